@@ -1,0 +1,58 @@
+"""The `nfr-drake` command: one subcommand per job, each a typed function turned into a CLI by tyro.
+
+Subcommands are imported only when they run, so `nfr-drake generate` does not pay for torch and
+`nfr-drake train` does not pay for pycolmap. To add one, add a line to `SUBCOMMANDS`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+from nfr_drake.errors import NfrDrakeError
+
+# name -> ("module:function", one-line description). The function's signature is the CLI.
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "generate": ("nfr_drake.data.generate:generate_command",
+                 "render a training dataset of one category with Drake"),
+    "captures": ("nfr_drake.data.captures:captures_command",
+                 "render capture sets (transforms.json + gt.json) of unseen objects"),
+    "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
+              "write a contact sheet PNG of a dataset's renders"),
+}
+
+
+def _usage() -> str:
+    width = max(len(n) for n in SUBCOMMANDS)
+    lines = ["usage: nfr-drake SUBCOMMAND [--help] [ARGS...]", "", "subcommands:"]
+    lines += [f"  {name:<{width}}  {desc}" for name, (_, desc) in SUBCOMMANDS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status."""
+    import tyro
+
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in SUBCOMMANDS:
+        print(f"nfr-drake: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    module_name, func_name = SUBCOMMANDS[name][0].split(":")
+    func = getattr(importlib.import_module(module_name), func_name)
+    try:
+        result = tyro.cli(func, args=rest, prog=f"nfr-drake {name}")
+    except NfrDrakeError as err:
+        print(f"nfr-drake {name}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"nfr-drake {name}: interrupted", file=sys.stderr)
+        return 130
+    return int(result) if isinstance(result, int) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
