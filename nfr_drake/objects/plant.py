@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.geometry import RenderLabel, Role, RoleAssign, SceneGraph
+from pydrake.geometry import PerceptionProperties, RenderLabel, Role, RoleAssign, SceneGraph
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
@@ -56,6 +56,8 @@ def apply_semantic_labels(plant: MultibodyPlant, scene_graph: SceneGraph,
         frame_id = plant.GetBodyFrameIdOrThrow(body_index)
         for geometry_id in inspector.GetGeometries(frame_id, Role.kPerception):
             label = int(part_semantic_class(inspector.GetName(geometry_id)))
-            props = inspector.GetPerceptionProperties(geometry_id)
+            props = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
             props.UpdateProperty("label", "id", RenderLabel(label))
-            scene_graph.AssignRole(source_id, geometry_id, props, RoleAssign.kReplace)
+            # Perception properties cannot be replaced in place: remove the role, assign anew.
+            scene_graph.RemoveRole(source_id, geometry_id, Role.kPerception)
+            scene_graph.AssignRole(source_id, geometry_id, props, RoleAssign.kNew)

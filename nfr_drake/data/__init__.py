@@ -1,0 +1,1 @@
+"""Rendering with Drake, dataset shards, capture sets."""

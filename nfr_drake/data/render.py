@@ -1,0 +1,155 @@
+"""Rendering articulated objects with Drake: an RgbdSensor on RenderEngineVtk.
+
+`ObjectRenderer` builds one diagram per object (plant + scene graph + VTK renderer + sensor) and
+then renders RGB, semantic labels and depth at any articulation q and any camera pose X_OC. The
+sensor rides on a free "camera rig" body whose pose is set per view, so views cost one render each
+and no diagram is rebuilt. The object's carcass is welded at the world origin, so W = O here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    LightParameter,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+)
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import SpatialInertia
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
+
+from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.objects import ArticulatedObject, SemanticClass
+from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels
+
+RENDERER_NAME = "nfr_vtk"
+DEFAULT_BACKGROUND_RGB = (0.92, 0.92, 0.92)
+_CLIP_NEAR_M, _CLIP_FAR_M = 0.05, 20.0
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """A camera headlight plus one directional key light fixed in the world.
+
+    Intensities are VTK light intensities; `key_direction_W` is the direction the light travels.
+    """
+
+    headlight_intensity: float = 0.55
+    key_intensity: float = 0.6
+    key_direction_W: tuple[float, float, float] = (-0.5, 0.3, -1.0)
+    key_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    def drake_lights(self) -> list[LightParameter]:
+        from pydrake.geometry import Rgba
+
+        direction = np.asarray(self.key_direction_W, float)
+        return [
+            LightParameter(type="directional", frame="camera", intensity=self.headlight_intensity,
+                           direction=[0.0, 0.0, 1.0]),
+            LightParameter(type="directional", frame="world", intensity=self.key_intensity,
+                           direction=direction / np.linalg.norm(direction),
+                           color=Rgba(*self.key_rgb, 1.0)),
+        ]
+
+
+def sample_lighting(rng: np.random.Generator) -> Lighting:
+    """Random lighting: headlight and key intensities, a key light from above, a warm or cool tint."""
+    azimuth = rng.uniform(-np.pi, np.pi)
+    elevation = rng.uniform(np.deg2rad(30), np.deg2rad(80))
+    towards_light = np.array([np.cos(elevation) * np.cos(azimuth),
+                              np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    warm = rng.uniform(-0.08, 0.08)  # > 0: warmer (less blue), < 0: cooler (less red)
+    return Lighting(
+        headlight_intensity=float(rng.uniform(0.4, 0.75)),
+        key_intensity=float(rng.uniform(0.3, 0.8)),
+        key_direction_W=tuple(-towards_light),
+        key_rgb=(1.0 - max(-warm, 0.0), 1.0 - abs(warm) / 2, 1.0 - max(warm, 0.0)),
+    )
+
+
+@dataclass(frozen=True)
+class RenderedView:
+    """One view. rgb: uint8 (H, W, 3); label: uint8 (H, W) semantic class (DESIGN.md);
+    depth: float32 (H, W), metres along the optical axis, inf where no surface is hit."""
+
+    rgb: np.ndarray
+    label: np.ndarray
+    depth: np.ndarray
+
+
+def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
+    """Drake's CameraInfo of a pinhole camera (Drake puts pixel centres at integer coordinates)."""
+    if camera.distortion is not None:
+        raise ValueError("Drake renders undistorted pinhole images only")
+    return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx - 0.5,
+                      camera.cy - 0.5)
+
+
+class ObjectRenderer:
+    """Renders one `ArticulatedObject` with a Drake RgbdSensor at any q and camera pose.
+
+    Args:
+        obj: the object; its carcass is welded at the world origin (frame O = W).
+        camera: intrinsics of every view (no distortion).
+        lighting: lights of this renderer; default `Lighting()`.
+        background_rgb: clear colour, each channel in [0, 1].
+    """
+
+    def __init__(self, obj: ArticulatedObject, camera: PinholeCamera,
+                 lighting: Lighting | None = None,
+                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB):
+        self.obj = obj
+        self.camera = camera
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+        params = RenderEngineVtkParams(default_clear_color=list(background_rgb),
+                                       lights=(lighting or Lighting()).drake_lights())
+        scene_graph.AddRenderer(RENDERER_NAME, MakeRenderEngineVtk(params))
+        self._model = add_articulated_object(plant, obj)
+        rig_model = plant.AddModelInstance("camera_rig")
+        rig = plant.AddRigidBody("camera_rig", rig_model, SpatialInertia.SolidSphereWithMass(0.1, 0.05))
+        plant.Finalize()
+        apply_semantic_labels(plant, scene_graph, self._model)
+
+        core = RenderCameraCore(RENDERER_NAME, drake_camera_info(camera),
+                                ClippingRange(_CLIP_NEAR_M, _CLIP_FAR_M), RigidTransform())
+        sensor = builder.AddSystem(RgbdSensor(
+            parent_id=plant.GetBodyFrameIdOrThrow(rig.index()), X_PB=RigidTransform(),
+            color_camera=ColorRenderCamera(core, show_window=False),
+            depth_camera=DepthRenderCamera(core, DepthRange(_CLIP_NEAR_M, _CLIP_FAR_M))))
+        builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+        self._diagram = builder.Build()
+        self._context = self._diagram.CreateDefaultContext()
+        self._plant, self._rig, self._sensor = plant, rig, sensor
+        self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
+        self._sensor_context = sensor.GetMyContextFromRoot(self._context)
+
+    def set_state(self, q: float, X_OC: np.ndarray) -> None:
+        """Set articulation q in [0, 1] and camera pose X_OC (4x4, OpenCV axes)."""
+        self._plant.SetPositions(self._plant_context, self._model,
+                                 np.array([self.obj.joint_value(q)]))
+        self._plant.SetFreeBodyPose(self._plant_context, self._rig, RigidTransform(X_OC))
+
+    def render_rgb(self, q: float, X_OC: np.ndarray) -> np.ndarray:
+        """uint8 RGB image (H, W, 3)."""
+        self.set_state(q, X_OC)
+        return self._sensor.color_image_output_port().Eval(self._sensor_context).data[..., :3].copy()
+
+    def render(self, q: float, X_OC: np.ndarray) -> RenderedView:
+        """RGB, semantic labels and depth of one view."""
+        self.set_state(q, X_OC)
+        ctx = self._sensor_context
+        rgb = self._sensor.color_image_output_port().Eval(ctx).data[..., :3].copy()
+        raw = self._sensor.label_image_output_port().Eval(ctx).data[..., 0]
+        label = np.where((raw >= SemanticClass.CARCASS) & (raw <= SemanticClass.HANDLE), raw, 0)
+        depth = self._sensor.depth_image_32F_output_port().Eval(ctx).data[..., 0].copy()
+        return RenderedView(rgb, label.astype(np.uint8), depth)
