@@ -14,3 +14,7 @@ class CaptureSetError(NfrDrakeError):
 
 class DatasetError(NfrDrakeError):
     """A rendered dataset folder is missing, malformed or was written with another configuration."""
+
+
+class ConfigError(NfrDrakeError, ValueError):
+    """An option or configuration value is out of range or inconsistent."""

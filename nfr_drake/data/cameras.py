@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nfr_drake.errors import ConfigError
+
 
 def look_at(p_OC: np.ndarray, p_OT: np.ndarray, up_O: np.ndarray = np.array([0.0, 0.0, 1.0])
             ) -> np.ndarray:
@@ -44,11 +46,11 @@ class CameraDistribution:
         for name in ("azimuth_deg", "elevation_deg", "distance_m"):
             lo, hi = getattr(self, name)
             if not lo <= hi:
-                raise ValueError(f"{name}: min {lo} exceeds max {hi}")
+                raise ConfigError(f"{name}: min {lo} exceeds max {hi}")
         if not 0.0 < self.distance_m[0]:
-            raise ValueError("distance_m must be positive")
+            raise ConfigError("distance_m must be positive")
         if not -90.0 < self.elevation_deg[0] <= self.elevation_deg[1] < 90.0:
-            raise ValueError("elevation_deg must lie strictly between -90 and 90")
+            raise ConfigError("elevation_deg must lie strictly between -90 and 90")
 
     def sample(self, rng: np.random.Generator, n: int, p_OT: np.ndarray) -> np.ndarray:
         """n camera poses X_OC looking near the target p_OT, shape (n, 4, 4)."""

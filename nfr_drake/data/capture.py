@@ -79,6 +79,11 @@ class PinholeCamera:
         return PinholeCamera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height,
                              self.distortion)
 
+    @classmethod
+    def from_json(cls, d: dict, source: str = "camera") -> PinholeCamera:
+        """From nerfstudio intrinsic keys (fl_x, fl_y, cx, cy, w, h, camera_model, k1..p2)."""
+        return _camera_from_json(d, None, "intrinsics", Path(source))
+
     def to_json(self) -> dict:
         d = {"fl_x": self.fx, "fl_y": self.fy, "cx": self.cx, "cy": self.cy,
              "w": self.width, "h": self.height,
