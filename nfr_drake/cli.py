@@ -17,6 +17,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "render a training dataset of one category with Drake"),
     "captures": ("nfr_drake.data.captures:captures_command",
                  "render capture sets (transforms.json + gt.json) of unseen objects"),
+    "validate": ("nfr_drake.data.validate:validate_command",
+                 "check a capture set (transforms.json and its images)"),
     "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
               "write a contact sheet PNG of a dataset's renders"),
 }

@@ -1,5 +1,13 @@
-"""Test-wide settings: no network downloads (Meshcat still runs), CPU-sized torch threads."""
+"""Test-wide settings.
+
+Network: nothing in nfr-drake may download (drake_models included). DRAKE_ALLOW_NETWORK=meshcat
+alone would be the strictest setting, but in drake 1.51 it makes every `Parser()` constructor
+fail, because the default PackageMap registers the remote `drake_models` package and refuses to
+do so with package_map networking off and an empty download cache. We therefore also allow
+`package_map`; since this machine (and CI) cannot reach GitHub, any accidental use of
+`package://drake_models/...` still fails the test that makes it.
+"""
 
 import os
 
-os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat")
+os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat:package_map")

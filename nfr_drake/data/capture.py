@@ -268,7 +268,7 @@ def write_capture_set(
     X_OCs: list[np.ndarray],
     cameras: list[PinholeCamera] | PinholeCamera,
     gt: dict | None = None,
-    extra_files: dict[str, np.ndarray] | None = None,
+    extra_files: dict[str, np.ndarray | str] | None = None,
 ) -> Path:
     """Write a capture set atomically: into a temporary folder renamed to `root` when complete.
 
@@ -277,7 +277,7 @@ def write_capture_set(
         X_OCs: camera poses in O, 4x4, OpenCV axes.
         cameras: one camera for all frames, or one per frame.
         gt: ground truth written as gt.json.
-        extra_files: more images to write, relative path -> uint8 array (e.g. label images).
+        extra_files: more files, relative path -> uint8 image array (written as PNG) or text.
     Raises FileExistsError if `root` exists.
     """
     root = Path(root)
@@ -301,7 +301,11 @@ def write_capture_set(
     (tmp / TRANSFORMS_FILE).write_text(json.dumps(doc, indent=2))
     if gt is not None:
         (tmp / GT_FILE).write_text(json.dumps(gt, indent=2))
-    for rel, array in (extra_files or {}).items():
-        write_image(tmp / rel, array)
+    for rel, content in (extra_files or {}).items():
+        if isinstance(content, str):
+            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / rel).write_text(content)
+        else:
+            write_image(tmp / rel, content)
     os.replace(tmp, root)
     return root

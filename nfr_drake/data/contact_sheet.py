@@ -1,0 +1,43 @@
+"""`nfr-drake sheet`: a contact sheet of a dataset: per object, RGB and labels across q."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from nfr_drake.data.dataset import RenderedDataset
+from nfr_drake.data.visualize import colorize_labels, image_grid
+
+
+def contact_sheet(dataset: RenderedDataset, objects: int = 6, articulations: int = 6,
+                  view: int = 0) -> np.ndarray:
+    """uint8 RGB image: for each of the first `objects` objects a row of renders at
+    `articulations` evenly spread q values (one camera view each), and below it their labels."""
+    rows = []
+    A = dataset.spec.articulations
+    picks = np.unique(np.linspace(0, A - 1, min(articulations, A)).round().astype(int))
+    v = min(view, dataset.spec.views - 1)
+    for rec in dataset.records[:objects]:
+        rows.append([np.asarray(rec.rgb[a, v]) for a in picks])
+        rows.append([colorize_labels(np.asarray(rec.label[a, v])) for a in picks])
+    return image_grid(rows)
+
+
+def contact_sheet_command(data: Path, out: Path, objects: int = 6, articulations: int = 6,
+                          scale: int = 2) -> None:
+    """Write a contact sheet PNG of the dataset in DATA.
+
+    Args:
+        data: dataset folder written by `nfr-drake generate`.
+        out: PNG file to write.
+        objects: number of objects (rows of RGB + label images).
+        articulations: q values per object, evenly spread over the object's articulations.
+        scale: integer upscaling of each image, for legibility.
+    """
+    sheet = contact_sheet(RenderedDataset(data), objects, articulations)
+    sheet = np.repeat(np.repeat(sheet, scale, axis=0), scale, axis=1)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(out), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    print(f"wrote {out}")

@@ -1,0 +1,98 @@
+"""Drake renders: label classes where expected; the camera convention matches our intrinsics."""
+
+import math
+
+import numpy as np
+import pytest
+
+from nfr_drake.data.cameras import CameraDistribution, look_at
+from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.render import ObjectRenderer
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, SemanticClass, object_rng, sample_object
+
+SIZE = 128
+
+
+def _project(camera: PinholeCamera, X_OC: np.ndarray, p_O: np.ndarray) -> np.ndarray:
+    """Continuous pixel coordinates (u, v) of p_O; the top-left pixel's centre is (0.5, 0.5)."""
+    X_CO = np.linalg.inv(X_OC)
+    p_C = X_CO[:3, :3] @ p_O + X_CO[:3, 3]
+    return np.array([camera.fx * p_C[0] / p_C[2] + camera.cx, camera.fy * p_C[1] / p_C[2] + camera.cy])
+
+
+def _unproject(camera, X_OC, depth):
+    """Points in O of every pixel with a finite depth: (N, 3), and their (row, col) indices."""
+    rows, cols = np.nonzero(np.isfinite(depth))
+    z = depth[rows, cols]
+    x = (cols + 0.5 - camera.cx) / camera.fx * z
+    y = (rows + 0.5 - camera.cy) / camera.fy * z
+    p_C = np.stack([x, y, z], 1)
+    return p_C @ X_OC[:3, :3].T + X_OC[:3, 3], rows, cols
+
+
+@pytest.fixture(scope="module")
+def closet():
+    for i in range(50):
+        obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 11, i))
+        if obj.params["handle_type"] == "bar":
+            return obj
+    raise AssertionError("no bar-handled closet in 50 seeds")
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return PinholeCamera.from_fov(SIZE, SIZE, math.radians(50))
+
+
+def test_depth_unprojects_onto_the_door_front_surface(closet, camera):
+    """A known plane: door pixels at q = 0, unprojected with our K and X_OC, lie on x = D/2 + td."""
+    renderer = ObjectRenderer(closet, camera)
+    X_OC = look_at(np.array([1.6, 0.3, 0.9]), closet.look_at_target())
+    view = renderer.render(0.0, X_OC)
+    points, rows, cols = _unproject(camera, X_OC, view.depth)
+    door = view.label[rows, cols] == SemanticClass.MOVING
+    assert door.sum() > 500
+    front_x = closet.params["depth"] / 2 + closet.params["door_thickness"]
+    # Away from the door's silhouette, where a pixel may straddle two surfaces.
+    assert np.median(np.abs(points[door, 0] - front_x)) < 2e-3
+    assert np.percentile(np.abs(points[door, 0] - front_x), 90) < 5e-3
+
+
+def test_keypoints_project_onto_their_classes(closet, camera):
+    renderer = ObjectRenderer(closet, camera)
+    rng = np.random.default_rng(0)
+    hits = 0
+    for X_OC in CameraDistribution(azimuth_deg=(-30, 30)).sample(rng, 6, closet.look_at_target()):
+        view = renderer.render(0.0, X_OC)
+        u, v = _project(camera, X_OC, closet.keypoints(0.0)["handle"])
+        r, c = int(v), int(u)  # the pixel containing the continuous coordinate
+        patch = view.label[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
+        hits += SemanticClass.HANDLE in patch
+        # The door's centre at q = 0 is door; a point beyond the object is background.
+        door_centre = np.array([closet.params["depth"] / 2 + 0.01, 0.0, closet.params["height"] / 2])
+        u, v = _project(camera, X_OC, door_centre)
+        assert view.label[int(v), int(u)] in (SemanticClass.MOVING, SemanticClass.HANDLE)
+        assert view.label[0, 0] == SemanticClass.BACKGROUND
+    assert hits >= 5
+
+
+def test_all_classes_appear_and_carcass_shows_when_door_is_open(closet, camera):
+    renderer = ObjectRenderer(closet, camera)
+    X_OC = look_at(np.array([1.5, 0.0, 0.8]), closet.look_at_target())
+    closed, opened = renderer.render(0.0, X_OC), renderer.render(1.0, X_OC)
+    assert set(np.unique(closed.label)) == {0, 1, 2, 3}
+    # Opening the door uncovers the carcass's inside, seen straight from the front.
+    assert (opened.label == SemanticClass.CARCASS).sum() > 3 * (closed.label == SemanticClass.CARCASS).sum()
+    assert closed.rgb.shape == (SIZE, SIZE, 3) and closed.rgb.dtype == np.uint8
+    assert np.isinf(closed.depth[0, 0]) and np.isfinite(closed.depth[SIZE // 2, SIZE // 2])
+
+
+def test_drawer_moves_out_in_depth():
+    obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 11, 0))
+    camera = PinholeCamera.from_fov(64, 64, math.radians(50))
+    renderer = ObjectRenderer(obj, camera)
+    X_OC = look_at(np.array([1.6, 0.0, 0.9]), obj.look_at_target())
+    closed, opened = renderer.render(0.0, X_OC), renderer.render(1.0, X_OC)
+    moving = lambda v: v.depth[v.label == SemanticClass.MOVING].min()  # noqa: E731
+    # The front comes towards the camera by about the travel times cos(elevation).
+    assert moving(closed) - moving(opened) > 0.6 * obj.joint_upper
