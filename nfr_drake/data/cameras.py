@@ -8,9 +8,10 @@ import numpy as np
 
 from nfr_drake.errors import ConfigError
 
+_UP_O = np.array([0.0, 0.0, 1.0])
 
-def look_at(p_OC: np.ndarray, p_OT: np.ndarray, up_O: np.ndarray = np.array([0.0, 0.0, 1.0])
-            ) -> np.ndarray:
+
+def look_at(p_OC: np.ndarray, p_OT: np.ndarray, up_O: np.ndarray = _UP_O) -> np.ndarray:
     """Pose X_OC (4x4) of a camera at p_OC looking at p_OT, OpenCV axes (x right, y down, z forward).
 
     The image's up direction is as close to `up_O` as possible. Raises ValueError when the viewing

@@ -16,7 +16,13 @@ import numpy as np
 import torch
 
 from nfr_drake.data.capture import PinholeCamera
-from nfr_drake.data.shards import DEPTH_SCALE, OBJECTS_DIR, completed_objects, object_dir_name, read_spec
+from nfr_drake.data.shards import (
+    DEPTH_SCALE,
+    OBJECTS_DIR,
+    completed_objects,
+    object_dir_name,
+    read_spec,
+)
 from nfr_drake.errors import DatasetError
 
 

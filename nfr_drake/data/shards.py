@@ -141,7 +141,11 @@ def remove_partial(root: Path, indices: set[int]) -> None:
 
 def write_object(root: Path, index: int, arrays: dict[str, np.ndarray], meta: dict,
                  sdf: str) -> None:
-    """Write one object's folder atomically (temporary folder, then rename)."""
+    """Write one object's folder atomically (temporary folder, then rename).
+
+    If another process completed the same object meanwhile (an orphaned worker of a killed run),
+    its folder is kept and this one discarded: both hold the same deterministic data.
+    """
     final = Path(root) / OBJECTS_DIR / object_dir_name(index)
     tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -150,4 +154,9 @@ def write_object(root: Path, index: int, arrays: dict[str, np.ndarray], meta: di
         np.save(tmp / f"{name}.npy", array)
     (tmp / "meta.json").write_text(json.dumps(meta))
     (tmp / "object.sdf").write_text(sdf)
-    os.replace(tmp, final)
+    try:
+        os.replace(tmp, final)
+    except OSError:
+        if not final.is_dir():
+            raise
+        shutil.rmtree(tmp, ignore_errors=True)
