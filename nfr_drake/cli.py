@@ -19,6 +19,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "render capture sets (transforms.json + gt.json) of unseen objects"),
     "validate": ("nfr_drake.data.validate:validate_command",
                  "check a capture set (transforms.json and its images)"),
+    "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
+                       "train the paper's image-encoder baseline on a dataset"),
     "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
               "write a contact sheet PNG of a dataset's renders"),
 }

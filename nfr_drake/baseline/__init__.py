@@ -1,0 +1,1 @@
+"""The paper's image-encoder baseline (ResNet-style encoder over posed views)."""
