@@ -1,0 +1,196 @@
+"""Evaluation over held-out capture sets: per-capture metrics, a summary table and error plots.
+
+A method is anything that turns a capture set into a `Prediction`; the neural-field fit and the
+image-encoder baseline both are. Metrics follow the paper's evaluation (articulation error,
+keypoint RMSE at the observed state, handle trajectory over q in [0, 1]) plus render quality
+(PSNR, segmentation mIoU) for methods that render, and the time per capture.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.eval.metrics import (
+    articulation_error,
+    keypoint_rmse_cm,
+    mean_iou,
+    psnr,
+    trajectory_rmse_cm,
+)
+
+
+@dataclass
+class Prediction:
+    """One method's answer for one capture set, positions in O, metres.
+
+    q: articulation in [0, 1]. keypoints: name -> (3,) at q. trajectory: name -> (N, 3) on the
+    q grid it was asked for. renders / labels: per frame uint8 RGB (H, W, 3) / classes (H, W) at
+    the observed state, or None for methods that do not render. seconds: wall time.
+    """
+
+    q: float
+    keypoints: dict[str, np.ndarray]
+    trajectory: dict[str, np.ndarray]
+    seconds: float
+    renders: list[np.ndarray] | None = None
+    labels: list[np.ndarray] | None = None
+    image_loss: float = math.nan
+
+
+Method = Callable[[CaptureSet, np.ndarray], Prediction]
+"""(capture, q grid (N,)) -> Prediction."""
+
+
+@dataclass
+class CaptureMetrics:
+    """Errors of one method on one capture set (NaN where a method has no such output)."""
+
+    capture: str
+    set_name: str
+    method: str
+    articulation_error: float
+    keypoint_rmse_cm: float
+    handle_trajectory_rmse_cm: float
+    psnr_db: float
+    miou: float
+    seconds: float
+    image_loss: float
+
+
+def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: str) -> CaptureMetrics:
+    """Compare a prediction with the capture's gt.json (and its label images)."""
+    gt = capture.gt
+    if gt is None:
+        raise NfrDrakeError(f"{capture.root}: no gt.json, cannot evaluate")
+    names = list(gt["keypoints"])
+    kp_true = np.array([gt["keypoints"][n] for n in names])
+    kp_pred = np.array([prediction.keypoints[n] for n in names])
+    traj_true = np.asarray(gt["trajectory"]["keypoints"]["handle"])
+    traj_pred = np.asarray(prediction.trajectory["handle"])
+    obj = gt["object"]
+    psnr_db = miou = math.nan
+    if prediction.renders is not None:
+        images = capture.load_images()
+        psnr_db = float(np.mean([psnr(r / 255.0, i / 255.0) for r, i in zip(
+            prediction.renders, images, strict=True)]))
+    if prediction.labels is not None and "label_paths" in gt:
+        true_labels = [cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED)
+                       for p in gt["label_paths"]]
+        miou = float(np.mean([mean_iou(p, t) for p, t in zip(prediction.labels, true_labels,
+                                                             strict=True)]))
+    return CaptureMetrics(
+        capture=capture.root.name, set_name=set_name, method=method,
+        articulation_error=articulation_error(prediction.q, gt["q"], obj["joint_type"],
+                                              obj["joint_upper"]),
+        keypoint_rmse_cm=keypoint_rmse_cm(kp_pred, kp_true),
+        handle_trajectory_rmse_cm=trajectory_rmse_cm(traj_pred, traj_true),
+        psnr_db=psnr_db, miou=miou, seconds=prediction.seconds,
+        image_loss=prediction.image_loss)
+
+
+def capture_dirs(root: Path) -> list[Path]:
+    """The capture sets in `root`: itself if it holds transforms.json, else its sub-folders."""
+    root = Path(root)
+    if (root / "transforms.json").exists():
+        return [root]
+    dirs = sorted(p for p in root.iterdir() if (p / "transforms.json").exists())
+    if not dirs:
+        raise NfrDrakeError(f"{root}: no capture sets (folders with transforms.json) found")
+    return dirs
+
+
+def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
+             limit: int | None = None) -> list[CaptureMetrics]:
+    """Run every method on every capture of every set, appending rows to `csv_path`.
+
+    Rows already in the CSV (same capture, set and method) are kept and not recomputed, so an
+    interrupted evaluation resumes.
+    """
+    done: dict[tuple[str, str, str], CaptureMetrics] = {}
+    if csv_path.exists():
+        with open(csv_path) as f:
+            for row in csv.DictReader(f):
+                m = CaptureMetrics(**{k: (v if k in ("capture", "set_name", "method")
+                                          else float(v)) for k, v in row.items()})
+                done[(m.capture, m.set_name, m.method)] = m
+    new_file = not csv_path.exists()
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    results = list(done.values())
+    with open(csv_path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(CaptureMetrics.__dataclass_fields__))
+        if new_file:
+            writer.writeheader()
+        for set_name, root in sets.items():
+            dirs = capture_dirs(root)[:limit]
+            for method_name, method in methods.items():
+                for d in tqdm(dirs, desc=f"{set_name} / {method_name}", unit="capture"):
+                    if (d.name, set_name, method_name) in done:
+                        continue
+                    capture = read_capture_set(d)
+                    grid = np.asarray(capture.gt["trajectory"]["q"])
+                    metrics = score(capture, method(capture, grid), set_name, method_name)
+                    writer.writerow(asdict(metrics))
+                    f.flush()
+                    results.append(metrics)
+    return results
+
+
+_COLUMNS = (("articulation_error", "articulation error ({unit})"),
+            ("keypoint_rmse_cm", "keypoint RMSE (cm)"),
+            ("handle_trajectory_rmse_cm", "handle trajectory RMSE (cm)"),
+            ("psnr_db", "PSNR (dB)"), ("miou", "mIoU"), ("seconds", "time (s)"))
+
+
+def summary_table(results: Iterable[CaptureMetrics], unit: str) -> str:
+    """Markdown table of medians (and 90th percentiles of the errors) per set and method."""
+    results = list(results)
+    header = "| set | method | n | " + " | ".join(t.format(unit=unit) for _, t in _COLUMNS) + " |"
+    lines = [header, "|" + "---|" * (3 + len(_COLUMNS))]
+    keys = sorted({(r.set_name, r.method) for r in results})
+    for set_name, method in keys:
+        rows = [r for r in results if r.set_name == set_name and r.method == method]
+        cells = []
+        for attr, _ in _COLUMNS:
+            values = np.array([getattr(r, attr) for r in rows], float)
+            if np.all(np.isnan(values)):
+                cells.append("n/a")
+            elif attr in ("psnr_db", "miou", "seconds"):
+                cells.append(f"{np.nanmedian(values):.3g}")
+            else:
+                cells.append(f"{np.nanmedian(values):.2f} (p90 {np.nanpercentile(values, 90):.2f})")
+        lines.append(f"| {set_name} | {method} | {len(rows)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_error_distributions(results: Iterable[CaptureMetrics], unit: str, path: Path) -> None:
+    """Box plots of articulation error and keypoint RMSE per set and method (paper's Fig. 5)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    results = list(results)
+    keys = sorted({(r.set_name, r.method) for r in results})
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for ax, (attr, title) in zip(axes, _COLUMNS[:3], strict=False):
+        data = [[getattr(r, attr) for r in results if (r.set_name, r.method) == k] for k in keys]
+        ax.boxplot(data, showfliers=True)
+        ax.set_xticks(range(1, len(keys) + 1), [f"{s}\n{m}" for s, m in keys], rotation=30,
+                      ha="right", fontsize=8)
+        ax.set_title(title.format(unit=unit))
+        ax.set_yscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

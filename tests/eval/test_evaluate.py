@@ -1,0 +1,50 @@
+"""Evaluation driver: a perfect prediction scores zero error; a shifted one scores the shift."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.captures import captures_command
+from nfr_drake.eval.evaluate import Prediction, evaluate, score, summary_table
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory):
+    root = tmp_path_factory.mktemp("caps")
+    captures_command("closet", n=2, out=root, views=3, size=32)
+    return root
+
+
+def _oracle(shift=np.zeros(3)):
+    def method(capture, grid):
+        gt = capture.gt
+        traj = {k: np.asarray(v) + shift for k, v in gt["trajectory"]["keypoints"].items()}
+        labels = [cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED)
+                  for p in gt["label_paths"]]
+        return Prediction(gt["q"], {k: np.asarray(v) + shift for k, v in gt["keypoints"].items()},
+                          traj, 0.5, renders=capture.load_images(), labels=labels)
+    return method
+
+
+def test_perfect_prediction_scores_zero(captures):
+    capture = read_capture_set(captures / "closet_000")
+    m = score(capture, _oracle()(capture, None), "s", "oracle")
+    assert m.articulation_error == 0 and m.keypoint_rmse_cm == 0
+    assert m.handle_trajectory_rmse_cm == 0 and m.miou == 1.0 and m.psnr_db == math.inf
+
+
+def test_shift_shows_in_keypoint_errors_and_evaluation_resumes(captures, tmp_path):
+    csv_path = tmp_path / "r.csv"
+    shift = np.array([0.03, 0.0, 0.04])
+    results = evaluate({"shifted": _oracle(shift)}, {"closets": captures}, csv_path)
+    assert len(results) == 2
+    for r in results:
+        assert r.keypoint_rmse_cm == pytest.approx(5.0)
+        assert r.handle_trajectory_rmse_cm == pytest.approx(5.0)
+    again = evaluate({"shifted": _oracle(shift)}, {"closets": captures}, csv_path)
+    assert len(again) == 2 and len(csv_path.read_text().splitlines()) == 3
+    table = summary_table(again, "deg")
+    assert "| closets | shifted | 2 |" in table and "5.00" in table
