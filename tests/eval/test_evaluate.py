@@ -18,13 +18,14 @@ def captures(tmp_path_factory):
     return root
 
 
-def _oracle(shift=np.zeros(3)):
+def _oracle(shift=(0.0, 0.0, 0.0)):
     def method(capture, grid):
         gt = capture.gt
-        traj = {k: np.asarray(v) + shift for k, v in gt["trajectory"]["keypoints"].items()}
+        offset = np.asarray(shift)
+        traj = {k: np.asarray(v) + offset for k, v in gt["trajectory"]["keypoints"].items()}
         labels = [cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED)
                   for p in gt["label_paths"]]
-        return Prediction(gt["q"], {k: np.asarray(v) + shift for k, v in gt["keypoints"].items()},
+        return Prediction(gt["q"], {k: np.asarray(v) + offset for k, v in gt["keypoints"].items()},
                           traj, 0.5, renders=capture.load_images(), labels=labels)
     return method
 
