@@ -145,7 +145,7 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
     return results
 
 
-_COLUMNS = (("articulation_error", "articulation error ({unit})"),
+COLUMNS = (("articulation_error", "articulation error ({unit})"),
             ("keypoint_rmse_cm", "keypoint RMSE (cm)"),
             ("handle_trajectory_rmse_cm", "handle trajectory RMSE (cm)"),
             ("psnr_db", "PSNR (dB)"), ("miou", "mIoU"), ("seconds", "time (s)"))
@@ -154,13 +154,13 @@ _COLUMNS = (("articulation_error", "articulation error ({unit})"),
 def summary_table(results: Iterable[CaptureMetrics], unit: str) -> str:
     """Markdown table of medians (and 90th percentiles of the errors) per set and method."""
     results = list(results)
-    header = "| set | method | n | " + " | ".join(t.format(unit=unit) for _, t in _COLUMNS) + " |"
-    lines = [header, "|" + "---|" * (3 + len(_COLUMNS))]
+    header = "| set | method | n | " + " | ".join(t.format(unit=unit) for _, t in COLUMNS) + " |"
+    lines = [header, "|" + "---|" * (3 + len(COLUMNS))]
     keys = sorted({(r.set_name, r.method) for r in results})
     for set_name, method in keys:
         rows = [r for r in results if r.set_name == set_name and r.method == method]
         cells = []
-        for attr, _ in _COLUMNS:
+        for attr, _ in COLUMNS:
             values = np.array([getattr(r, attr) for r in rows], float)
             if np.all(np.isnan(values)):
                 cells.append("n/a")
@@ -170,27 +170,3 @@ def summary_table(results: Iterable[CaptureMetrics], unit: str) -> str:
                 cells.append(f"{np.nanmedian(values):.2f} (p90 {np.nanpercentile(values, 90):.2f})")
         lines.append(f"| {set_name} | {method} | {len(rows)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def plot_error_distributions(results: Iterable[CaptureMetrics], unit: str, path: Path) -> None:
-    """Box plots of articulation error and keypoint RMSE per set and method (paper's Fig. 5)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    results = list(results)
-    keys = sorted({(r.set_name, r.method) for r in results})
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
-    for ax, (attr, title) in zip(axes, _COLUMNS[:3], strict=False):
-        data = [[getattr(r, attr) for r in results if (r.set_name, r.method) == k] for k in keys]
-        ax.boxplot(data, showfliers=True)
-        ax.set_xticks(range(1, len(keys) + 1), [f"{s}\n{m}" for s, m in keys], rotation=30,
-                      ha="right", fontsize=8)
-        ax.set_title(title.format(unit=unit))
-        ax.set_yscale("log")
-        ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
