@@ -21,6 +21,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "check a capture set (transforms.json and its images)"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
+    "poses": ("nfr_drake.perception.poses:poses_command",
+              "camera poses of a folder of photos (pycolmap SfM, metric alignment) as a capture set"),
     "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
               "write a contact sheet PNG of a dataset's renders"),
 }

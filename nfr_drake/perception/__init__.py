@@ -1,0 +1,14 @@
+"""Perception from real photos: camera poses by structure from motion, metric alignment, point clouds.
+
+Modules, one role each:
+- `intrinsics`: the photos' camera model (pinhole + OpenCV distortion), COLMAP/OpenCV conversions,
+  undistortion.
+- `photos`: the photo folder: listing, reading, resizing to the working size.
+- `sfm`: pycolmap structure from motion (SIFT, exhaustive matching, incremental mapping).
+- `charuco`: ChArUco board detection and the board's pose in a photo.
+- `alignment`: similarity transforms that take a reconstruction into metres, object poses.
+- `report`: what a pose-estimation run did (registered images, errors, residuals, timings).
+- `poses`: `nfr-drake poses`, photos -> capture set in frame O.
+- `synthetic`: Drake-rendered photo folders of a closet in a textured room at known poses.
+- `pointcloud`: semantically labelled point clouds (PLY).
+"""

@@ -1,0 +1,245 @@
+"""`nfr-drake poses`: a folder of photos -> a capture set with metric camera poses in frame O.
+
+Steps: resize the photos to the working size; structure from motion (`sfm`); a similarity into
+metres from a ChArUco board in the photos or from known camera centres (`alignment`); the object's
+pose X_WO takes the world frame W (the board's frame B, or the anchors' frame) to O; undistorted
+images and poses X_OC are written as a capture set (DESIGN.md) with `report.json` (`report`) and
+the sparse points in O (`points3D.ply`, metres).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
+
+import cv2
+import numpy as np
+import tyro
+
+from nfr_drake.data.capture import write_capture_set
+from nfr_drake.errors import ConfigError
+from nfr_drake.perception.alignment import (
+    Similarity,
+    align_to_camera_poses,
+    align_to_centres,
+    parse_object_pose,
+    read_anchors,
+)
+from nfr_drake.perception.charuco import BoardNotFoundError, CharucoBoardSpec, CharucoPoseEstimator
+from nfr_drake.perception.intrinsics import PhotoCamera
+from nfr_drake.perception.photos import WorkingPhoto, prepare_photos
+from nfr_drake.perception.report import PoseReport
+from nfr_drake.perception.sfm import (
+    ReconstructionError,
+    SfmOptions,
+    camera_poses,
+    image_cameras,
+    run_sfm,
+)
+
+REPORT_FILE = "report.json"
+POINTS_FILE = "points3D.ply"
+_ASPECT_TOLERANCE = 0.01
+DEFAULT_BOARD = CharucoBoardSpec()
+DEFAULT_SFM = SfmOptions()
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """How the reconstruction is made metric: exactly one of a board or anchors (or neither, with
+    `allow_unaligned`)."""
+
+    charuco: CharucoBoardSpec | None = None
+    anchors: dict[str, np.ndarray] | None = None
+    allow_unaligned: bool = False
+
+
+def _progress(message: str) -> None:
+    print(f"[poses] {message}", file=sys.stderr, flush=True)
+
+
+def _working_camera(camera: PhotoCamera, photos: list[WorkingPhoto]) -> PhotoCamera:
+    """The known camera scaled to the working size; all photos must share its size (or aspect)."""
+    sizes = sorted({p.original_size for p in photos})
+    if len(sizes) > 1:
+        raise ConfigError(f"known intrinsics need photos of one size; found {sizes}")
+    (w, h), = sizes
+    if abs(w / h - camera.width / camera.height) > _ASPECT_TOLERANCE * w / h:
+        raise ConfigError(f"the intrinsics are for {camera.width}x{camera.height} images, the "
+                          f"photos are {w}x{h} (another aspect ratio; rotated photos?)")
+    return camera.scaled(*photos[0].size)
+
+
+def _board_poses(estimator: CharucoPoseEstimator, image_dir: Path, work_names: dict[str, str],
+                 cameras: dict[str, PhotoCamera]) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+    """X_BC and detection details for each registered photo that shows the board."""
+    X_BCs, details = {}, {}
+    for name, work_name in work_names.items():
+        pose = estimator.estimate(cv2.imread(str(image_dir / work_name)), cameras[name])
+        if pose is not None:
+            X_BCs[name] = pose.X_BC
+            details[name] = {"corners": pose.corners,
+                             "reprojection_error_px": pose.reprojection_error_px}
+    return X_BCs, details
+
+
+def _ply_text(points: np.ndarray, colors: np.ndarray) -> str:
+    """ASCII PLY of points (N, 3) in metres with uint8 colours (N, 3)."""
+    header = ["ply", "format ascii 1.0", f"element vertex {len(points)}",
+              "property float x", "property float y", "property float z",
+              "property uchar red", "property uchar green", "property uchar blue", "end_header"]
+    rows = [f"{x:.6f} {y:.6f} {z:.6f} {r} {g} {b}"
+            for (x, y, z), (r, g, b) in zip(points, colors, strict=True)]
+    return "\n".join(header + rows) + "\n"
+
+
+def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
+                   camera: PhotoCamera | None = None, X_WO: np.ndarray | None = None,
+                   max_size: int = 1024, min_registered: int = 3,
+                   sfm_options: SfmOptions = DEFAULT_SFM, work_dir: Path | None = None,
+                   progress=_progress) -> PoseReport:
+    """Estimate metric camera poses of the photos in `photos_dir` and write the capture set `out`.
+
+    Args:
+        alignment: the board or the anchors (camera centres in W, metres, by photo name).
+        camera: intrinsics of the photos at their original size, held fixed; None to
+            self-calibrate (SIMPLE_RADIAL).
+        X_WO: pose of the object frame O in W (4x4); None means O = W.
+        max_size: the photos' longer side for SfM and in the capture set, pixels.
+        min_registered: fewer registered photos is an error.
+        work_dir: keeps the resized photos, COLMAP database and models; default a temporary folder.
+    Returns the report (also written to `out/report.json`). Raises NfrDrakeError subclasses.
+    """
+    if alignment.charuco is not None and alignment.anchors is not None:
+        raise ConfigError("align with either a ChArUco board or anchors, not both")
+    if alignment.charuco is None and alignment.anchors is None and not alignment.allow_unaligned:
+        raise ConfigError("no metric alignment: pass --charuco (board in the photos) or --anchors "
+                          "centres.json (known camera centres), or --allow-unaligned for poses in "
+                          "SfM's arbitrary frame and scale")
+    if out.exists():
+        raise ConfigError(f"{out} already exists; choose another --out")
+    if max_size < 64:
+        raise ConfigError(f"max_size {max_size} px is too small for feature matching")
+    estimator = CharucoPoseEstimator(alignment.charuco) if alignment.charuco else None
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="nfr_poses_") as tmp:
+        work = Path(work_dir) if work_dir is not None else Path(tmp)
+        image_dir = work / "images"
+        progress(f"resizing photos from {photos_dir} to at most {max_size} px")
+        photos = prepare_photos(photos_dir, image_dir, max_size)
+        work_camera = _working_camera(camera, photos) if camera else None
+        sfm = run_sfm(image_dir, [p.work_name for p in photos], work, work_camera, sfm_options,
+                      progress)
+        by_work = {p.work_name: p.name for p in photos}
+        rec = sfm.reconstruction
+        X_RCs = {by_work[n]: X for n, X in camera_poses(rec).items()}
+        cameras = {by_work[n]: c for n, c in image_cameras(rec).items()}
+        registered = sorted(X_RCs)
+        unregistered = [p.name for p in photos if p.name not in X_RCs]
+        if len(registered) < min_registered:
+            raise ReconstructionError(
+                f"only {len(registered)} of {len(photos)} photos registered (need {min_registered}); "
+                f"not registered: {', '.join(unregistered)}")
+
+        board_details = {}
+        if estimator is not None:
+            progress("detecting the ChArUco board in the registered photos")
+            work_names = {p.name: p.work_name for p in photos if p.name in X_RCs}
+            X_BCs, board_details = _board_poses(estimator, image_dir, work_names, cameras)
+            if len(X_BCs) < 2:
+                raise BoardNotFoundError(
+                    f"the ChArUco board ({estimator.spec.squares[0]}x{estimator.spec.squares[1]} "
+                    f"squares, {estimator.spec.dictionary}) was found in {len(X_BCs)} registered "
+                    "photo(s); metric alignment needs it in at least 2. Check the board options "
+                    "(--board.squares, --board.dictionary, --board.legacy-pattern)")
+            aligned = align_to_camera_poses(X_RCs, X_BCs, "charuco")
+        elif alignment.anchors is not None:
+            aligned = align_to_centres(X_RCs, alignment.anchors)
+        else:
+            aligned = None
+        S = aligned.similarity if aligned else Similarity.identity()
+        X_OW = np.linalg.inv(X_WO) if X_WO is not None else np.eye(4)
+        X_OCs = [X_OW @ S.apply_pose(X_RCs[n]) for n in registered]
+
+        progress(f"writing the capture set {out}")
+        images, pinholes = [], []
+        name_to_work = {p.name: p.work_name for p in photos}
+        for name in registered:
+            bgr = cv2.imread(str(image_dir / name_to_work[name]))
+            undistorted, pinhole = cameras[name].undistort(bgr)
+            images.append(cv2.cvtColor(undistorted, cv2.COLOR_BGR2RGB))
+            pinholes.append(pinhole)
+        points = [p for p in rec.points3D.values()]
+        p_R = np.array([p.xyz for p in points]).reshape(-1, 3)
+        p_O = S.apply(p_R) @ X_OW[:3, :3].T + X_OW[:3, 3]
+        colors = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
+        frame = ("O" if X_WO is not None else "O = W (no object pose given)") if aligned else \
+            "R (unaligned: SfM's frame and arbitrary scale)"
+        report = PoseReport(
+            photos=len(photos), working_size_px=max(photos[0].size), registered=registered,
+            unregistered=unregistered,
+            mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
+            points3D=len(points), num_models=sfm.num_models,
+            calibration="known" if camera else "self-calibrated", alignment=aligned, frame=frame,
+            frames={f"images/frame_{i:03d}.png": n for i, n in enumerate(registered)},
+            cameras={n: cameras[n].to_json() for n in registered}, board_poses=board_details,
+            seconds={**sfm.seconds, "total": time.perf_counter() - start})
+        shared = pinholes[0] if all(c == pinholes[0] for c in pinholes) else pinholes
+        write_capture_set(out, images, X_OCs, shared,
+                          extra_files={REPORT_FILE: report.dumps(), POINTS_FILE: _ply_text(p_O, colors)})
+    return report
+
+
+def poses_command(
+    photos_dir: Annotated[Path, tyro.conf.Positional],
+    out: Path,
+    intrinsics: Path | None = None,
+    max_size: int = 1024,
+    charuco: bool = False,
+    board: CharucoBoardSpec = DEFAULT_BOARD,
+    anchors: Path | None = None,
+    object_pose: str | None = None,
+    min_registered: int = 3,
+    allow_unaligned: bool = False,
+    work_dir: Path | None = None,
+    sfm: SfmOptions = DEFAULT_SFM,
+) -> int:
+    """Estimate metric camera poses of a folder of photos and write a capture set in frame O.
+
+    Args:
+        photos_dir: folder of photos (jpg, png, ...) of one static scene, taken with one camera.
+        out: capture-set folder to create (transforms.json, images/, report.json, points3D.ply).
+        intrinsics: JSON with fl_x, fl_y, cx, cy, w, h and optional k1, k2, p1, p2, k3..k6 (pixel
+            centres at +0.5); the photos' camera, held fixed. Default: self-calibration.
+        max_size: longer side of the images used and written, pixels.
+        charuco: make the poses metric with the ChArUco board (--board.*) seen in the photos;
+            W is then the board frame.
+        board: the board's geometry.
+        anchors: JSON {"photo.jpg": [x, y, z], ...}: known camera centres in W, metres (3 or
+            more, not on a line).
+        object_pose: X_WO, the object frame in W: "x y z roll pitch yaw" (metres, radians; write
+            --object-pose="-0.1 ..." for a leading minus) or a JSON file with a 4x4 matrix.
+            Default: O = W.
+        min_registered: fail when fewer photos register.
+        allow_unaligned: with neither --charuco nor --anchors, write poses in SfM's own frame and
+            arbitrary scale instead of failing.
+        work_dir: keep the resized photos, COLMAP database and models here.
+        sfm: feature and mapping options.
+    """
+    X_WO = parse_object_pose(object_pose) if object_pose is not None else None
+    camera = PhotoCamera.from_json_file(intrinsics) if intrinsics else None
+    alignment = Alignment(charuco=board if charuco else None,
+                          anchors=read_anchors(anchors) if anchors else None,
+                          allow_unaligned=allow_unaligned)
+    report = estimate_poses(photos_dir, out, alignment, camera, X_WO, max_size, min_registered,
+                            sfm, work_dir)
+    print(report.summary())
+    print(f"capture set: {out}")
+    if report.unregistered:
+        print(f"warning: {len(report.unregistered)} photo(s) not registered", file=sys.stderr)
+    return 0
+

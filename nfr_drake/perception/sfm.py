@@ -1,0 +1,154 @@
+"""Structure from motion with pycolmap 4.x on the CPU: SIFT, exhaustive matching, incremental mapping.
+
+`run_sfm` turns a folder of (resized) photos into a `pycolmap.Reconstruction` in its own
+arbitrary frame R and scale. Camera poses come out as `cam_from_world` (COLMAP: X_CR, OpenCV
+axes); `camera_poses` turns them into X_RC. Known intrinsics are held fixed; without them each
+camera is self-calibrated with COLMAP's SIMPLE_RADIAL model (f, cx, cy, k).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.perception.intrinsics import PhotoCamera
+
+SELF_CALIBRATION_MODEL = "SIMPLE_RADIAL"
+
+
+class ReconstructionError(NfrDrakeError):
+    """Structure from motion found no model, or registered too few photos."""
+
+
+@dataclass(frozen=True)
+class SfmOptions:
+    """Options of the structure-from-motion run."""
+
+    max_num_features: int = 8192
+    """SIFT features kept per image."""
+    first_octave: int = -1
+    """SIFT's first octave: -1 upsamples the image once (more features, slower), 0 does not."""
+    max_ratio: float = 0.8
+    """Lowe's ratio test threshold for matches."""
+    min_num_matches: int = 15
+    """Verified matches an image pair needs to be used by the mapper."""
+    seed: int = 0
+    """Random seed of RANSAC and the mapper (runs with several threads may still differ slightly)."""
+    num_threads: int = -1
+    """CPU threads; -1 uses all cores."""
+
+
+@dataclass
+class SfmResult:
+    """A reconstruction and what it took.
+
+    reconstruction: the largest model, frame R, arbitrary scale;
+    num_models: models the mapper found (more than one means the photos fell into groups);
+    seconds: wall time per stage ("extraction", "matching", "mapping").
+    """
+
+    reconstruction: pycolmap.Reconstruction
+    num_models: int
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _reader_options(camera: PhotoCamera | None) -> pycolmap.ImageReaderOptions:
+    if camera is None:
+        return pycolmap.ImageReaderOptions(camera_model=SELF_CALIBRATION_MODEL)
+    model, params = camera.colmap_model()
+    return pycolmap.ImageReaderOptions(camera_model=model,
+                                       camera_params=",".join(f"{v:.17g}" for v in params))
+
+
+def _mapping_options(known_intrinsics: bool, options: SfmOptions) -> pycolmap.IncrementalPipelineOptions:
+    mapping = pycolmap.IncrementalPipelineOptions(
+        min_num_matches=options.min_num_matches, num_threads=options.num_threads,
+        random_seed=options.seed, extract_colors=True)
+    if known_intrinsics:
+        mapping.ba_refine_focal_length = False
+        mapping.ba_refine_principal_point = False
+        mapping.ba_refine_extra_params = False
+        mapping.mapper.abs_pose_refine_focal_length = False
+        mapping.mapper.abs_pose_refine_extra_params = False
+    return mapping
+
+
+def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
+            options: SfmOptions | None = None,
+            progress: Callable[[str], None] | None = print) -> SfmResult:
+    """Reconstruct cameras and sparse points from the images `image_names` in `image_dir`.
+
+    Args:
+        camera: intrinsics of every image (all must have its size), held fixed; None to
+            self-calibrate one SIMPLE_RADIAL camera per image size.
+        work_dir: receives `database.db` and the mapper's `sparse/` models.
+        progress: called with one line per stage; None for silence.
+    Raises ReconstructionError when no model is found.
+    """
+    options = options or SfmOptions()
+    say = progress or (lambda _: None)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    database = work_dir / "database.db"
+    database.unlink(missing_ok=True)
+    pycolmap.set_random_seed(options.seed)
+    seconds = {}
+
+    n = len(image_names)
+    say(f"extracting SIFT features from {n} images (CPU)")
+    start = time.perf_counter()
+    extraction = pycolmap.FeatureExtractionOptions(num_threads=options.num_threads)
+    extraction.sift.max_num_features = options.max_num_features
+    extraction.sift.first_octave = options.first_octave
+    pycolmap.extract_features(
+        database, image_dir, image_names=image_names,
+        camera_mode=pycolmap.CameraMode.SINGLE if camera else pycolmap.CameraMode.AUTO,
+        reader_options=_reader_options(camera), extraction_options=extraction,
+        device=pycolmap.Device.cpu)
+    seconds["extraction"] = time.perf_counter() - start
+
+    say(f"matching all {n * (n - 1) // 2} image pairs (exhaustive, CPU)")
+    start = time.perf_counter()
+    matching = pycolmap.FeatureMatchingOptions(num_threads=options.num_threads)
+    matching.sift.max_ratio = options.max_ratio
+    pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+    seconds["matching"] = time.perf_counter() - start
+
+    say("incremental mapping")
+    start = time.perf_counter()
+    sparse = work_dir / "sparse"
+    sparse.mkdir(exist_ok=True)
+    models = pycolmap.incremental_mapping(database, image_dir, sparse,
+                                          _mapping_options(camera is not None, options))
+    seconds["mapping"] = time.perf_counter() - start
+    if not models:
+        raise ReconstructionError(
+            f"no model found from {n} photos: too few matching features between them (photos need "
+            "overlap, texture and a camera that moves between shots)")
+    best = max(models.values(), key=lambda r: r.num_reg_images())
+    say(f"registered {best.num_reg_images()} of {n} images, {best.num_points3D()} points, "
+        f"mean reprojection error {best.compute_mean_reprojection_error():.3f} px")
+    return SfmResult(best, len(models), seconds)
+
+
+def camera_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
+    """Image name -> X_RC (4x4, OpenCV axes) of each registered image, frame R of the model."""
+    poses = {}
+    for image in reconstruction.images.values():
+        if not image.has_pose:
+            continue
+        X_CR = np.eye(4)
+        X_CR[:3] = image.cam_from_world().matrix()
+        poses[image.name] = np.linalg.inv(X_CR)
+    return poses
+
+
+def image_cameras(reconstruction: pycolmap.Reconstruction) -> dict[str, PhotoCamera]:
+    """Image name -> the (possibly self-calibrated) camera of each registered image."""
+    return {image.name: PhotoCamera.from_colmap(reconstruction.cameras[image.camera_id])
+            for image in reconstruction.images.values() if image.has_pose}
