@@ -42,6 +42,8 @@ class SfmOptions:
     """Random seed of RANSAC and the mapper (runs with several threads may still differ slightly)."""
     num_threads: int = -1
     """CPU threads; -1 uses all cores."""
+    verbose: bool = False
+    """Show COLMAP's own log lines (otherwise only its warnings and errors)."""
 
 
 @dataclass
@@ -92,7 +94,17 @@ def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Pho
     Raises ReconstructionError when no model is found.
     """
     options = options or SfmOptions()
-    say = progress or (lambda _: None)
+    previous_level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 0 if options.verbose else 1
+    try:
+        return _run_sfm(image_dir, image_names, work_dir, camera, options,
+                        progress or (lambda _: None))
+    finally:
+        pycolmap.logging.minloglevel = previous_level
+
+
+def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
+             options: SfmOptions, say: Callable[[str], None]) -> SfmResult:
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "database.db"
     database.unlink(missing_ok=True)

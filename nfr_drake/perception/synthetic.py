@@ -1,0 +1,236 @@
+"""Synthetic photo folders: a closet in a textured room with a ChArUco board, rendered by Drake.
+
+The objects of `nfr_drake.objects` are plain-coloured and give SIFT little to hold on to, so this
+scene adds what real rooms have: a floor and walls with random texture, and a ChArUco board
+lying on the floor in front of the object (for `nfr-drake poses --charuco`). Photos are rendered
+with Drake's RgbdSensor (RenderEngineVtk) at known poses X_OC; `write_photo_folder` stores them
+with `truth.json` so that the pose pipeline can be checked end to end.
+
+Frames: the object frame O is the world frame of this scene. The board frame B is OpenCV's (see
+`charuco`); the board lies face up, so z_B points down: X_OB = [Rx(pi), p_OB].
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    GeometryInstance,
+    IllustrationProperties,
+    MakeRenderEngineVtk,
+    Mesh,
+    PerceptionProperties,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    RenderLabel,
+    Rgba,
+)
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import SpatialInertia
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import RgbdSensor
+
+from nfr_drake.data.cameras import look_at
+from nfr_drake.data.capture import PinholeCamera, write_image
+from nfr_drake.data.render import Lighting, drake_camera_info
+from nfr_drake.objects import ArticulatedObject
+from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels
+from nfr_drake.perception.charuco import CharucoBoardSpec
+
+TRUTH_FILE = "truth.json"
+_RENDERER = "synthetic_vtk"
+_CLIP_NEAR_M, _CLIP_FAR_M = 0.05, 30.0
+_PX_PER_SQUARE = 200
+
+
+@dataclass(frozen=True)
+class RoomSpec:
+    """The textured room around the object (metres, in O)."""
+
+    floor_half_size_m: float = 3.0
+    """The floor is a square of this half side centred under the object."""
+    wall_distance_m: float = 1.5
+    """The back wall is the plane x = -wall_distance_m."""
+    wall_height_m: float = 2.5
+    texture_px: int = 2048
+    """Side of each wall and floor texture, pixels."""
+    board: CharucoBoardSpec = field(default_factory=lambda: CharucoBoardSpec(square_m=0.08,
+                                                                             marker_m=0.06))
+    """The ChArUco board on the floor (larger than the test print, to be seen from 2 m)."""
+    p_OB: tuple[float, float, float] = (0.6, 0.28, 0.001)
+    """Position of the board's origin corner, on (just above) the floor."""
+
+
+def board_pose(room: RoomSpec) -> np.ndarray:
+    """X_OB (4x4): the board lies face up on the floor, x_B = x_O, y_B = -y_O, z_B = -z_O."""
+    X_OB = np.diag([1.0, -1.0, -1.0, 1.0])
+    X_OB[:3, 3] = room.p_OB
+    return X_OB
+
+
+def random_texture(rng: np.random.Generator, size: int) -> np.ndarray:
+    """A feature-rich texture: uint8 RGB (size, size, 3) of random shapes at many scales."""
+    image = np.full((size, size, 3), rng.integers(90, 200, size=3), np.uint8)
+    for radius in (size // 16, size // 40, size // 100, size // 250):
+        for _ in range(int(6 * (size / max(radius, 1)) ** 1.2)):
+            centre = tuple(int(v) for v in rng.integers(0, size, 2))
+            colour = tuple(int(v) for v in rng.integers(0, 256, 3))
+            r = max(1, int(radius * rng.uniform(0.4, 1.0)))
+            if rng.random() < 0.5:
+                cv2.circle(image, centre, r, colour, -1, cv2.LINE_AA)
+            else:
+                corner = (centre[0] + r, centre[1] + int(r * rng.uniform(0.3, 1.5)))
+                cv2.rectangle(image, centre, corner, colour, -1, cv2.LINE_AA)
+    return cv2.GaussianBlur(image, (0, 0), 0.7)
+
+
+def board_texture(spec: CharucoBoardSpec) -> np.ndarray:
+    """The board image, uint8 RGB, exactly `_PX_PER_SQUARE` pixels per square, no margin."""
+    nx, ny = spec.squares
+    grey = spec.board().generateImage((nx * _PX_PER_SQUARE, ny * _PX_PER_SQUARE), marginSize=0,
+                                      borderBits=1)
+    return cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
+
+
+def _write_quad_obj(path: Path, size_x: float, size_y: float) -> None:
+    """An OBJ rectangle [0, size_x] x [0, size_y] in its z = 0 plane, seen from -z.
+
+    Texture coordinates put image pixel (u, v) (u right, v down, normalised) at
+    (u size_x, v size_y, 0), as OpenCV's board coordinates do.
+    """
+    path.write_text(
+        f"v 0 0 0\nv {size_x} 0 0\nv {size_x} {size_y} 0\nv 0 {size_y} 0\n"
+        "vt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\n"
+        "vn 0 0 -1\n"
+        "f 1/1/1 3/3/1 2/2/1\nf 1/1/1 4/4/1 3/3/1\n")
+
+
+class SyntheticPhotoScene:
+    """A closet at articulation q in a textured room, photographed by a Drake RgbdSensor.
+
+    Args:
+        obj: the object, welded with its frame O at the world origin.
+        q: articulation in [0, 1].
+        camera: intrinsics of every photo (no distortion).
+        room: the room and board; seed: the textures' random seed.
+    """
+
+    def __init__(self, obj: ArticulatedObject, q: float, camera: PinholeCamera,
+                 room: RoomSpec | None = None, seed: int = 0):
+        self.obj, self.q, self.camera = obj, q, camera
+        self.room = room or RoomSpec()
+        self._assets = tempfile.TemporaryDirectory(prefix="nfr_synthetic_")
+        assets = Path(self._assets.name)
+        rng = np.random.default_rng(seed)
+
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+        params = RenderEngineVtkParams(default_clear_color=[0.8, 0.8, 0.8],
+                                       lights=Lighting().drake_lights())
+        scene_graph.AddRenderer(_RENDERER, MakeRenderEngineVtk(params))
+        model = add_articulated_object(plant, obj)
+        for name, X_OQ, size, texture in self._surfaces(rng):
+            write_image(assets / f"{name}.png", texture)
+            _write_quad_obj(assets / f"{name}.obj", *size)
+            self._add_textured_quad(plant, assets / f"{name}.obj", assets / f"{name}.png", X_OQ,
+                                    name)
+        rig = plant.AddRigidBody("camera_rig", plant.AddModelInstance("camera_rig"),
+                                 SpatialInertia.SolidSphereWithMass(0.1, 0.05))
+        plant.Finalize()
+        apply_semantic_labels(plant, scene_graph, model)
+        core = RenderCameraCore(_RENDERER, drake_camera_info(camera),
+                                ClippingRange(_CLIP_NEAR_M, _CLIP_FAR_M), RigidTransform())
+        sensor = builder.AddSystem(RgbdSensor(
+            parent_id=plant.GetBodyFrameIdOrThrow(rig.index()), X_PB=RigidTransform(),
+            color_camera=ColorRenderCamera(core, show_window=False),
+            depth_camera=DepthRenderCamera(core, DepthRange(_CLIP_NEAR_M, _CLIP_FAR_M))))
+        builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+        self._diagram = builder.Build()
+        self._context = self._diagram.CreateDefaultContext()
+        self._plant, self._rig, self._sensor = plant, rig, sensor
+        self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
+        plant.SetPositions(self._plant_context, model, np.array([obj.joint_value(q)]))
+
+    def _surfaces(self, rng: np.random.Generator):
+        """(name, X_OQ, (size_x, size_y), texture) of each textured rectangle Q, seen from -z_Q."""
+        r = self.room
+        h, d, t = r.floor_half_size_m, r.wall_distance_m, r.texture_px
+        floor = np.diag([1.0, -1.0, -1.0, 1.0])  # faces up
+        floor[:3, 3] = (-h, h, 0.0)
+        back = np.eye(4)  # the plane x = -d, facing +x: x_Q = y_O, y_Q = -z_O, z_Q = -x_O
+        back[:3, :3] = np.column_stack([[0, 1, 0], [0, 0, -1], [-1, 0, 0]])
+        back[:3, 3] = (-d, -h, r.wall_height_m)
+        yield "floor", floor, (2 * h, 2 * h), random_texture(rng, t)
+        yield "back_wall", back, (2 * h, r.wall_height_m), random_texture(rng, t)
+        nx, ny = r.board.squares
+        yield ("board", board_pose(r), (nx * r.board.square_m, ny * r.board.square_m),
+               board_texture(r.board))
+
+    @staticmethod
+    def _add_textured_quad(plant, obj_path: Path, png_path: Path, X_OQ: np.ndarray, name: str):
+        instance = GeometryInstance(RigidTransform(X_OQ), Mesh(str(obj_path)), name)
+        illustration = IllustrationProperties()  # Meshcat: untextured grey
+        illustration.AddProperty("phong", "diffuse", Rgba(0.7, 0.7, 0.7, 1.0))
+        instance.set_illustration_properties(illustration)
+        perception = PerceptionProperties()
+        perception.AddProperty("phong", "diffuse", Rgba(1.0, 1.0, 1.0, 1.0))
+        perception.AddProperty("phong", "diffuse_map", str(png_path))
+        perception.AddProperty("label", "id", RenderLabel(0))
+        instance.set_perception_properties(perception)
+        plant.RegisterVisualGeometry(plant.world_body(), instance)
+
+    def render(self, X_OC: np.ndarray) -> np.ndarray:
+        """The photo from camera pose X_OC (4x4, OpenCV axes): uint8 RGB (H, W, 3)."""
+        self._plant.SetFreeBodyPose(self._plant_context, self._rig, RigidTransform(X_OC))
+        ctx = self._sensor.GetMyContextFromRoot(self._context)
+        return self._sensor.color_image_output_port().Eval(ctx).data[..., :3].copy()
+
+
+def orbit_poses(n: int, target_O: np.ndarray, distance_m: float = 2.0,
+                azimuth_deg: tuple[float, float] = (-50.0, 50.0),
+                elevation_deg: tuple[float, float] = (22.0, 38.0)) -> np.ndarray:
+    """n camera poses X_OC (n, 4, 4) on an arc in front of the object (+x), looking at target_O.
+
+    Azimuths are spread evenly; elevations alternate between the bounds so the centres do not
+    lie on one line or one horizontal circle.
+    """
+    az = np.deg2rad(np.linspace(*azimuth_deg, n))
+    el = np.deg2rad(np.where(np.arange(n) % 2 == 0, elevation_deg[0], elevation_deg[1]))
+    poses = []
+    for a, e in zip(az, el, strict=True):
+        direction = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+        poses.append(look_at(target_O + distance_m * direction, target_O))
+    return np.stack(poses)
+
+
+def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray) -> Path:
+    """Render one photo per pose into `out` (photo_XXX.png) with `truth.json`.
+
+    truth.json: intrinsics (nerfstudio keys), `X_OC` per photo name (4x4, OpenCV axes), `X_OB`
+    (the board), the board's geometry, q and the object's keypoints at q (metres, in O).
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    poses = {}
+    for i, X_OC in enumerate(X_OCs):
+        name = f"photo_{i:03d}.png"
+        write_image(out / name, scene.render(X_OC))
+        poses[name] = np.asarray(X_OC).tolist()
+    b = scene.room.board
+    truth = {"camera": scene.camera.to_json(), "X_OC": poses,
+             "X_OB": board_pose(scene.room).tolist(),
+             "board": {"squares": list(b.squares), "square_m": b.square_m, "marker_m": b.marker_m,
+                       "dictionary": b.dictionary},
+             "q": scene.q,
+             "keypoints": {k: v.tolist() for k, v in scene.obj.keypoints(scene.q).items()}}
+    (out / TRUTH_FILE).write_text(json.dumps(truth, indent=2))
+    return out
