@@ -26,6 +26,7 @@ from nfr_drake.perception.alignment import (
     Similarity,
     align_to_camera_poses,
     align_to_centres,
+    check_not_collinear,
     parse_object_pose,
     read_anchors,
 )
@@ -72,6 +73,25 @@ def _working_camera(camera: PhotoCamera, photos: list[WorkingPhoto]) -> PhotoCam
         raise ConfigError(f"the intrinsics are for {camera.width}x{camera.height} images, the "
                           f"photos are {w}x{h} (another aspect ratio; rotated photos?)")
     return camera.scaled(*photos[0].size)
+
+
+def _board_message(estimator: CharucoPoseEstimator, found: int, where: str) -> str:
+    spec = estimator.spec
+    return (f"the ChArUco board ({spec.squares[0]}x{spec.squares[1]} squares, {spec.dictionary}) "
+            f"was found in {found} {where}; metric alignment needs it in at least 2. Check the "
+            "board options (--board.squares, --board.dictionary, --board.legacy-pattern)")
+
+
+def _photos_with_board(estimator: CharucoPoseEstimator, image_dir: Path,
+                       photos: list[WorkingPhoto]) -> list[str]:
+    """Names of the photos that show enough ChArUco corners for a pose; fails early with fewer
+    than two (before the costly reconstruction)."""
+    names = [p.name for p in photos
+             if len(estimator.detect(cv2.imread(str(image_dir / p.work_name)))[0])
+             >= estimator.min_corners]
+    if len(names) < 2:
+        raise BoardNotFoundError(_board_message(estimator, len(names), f"of {len(photos)} photos"))
+    return names
 
 
 def _board_poses(estimator: CharucoPoseEstimator, image_dir: Path, work_names: dict[str, str],
@@ -131,6 +151,10 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         image_dir = work / "images"
         progress(f"resizing photos from {photos_dir} to at most {max_size} px")
         photos = prepare_photos(photos_dir, image_dir, max_size)
+        with_board = _photos_with_board(estimator, image_dir, photos) if estimator else []
+        if alignment.anchors is not None:
+            known = sorted(set(alignment.anchors) & {p.name for p in photos})
+            check_not_collinear(np.array([alignment.anchors[n] for n in known]).reshape(-1, 3), known)
         work_camera = _working_camera(camera, photos) if camera else None
         sfm = run_sfm(image_dir, [p.work_name for p in photos], work, work_camera, sfm_options,
                       progress)
@@ -148,14 +172,11 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         board_details = {}
         if estimator is not None:
             progress("detecting the ChArUco board in the registered photos")
-            work_names = {p.name: p.work_name for p in photos if p.name in X_RCs}
+            work_names = {p.name: p.work_name for p in photos
+                          if p.name in X_RCs and p.name in with_board}
             X_BCs, board_details = _board_poses(estimator, image_dir, work_names, cameras)
             if len(X_BCs) < 2:
-                raise BoardNotFoundError(
-                    f"the ChArUco board ({estimator.spec.squares[0]}x{estimator.spec.squares[1]} "
-                    f"squares, {estimator.spec.dictionary}) was found in {len(X_BCs)} registered "
-                    "photo(s); metric alignment needs it in at least 2. Check the board options "
-                    "(--board.squares, --board.dictionary, --board.legacy-pattern)")
+                raise BoardNotFoundError(_board_message(estimator, len(X_BCs), "registered photo(s)"))
             aligned = align_to_camera_poses(X_RCs, X_BCs, "charuco")
         elif alignment.anchors is not None:
             aligned = align_to_centres(X_RCs, alignment.anchors)
