@@ -1,0 +1,117 @@
+"""Grasp frames and a static obstacle, derived from a keypoint trajectory alone.
+
+Conventions (all in the world frame W):
+- the approach direction is the unit vector the gripper moves along when closing in on the handle;
+  it is minus the direction in which the handle moves for increasing q (for a drawer exactly minus
+  the pull direction; for a door the handle path's tangent, which is the door's outward normal up to
+  the angle atan(standoff / radius) of the handle's standoff, 5-15 degrees here);
+- the bar axis is the axis of the handle's grip: the hinge axis (hinge_top - hinge_bottom) for a
+  door, horizontal and across the pull direction for a drawer;
+- the grasp frame G has its origin at the handle keypoint, +z along the approach, +x along the bar
+  axis, +y = z x x (the fingers' closing axis). It matches the tool frame of `nfr_drake.systems.robot`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.keypoints import KeypointTrajectory
+
+_Z = np.array([0.0, 0.0, 1.0])
+
+CARCASS_SETBACK = 0.05
+"""Distance from the handle (at q = 0) back to the front face of the keypoint-derived carcass box, m.
+Handles of both categories stand 4.5-7 cm in front of the carcass."""
+
+
+@dataclass(frozen=True)
+class HandleWaypoint:
+    """The handle at one articulation.
+
+    Attributes:
+        q: articulation in [0, 1].
+        p_WH: handle keypoint, m, shape (3,).
+        approach_W: unit approach direction, shape (3,).
+        bar_W: unit bar axis, shape (3,).
+    """
+
+    q: float
+    p_WH: np.ndarray
+    approach_W: np.ndarray
+    bar_W: np.ndarray
+
+    def X_WG(self, flip: bool = False) -> RigidTransform:
+        """Grasp frame G (see module docstring); `flip` turns the hand 180 degrees about the approach."""
+        x = -self.bar_W if flip else self.bar_W
+        z = self.approach_W
+        R = np.column_stack([x, np.cross(z, x), z])
+        return RigidTransform(RotationMatrix(R), self.p_WH)
+
+
+def _unit(v: np.ndarray, what: str) -> np.ndarray:
+    n = np.linalg.norm(v)
+    if n < 1e-9:
+        raise NfrDrakeError(f"keypoint trajectory: {what} is degenerate (zero length)")
+    return v / n
+
+
+def handle_tangent(kt: KeypointTrajectory, q: float) -> np.ndarray:
+    """Unit direction in which the handle moves for increasing q, at q, shape (3,)."""
+    dq = 0.5 * float(np.min(np.diff(kt.q_grid)))
+    lo, hi = max(q - dq, kt.q_grid[0]), min(q + dq, kt.q_grid[-1])
+    return _unit(kt.point("handle", hi) - kt.point("handle", lo), "the handle path")
+
+
+def bar_axis(kt: KeypointTrajectory, q: float) -> np.ndarray:
+    """Unit axis of the handle's grip, shape (3,): the hinge axis (upward) or horizontal across the pull."""
+    if kt.category == "closet":
+        a = _unit(kt.point("hinge_top", q) - kt.point("hinge_bottom", q), "the hinge axis")
+        return a if a @ _Z >= 0 else -a
+    return _unit(np.cross(_Z, handle_tangent(kt, q)), "the drawer's pull direction (vertical?)")
+
+
+def handle_waypoints(kt: KeypointTrajectory, q_values: np.ndarray) -> list[HandleWaypoint]:
+    """The handle, its approach direction and bar axis at each articulation in `q_values`."""
+    return [HandleWaypoint(float(q), kt.point("handle", q), -handle_tangent(kt, q), bar_axis(kt, q))
+            for q in q_values]
+
+
+@dataclass(frozen=True)
+class ObstacleBox:
+    """A box obstacle: full extents `size` (m, (3,)) and pose X_WB of its centre."""
+
+    name: str
+    size: np.ndarray
+    X_WB: RigidTransform
+
+
+def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
+    """A box inside the object's static part, from the keypoints alone.
+
+    Its front face is CARCASS_SETBACK behind the closed handle, across the front normal (the handle
+    tangent at q = 0). Closet: it spans the hinge line to its mirror image about the `goal` keypoint
+    (the carcass centre) and the floor to `hinge_top`. Drawer: 0.3 m wide, 0.3 m deep, from the floor
+    to 5 cm above the handle (the keypoints do not say more; the true carcass is larger).
+    """
+    n = handle_tangent(kt, 0.0)
+    n = _unit(n - (n @ _Z) * _Z, "the horizontal front normal")
+    lateral = np.cross(_Z, n)
+    p_handle = kt.point("handle", 0.0)
+    front = p_handle @ n - CARCASS_SETBACK
+    if kt.category == "closet" and "goal" in kt.names:
+        hinge, goal = kt.point("hinge_bottom", 0.0), kt.point("goal", 0.0)
+        half_width = abs((hinge - goal) @ lateral)
+        centre_lat = goal @ lateral
+        depth = max(2.0 * (front - goal @ n), 0.1)
+        height = kt.point("hinge_top", 0.0)[2]
+    else:
+        half_width, centre_lat, depth = 0.15, p_handle @ lateral, 0.3
+        height = p_handle[2] + 0.05
+    size = np.array([depth, 2.0 * half_width, height])
+    centre = (front - depth / 2) * n + centre_lat * lateral + height / 2 * _Z
+    R = RotationMatrix(np.column_stack([n, lateral, _Z]))
+    return ObstacleBox("carcass", size, RigidTransform(R, centre))

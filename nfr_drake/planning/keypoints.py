@@ -1,0 +1,108 @@
+"""Keypoint trajectories: where an object's keypoints are for each articulation q in [0, 1].
+
+This is the planner's only knowledge of the object. It is built here from an object's model (ground
+truth, `from_articulated_object`, or `nfr_drake.planning.model_keypoints` for any SDFormat/URDF
+model) and, later, from the neural field's forward simulation (`from_fit_result`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.objects.articulated import ArticulatedObject
+
+DEFAULT_GRID_SIZE = 41
+
+
+@dataclass(frozen=True)
+class KeypointTrajectory:
+    """Keypoint positions along the object's articulation, in the world frame W.
+
+    Attributes:
+        category: "closet" (a door on a hinge) or "drawer" (a slide); tells which keypoints exist.
+        q_grid: articulations, increasing, in [0, 1], shape (N,).
+        names: keypoint names, length K (always includes "handle"; closets add "hinge_top" and
+            "hinge_bottom").
+        p_WK: keypoint positions in W at each grid articulation, m, shape (N, K, 3).
+        q_current: the object's present articulation, in [0, 1].
+    """
+
+    category: str
+    q_grid: np.ndarray
+    names: tuple[str, ...]
+    p_WK: np.ndarray
+    q_current: float
+
+    def __post_init__(self) -> None:
+        q = np.asarray(self.q_grid, dtype=float)
+        p = np.asarray(self.p_WK, dtype=float)
+        if q.ndim != 1 or len(q) < 2 or np.any(np.diff(q) <= 0):
+            raise NfrDrakeError("keypoint trajectory: q_grid must be 1-D, increasing, at least 2 values")
+        if p.shape != (len(q), len(self.names), 3):
+            raise NfrDrakeError(f"keypoint trajectory: p_WK has shape {p.shape}, expected "
+                                f"({len(q)}, {len(self.names)}, 3)")
+        required = {"closet": ("handle", "hinge_top", "hinge_bottom"), "drawer": ("handle",)}
+        if self.category not in required:
+            raise NfrDrakeError(f"keypoint trajectory: unknown category {self.category!r}")
+        missing = [n for n in required[self.category] if n not in self.names]
+        if missing:
+            raise NfrDrakeError(f"keypoint trajectory of a {self.category} lacks keypoints {missing}")
+        object.__setattr__(self, "q_grid", q)
+        object.__setattr__(self, "p_WK", p)
+        object.__setattr__(self, "names", tuple(self.names))
+        object.__setattr__(self, "q_current", float(np.clip(self.q_current, q[0], q[-1])))
+
+    def at(self, q: float | np.ndarray) -> np.ndarray:
+        """Keypoints at articulation(s) q by linear interpolation: (K, 3), or (M, K, 3) for M values."""
+        qs = np.clip(np.atleast_1d(np.asarray(q, dtype=float)), self.q_grid[0], self.q_grid[-1])
+        flat = self.p_WK.reshape(len(self.q_grid), -1)
+        out = np.stack([np.interp(qs, self.q_grid, flat[:, j]) for j in range(flat.shape[1])], axis=-1)
+        out = out.reshape(len(qs), len(self.names), 3)
+        return out if np.ndim(q) else out[0]
+
+    def point(self, name: str, q: float | np.ndarray) -> np.ndarray:
+        """One keypoint at articulation(s) q, in W: (3,) or (M, 3)."""
+        return self.at(q)[..., self.names.index(name), :]
+
+    def with_current(self, q_current: float) -> KeypointTrajectory:
+        """The same trajectory with another present articulation."""
+        return KeypointTrajectory(self.category, self.q_grid, self.names, self.p_WK, q_current)
+
+    def shifted(self, offset_W: np.ndarray) -> KeypointTrajectory:
+        """All keypoints translated by `offset_W` (m, (3,)): a deliberately wrong estimate."""
+        return KeypointTrajectory(self.category, self.q_grid, self.names,
+                                  self.p_WK + np.asarray(offset_W, dtype=float), self.q_current)
+
+    @staticmethod
+    def from_object_frame(category: str, q_grid: np.ndarray, names: Sequence[str], p_OK: np.ndarray,
+                          X_WO: RigidTransform, q_current: float) -> KeypointTrajectory:
+        """From positions in the object frame O (m, (N, K, 3)) and the object's pose X_WO."""
+        p_OK = np.asarray(p_OK, dtype=float)
+        p_WK = (X_WO.rotation().matrix() @ p_OK.reshape(-1, 3).T).T + X_WO.translation()
+        return KeypointTrajectory(category, q_grid, tuple(names), p_WK.reshape(p_OK.shape), q_current)
+
+    @staticmethod
+    def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q_current: float,
+                                grid_size: int = DEFAULT_GRID_SIZE) -> KeypointTrajectory:
+        """Ground truth from a sampled object's keypoint function."""
+        q_grid = np.linspace(0.0, 1.0, grid_size)
+        return KeypointTrajectory.from_object_frame(
+            obj.category, q_grid, obj.keypoint_names, obj.keypoint_array(q_grid), X_WO, q_current)
+
+    @staticmethod
+    def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:
+        """From a fit result dict (DESIGN.md: "category", "q", "trajectory" in frame O)."""
+        try:
+            traj = result["trajectory"]
+            names = tuple(traj["keypoints"])
+            p_OK = np.stack([np.asarray(traj["keypoints"][n], dtype=float) for n in names], axis=1)
+            return KeypointTrajectory.from_object_frame(
+                result["category"], np.asarray(traj["q"], dtype=float), names, p_OK, X_WO,
+                float(result["q"]))
+        except (KeyError, TypeError, ValueError) as err:
+            raise NfrDrakeError(f"fit result has no usable keypoint trajectory: {err}") from None

@@ -1,0 +1,302 @@
+"""Grasp-and-articulate motions from a keypoint trajectory: base placement, chained IK, trajectory optimisation.
+
+The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (`s_pregrasp`, the hand
+`pregrasp_distance` back along the approach), grasp (`s_grasp`, at rest, tool frame on the handle),
+then the handle keypoints from the current q to the target q at T = `num_waypoints` evenly spaced
+times in [s_grasp, 1] (the paper's T waypoints), ending at rest. Only the keypoint trajectory is
+used; obstacles are the floor and the keypoint-derived carcass box.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.inverse_kinematics import (
+    AngleBetweenVectorsConstraint,
+    InverseKinematics,
+    MinimumDistanceLowerBoundConstraint,
+    PositionConstraint,
+)
+from pydrake.planning import KinematicTrajectoryOptimization
+from pydrake.solvers import SnoptSolver, SolverOptions
+from pydrake.trajectories import BsplineTrajectory
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.grasp import HandleWaypoint, carcass_box, handle_waypoints
+from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.planning.scene import PlanningScene, build_planning_scene
+from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
+
+# Franka datasheet (Panda) joint acceleration limits, rad/s^2.
+_ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
+_Z = np.array([0.0, 0.0, 1.0])
+_SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
+_WRIST_REACH = 0.80  # farthest shoulder-to-wrist-centre distance used, m (elbow nearly straight)
+_BASE_CLEARANCE = 0.3  # base axis to the moving part's sweep, m
+
+
+class PlanningError(NfrDrakeError):
+    """No motion satisfies the constraints; the message names those that failed."""
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Options of `plan_articulation`."""
+
+    num_waypoints: int = 10
+    """T: handle waypoints from the current to the target articulation."""
+    s_pregrasp: float = 0.25
+    s_grasp: float = 0.4
+    pregrasp_distance: float = 0.10
+    """How far back along the approach the pre-grasp holds the tool frame, m."""
+    position_tolerance: float = 0.003
+    """Half-width of the box the tool origin must lie in at each waypoint, m."""
+    bar_tolerance_deg: float = 3.0
+    """Allowed angle between the tool's x axis and the handle's bar axis."""
+    grasp_cone_deg: float = 5.0
+    """Allowed angle between the tool's z axis and the approach at pre-grasp and grasp."""
+    follow_cone_deg: float = 35.0
+    """Same while following the handle: the hand may turn about the bar (a cylindrical grasp); past
+    about 35 degrees the Panda hand's 0.2 m wide palm would touch a door 3 cm behind the bar."""
+    min_distance: float = 0.01
+    """Clearance between the robot and the floor / carcass box (and itself), m."""
+    collision_samples: int = 24
+    num_control_points: int = 18
+    velocity_scale: float = 0.5
+    """Fraction of the datasheet velocity limits the plan may use."""
+    acceleration_scale: float = 0.3
+    min_duration: float = 2.0
+    max_duration: float = 15.0
+    max_base_candidates: int = 12
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.s_pregrasp < self.s_grasp < 1.0:
+            raise NfrDrakeError("planner: need 0 < s_pregrasp < s_grasp < 1")
+        if self.num_waypoints < 2:
+            raise NfrDrakeError("planner: num_waypoints must be at least 2")
+
+
+@dataclass
+class PlanResult:
+    """A planned motion.
+
+    Attributes:
+        trajectory: positions of the planning plant (7 arm joints, 2 fingers) over time t in
+            [0, duration], s.
+        X_WB: the chosen robot base pose.
+        s_grasp: normalised time of the grasp; the grasp happens at t = s_grasp * duration.
+        waypoints: the handle waypoints (current q to target q).
+        flip: whether the hand is turned 180 degrees about the approach (grasp frame convention).
+        seconds: wall time per stage ("placement", "trajopt", "total").
+    """
+
+    trajectory: BsplineTrajectory
+    X_WB: RigidTransform
+    s_grasp: float
+    waypoints: list[HandleWaypoint]
+    flip: bool
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return float(self.trajectory.end_time() - self.trajectory.start_time())
+
+    @property
+    def t_grasp(self) -> float:
+        return self.s_grasp * self.duration
+
+
+def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np.ndarray:
+    """Points on the moving part's sweep, m, shape (M, 3): the handle path and, for a door, the
+    segments from the hinge axis to the handle."""
+    pts = [w.p_WH for w in waypoints]
+    if kt.category == "closet":
+        for w in waypoints:
+            a = kt.point("hinge_bottom", w.q)
+            axis = kt.point("hinge_top", w.q) - a
+            axis /= np.linalg.norm(axis)
+            foot = a + ((w.p_WH - a) @ axis) * axis
+            pts += [foot + f * (w.p_WH - foot) for f in np.linspace(0.0, 1.0, 8)]
+    return np.array(pts)
+
+
+def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], max_count: int
+                     ) -> list[RigidTransform]:
+    """Robot base poses on the floor facing the handle path, most reachable first.
+
+    Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
+    part's sweep by `_BASE_CLEARANCE` and the wrist centre of every waypoint (0.21 m back along the
+    approach) is within `_WRIST_REACH` of the shoulder; they are ranked by the farthest such reach.
+    """
+    p = np.array([w.p_WH for w in waypoints])
+    wrists = p + np.array([-0.21 * w.approach_W for w in waypoints])
+    swept = _swept_points(kt, waypoints)
+    c = p.mean(axis=0)
+    scored = []
+    for rho in np.arange(0.3, 1.01, 0.1):
+        for phi in np.radians(np.arange(0.0, 360.0, 15.0)):
+            p_WB = np.array([c[0] + rho * np.cos(phi), c[1] + rho * np.sin(phi), 0.0])
+            if np.min(np.linalg.norm((swept - p_WB)[:, :2], axis=1)) < _BASE_CLEARANCE:
+                continue
+            reach = np.linalg.norm(wrists - (p_WB + [0, 0, _SHOULDER_HEIGHT]), axis=1)
+            if reach.max() > _WRIST_REACH or np.linalg.norm((wrists - p_WB)[:, :2], axis=1).min() < 0.2:
+                continue
+            yaw = np.arctan2(*(c - p_WB)[1::-1])
+            scored.append((reach.max(), RigidTransform(RollPitchYaw(0, 0, yaw), p_WB)))
+    scored.sort(key=lambda item: item[0])
+    return [X for _, X in scored[:max_count]]
+
+
+class _Stage:
+    """One IK target: a tool position and its orientation constraints."""
+
+    def __init__(self, name: str, p_WT: np.ndarray, wp: HandleWaypoint, cone_deg: float, flip: bool):
+        self.name, self.p_WT, self.wp, self.cone, self.flip = name, p_WT, wp, np.radians(cone_deg), flip
+
+    def bar_W(self) -> np.ndarray:
+        return -self.wp.bar_W if self.flip else self.wp.bar_W
+
+
+def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
+    """(description, constraint) pairs fixing the tool frame for `stage`."""
+    plant, ctx, W, G = scene.plant, scene.plant_context, scene.plant.world_frame(), scene.tool_frame
+    tol = np.full(3, cfg.position_tolerance)
+    return [
+        (f"{stage.name} position", PositionConstraint(plant, W, stage.p_WT - tol, stage.p_WT + tol,
+                                                      G, np.zeros(3), ctx)),
+        (f"{stage.name} bar alignment", AngleBetweenVectorsConstraint(
+            plant, W, stage.bar_W(), G, np.array([1.0, 0, 0]), 0.0, np.radians(cfg.bar_tolerance_deg), ctx)),
+        (f"{stage.name} approach cone", AngleBetweenVectorsConstraint(
+            plant, W, stage.wp.approach_W, G, np.array([0, 0, 1.0]), 0.0, stage.cone, ctx)),
+    ]
+
+
+def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
+    first = waypoints[0]
+    stages = [_Stage("pre-grasp", first.p_WH - cfg.pregrasp_distance * first.approach_W, first,
+                     cfg.grasp_cone_deg, flip),
+              _Stage("grasp", first.p_WH, first, cfg.grasp_cone_deg, flip)]
+    stages += [_Stage(f"handle waypoint {i} (q={w.q:.2f})", w.p_WH, w, cfg.follow_cone_deg, flip)
+               for i, w in enumerate(waypoints[1:], start=1)]
+    return stages
+
+
+def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray, cfg: PlannerConfig
+                ) -> tuple[list[np.ndarray] | None, str]:
+    """Solve the stages in order, each seeded by and kept close to the last; (solutions, failed stage)."""
+    plant = scene.plant
+    solver = SnoptSolver()
+    q_prev = scene.full_q(q_start)
+    # First seed: the home posture turned to face the handle.
+    p_BH = scene.X_WB.inverse() @ stages[1].p_WT
+    q_seed = scene.full_q(np.r_[np.arctan2(p_BH[1], p_BH[0]), Q_HOME[1:]])
+    sols = []
+    for stage in stages:
+        ik = InverseKinematics(plant, scene.plant_context)
+        q = ik.q()
+        for _, c in _constraints(scene, stage, cfg):
+            ik.prog().AddConstraint(c, q)
+        ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance, 0.05)
+        ik.prog().AddBoundingBoxConstraint(q_prev[NUM_ARM_JOINTS:], q_prev[NUM_ARM_JOINTS:],
+                                           q[NUM_ARM_JOINTS:])
+        ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
+        result = solver.Solve(ik.prog(), q_seed)
+        if not result.is_success():
+            return None, stage.name
+        q_prev = q_seed = result.GetSolution(q)
+        sols.append(q_prev)
+    return sols, ""
+
+
+def _initial_guess(trajopt: KinematicTrajectoryOptimization, s_knots: np.ndarray, q_knots: np.ndarray
+                   ) -> BsplineTrajectory:
+    """A B-spline whose control points follow the piecewise-linear path through (s_knots, q_knots)."""
+    n = trajopt.num_control_points()
+    s_cp = np.linspace(0.0, 1.0, n)
+    cps = np.stack([np.interp(s_cp, s_knots, q_knots[:, j]) for j in range(q_knots.shape[1])])
+    return BsplineTrajectory(trajopt.basis(), cps)
+
+
+def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarray], q_start: np.ndarray,
+              cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, list[str]]:
+    plant = scene.plant
+    nq = plant.num_positions()
+    trajopt = KinematicTrajectoryOptimization(nq, cfg.num_control_points, spline_order=4)
+    prog = trajopt.get_mutable_prog()
+    trajopt.AddDurationCost(1.0)
+    trajopt.AddPathLengthCost(0.2)
+    q0 = scene.full_q(q_start)
+    lower, upper = plant.GetPositionLowerLimits().copy(), plant.GetPositionUpperLimits().copy()
+    lower[NUM_ARM_JOINTS:] = upper[NUM_ARM_JOINTS:] = q0[NUM_ARM_JOINTS:]
+    trajopt.AddPositionBounds(lower, upper)
+    vmax = cfg.velocity_scale * plant.GetVelocityUpperLimits()
+    trajopt.AddVelocityBounds(-vmax, vmax)
+    amax = np.r_[cfg.acceleration_scale * _ACCEL_LIMITS, np.ones(nq - NUM_ARM_JOINTS)]
+    trajopt.AddAccelerationBounds(-amax, amax)
+    trajopt.AddDurationConstraint(cfg.min_duration, cfg.max_duration)
+
+    described = []
+    b = trajopt.AddPathPositionConstraint(q0, q0, 0.0)
+    described.append(("start configuration", b))
+    zeros = np.zeros(nq)
+    for s, what in ((0.0, "start"), (cfg.s_grasp, "grasp"), (1.0, "end")):
+        described.append((f"at rest at {what}", trajopt.AddPathVelocityConstraint(zeros, zeros, s)))
+    s_follow = np.linspace(cfg.s_grasp, 1.0, len(stages) - 1)
+    s_stage = np.r_[cfg.s_pregrasp, s_follow]
+    for stage, s in zip(stages, s_stage, strict=True):
+        for name, c in _constraints(scene, stage, cfg):
+            described.append((name, trajopt.AddPathPositionConstraint(c, s)))
+    collision = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, scene.plant_context,
+                                                    None, 0.05)
+    for s in np.linspace(0.0, 1.0, cfg.collision_samples + 1)[1:]:
+        described.append((f"collision clearance at s={s:.2f}", trajopt.AddPathPositionConstraint(collision, s)))
+    for name, binding in described:
+        binding.evaluator().set_description(name)
+
+    s_knots = np.r_[0.0, s_stage]
+    q_knots = np.stack([q0, *ik_sols])
+    trajopt.SetInitialGuess(_initial_guess(trajopt, s_knots, q_knots))
+    options = SolverOptions()
+    options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
+    result = SnoptSolver().Solve(prog, None, options)
+    if not result.is_success():
+        failed = result.GetInfeasibleConstraintNames(prog, 1e-4)
+        return None, sorted(set(failed)) or [f"solver status {result.get_solution_result()}"]
+    return trajopt.ReconstructTrajectory(result), []
+
+
+def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray = Q_HOME,
+                      config: PlannerConfig = PlannerConfig()) -> PlanResult:
+    """Plan grasping the handle and moving it from `kt.q_current` to `q_target`.
+
+    q_start: the arm's joint positions at t = 0, rad, shape (7,). Raises PlanningError naming the
+    constraints that failed.
+    """
+    t0 = time.perf_counter()
+    if not 0.0 <= q_target <= 1.0:
+        raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")
+    q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
+    waypoints = handle_waypoints(kt, q_values)
+    obstacles = [carcass_box(kt)]
+    failures = []
+    for X_WB in _base_candidates(kt, waypoints, config.max_base_candidates):
+        scene = build_planning_scene(X_WB, obstacles)
+        for flip in (True, False):
+            stages = _stages(waypoints, config, flip)
+            sols, failed = _chained_ik(scene, stages, q_start, config)
+            if sols is None:
+                failures.append(f"IK of {failed}")
+                continue
+            t1 = time.perf_counter()
+            traj, failed_constraints = _optimise(scene, stages, sols, q_start, config)
+            t2 = time.perf_counter()
+            if traj is None:
+                failures.append("trajectory optimisation: " + ", ".join(failed_constraints))
+                continue
+            return PlanResult(traj, X_WB, config.s_grasp, waypoints, flip,
+                              {"placement": t1 - t0, "trajopt": t2 - t1, "total": t2 - t0})
+    summary = "; ".join(dict.fromkeys(failures)) or "no robot base position clears the handle path"
+    raise PlanningError(f"no feasible motion from q={kt.q_current:.2f} to q={q_target:.2f}: {summary}")

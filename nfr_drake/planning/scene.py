@@ -1,0 +1,57 @@
+"""The planner's world: the arm at a base pose, the floor and keypoint-derived obstacle boxes.
+
+It never holds the object's model: obstacles come from `grasp.carcass_box` (keypoints only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Box, ProximityProperties
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.planning import RobotDiagram, RobotDiagramBuilder
+from pydrake.systems.framework import Context
+
+from nfr_drake.planning.grasp import ObstacleBox
+from nfr_drake.systems.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda
+
+
+@dataclass
+class PlanningScene:
+    """A built planning diagram and its contexts (kept alive for the constraints that use them).
+
+    Positions q of `plant`: 7 arm joints then 2 finger joints, shape (9,).
+    """
+
+    diagram: RobotDiagram
+    plant: MultibodyPlant
+    robot: ModelInstanceIndex
+    context: Context
+    plant_context: Context
+    X_WB: RigidTransform
+
+    @property
+    def tool_frame(self):
+        return self.plant.GetFrameByName(TOOL_FRAME, self.robot)
+
+    def full_q(self, q_arm: np.ndarray) -> np.ndarray:
+        """Arm joints (7,) with the fingers open, shape (9,)."""
+        return np.r_[q_arm, FINGER_OPEN, FINGER_OPEN]
+
+
+def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox]) -> PlanningScene:
+    """The arm with base pose X_WB, the floor, and `obstacles` welded to the world."""
+    builder = RobotDiagramBuilder(time_step=0.0)
+    plant = builder.plant()
+    robot = add_panda(plant, X_WB)
+    add_floor(plant)
+    for box in obstacles:
+        plant.RegisterCollisionGeometry(plant.world_body(), box.X_WB, Box(*box.size),
+                                        f"obstacle_{box.name}", ProximityProperties())
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    return PlanningScene(diagram, plant, robot, context, plant.GetMyMutableContextFromRoot(context), X_WB)

@@ -1,0 +1,69 @@
+"""The Franka Panda arm and hand and the floor from `sdf/`, resolved as `package://nfr_drake/...`.
+
+Frames: B is the robot base (panda_link0, on the floor), G the tool frame `panda_tool` at the grasp
+point between the finger pads (+z approach, +y finger closing axis, +x along the pads).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex
+
+import nfr_drake
+from nfr_drake.errors import NfrDrakeError
+
+PACKAGE_NAME = "nfr_drake"
+PANDA_URL = "package://nfr_drake/panda/panda_arm_hand.sdf"
+FLOOR_URL = "package://nfr_drake/scene/floor.sdf"
+BASE_FRAME = "panda_link0"
+TOOL_FRAME = "panda_tool"
+HAND_BODIES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
+ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
+FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
+NUM_ARM_JOINTS = 7
+
+Q_HOME = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4])
+"""Franka's "ready" configuration of the arm joints, rad, shape (7,)."""
+FINGER_OPEN = 0.04
+"""Opening of each finger (half the gripper width) when open, m."""
+
+
+def sdf_dir() -> Path:
+    """The `sdf/` folder beside the package source (the package is installed editable)."""
+    path = Path(nfr_drake.__file__).resolve().parent.parent / "sdf"
+    if not (path / "package.xml").is_file():
+        raise NfrDrakeError(
+            f"robot models not found at {path}; install nfr-drake editable from its source tree "
+            "(pip install -e .) so that sdf/ sits beside the nfr_drake package")
+    return path
+
+
+def register_package(parser: Parser) -> Parser:
+    """Make `package://nfr_drake/...` resolve to `sdf/` in this parser; returns the parser."""
+    package_map = parser.package_map()
+    if not package_map.Contains(PACKAGE_NAME):
+        package_map.Add(PACKAGE_NAME, str(sdf_dir()))
+    return parser
+
+
+def add_panda(plant: MultibodyPlant, X_WB: RigidTransform | None = None,
+              model_name: str = "panda") -> ModelInstanceIndex:
+    """Add the arm and hand with its base welded at X_WB (default identity); before Finalize()."""
+    parser = register_package(Parser(plant, model_name))
+    (model,) = parser.AddModels(url=PANDA_URL)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(BASE_FRAME, model),
+                     X_WB if X_WB is not None else RigidTransform())
+    return model
+
+
+def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:
+    """Add the floor with its top surface on the world's z = 0 plane; before Finalize()."""
+    parser = register_package(Parser(plant))
+    (model,) = parser.AddModels(url=FLOOR_URL)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("floor", model))
+    return model
