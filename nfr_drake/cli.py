@@ -19,10 +19,13 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "render capture sets (transforms.json + gt.json) of unseen objects"),
     "validate": ("nfr_drake.data.validate:validate_command",
                  "check a capture set (transforms.json and its images)"),
+    "infer": ("nfr_drake.inference.infer:infer_command",
+              "fit a model to a capture set and forward-simulate the object's motion"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
     "poses": ("nfr_drake.perception.poses:poses_command",
               "camera poses of a folder of photos (pycolmap SfM, metric alignment) as a capture set"),
+    "train": ("nfr_drake.nfr.train:train_command", "train the neural field (auto-decoder) on a dataset"),
     "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
               "write a contact sheet PNG of a dataset's renders"),
 }

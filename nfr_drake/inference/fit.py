@@ -1,0 +1,207 @@
+"""Auto-decoding: find the latent code z = [z_art, z_obj] of an unseen object from posed images.
+
+The networks stay frozen; only z moves, by Adam on the image loss (paper: lambda_1 = lambda_2 = 0)
+plus SRN's latent prior. Several codes are fitted at once, their z_art started at evenly spread
+articulations (multi-start), because the image loss has local minima in q (a door seen from one
+side at q and near 1 - q looks alike); the code with the lowest image loss on a fixed evaluation set
+of rays wins. Each start stops when its loss has not improved by `min_improvement` for `patience`
+steps (or at `max_steps`).
+
+Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
+views works (the paper's claim of robustness to camera parameters never seen in training).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+
+from nfr_drake.data.capture import CaptureFrame, CaptureSet
+from nfr_drake.errors import ConfigError
+from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
+from nfr_drake.nfr.losses import latent_loss
+from nfr_drake.nfr.model import NFRModel
+from nfr_drake.nfr.rays import Rays, pixel_centers
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Options of the auto-decoding fit.
+
+    Attributes:
+        restarts: codes fitted in parallel; start i has q = (i + 0.5) / restarts.
+        max_steps: Adam steps at most.
+        min_steps: steps before the stopping rule may end the fit.
+        rays_per_step: random pixels (over all views) per step, shared by all restarts.
+        lr: Adam learning rate of z.
+        latent_weight: weight of the Gaussian prior on z_obj (training's value keeps codes where the
+            networks have seen them).
+        patience: steps without an improvement of `min_improvement` (relative) that end the fit.
+        min_improvement: relative improvement of the smoothed loss that counts as progress.
+        eval_rays: fixed rays on which the restarts' final losses are compared.
+        seed: seed of ray sampling.
+    """
+
+    restarts: int = 4
+    max_steps: int = 600
+    min_steps: int = 150
+    rays_per_step: int = 512
+    lr: float = 1e-2
+    latent_weight: float = 1e-3
+    patience: int = 100
+    min_improvement: float = 0.01
+    eval_rays: int = 8192
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("restarts", "max_steps", "rays_per_step", "patience", "eval_rays"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"FitConfig.{name} must be >= 1")
+        if not 0 <= self.min_steps <= self.max_steps:
+            raise ConfigError("FitConfig.min_steps must lie in [0, max_steps]")
+        if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
+            raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
+
+
+@dataclass
+class ObservedRays:
+    """All pixels of a capture as rays in O: origins, directions (N, 3); colours rgb (N, 3) in
+    [0, 1]; frame (N,) index of the frame each pixel belongs to."""
+
+    origins: torch.Tensor
+    directions: torch.Tensor
+    rgb: torch.Tensor
+    frame: torch.Tensor
+
+    def take(self, index: torch.Tensor, batch: int) -> tuple[Rays, torch.Tensor]:
+        """Rays (batch, R, 3) repeated for `batch` codes and their colours (R, 3)."""
+        o, d = self.origins[index], self.directions[index]
+        return Rays(o.expand(batch, -1, -1), d.expand(batch, -1, -1)), self.rgb[index]
+
+
+def frame_ray_directions(frame: CaptureFrame) -> np.ndarray:
+    """Unit directions in O of every pixel centre of a frame, row-major, (H W, 3).
+
+    Distortion (OpenCV k1 k2 p1 p2) is undone before the pinhole back-projection.
+    """
+    cam = frame.camera
+    uv = pixel_centers(cam.height, cam.width, dtype=torch.float64).numpy()
+    if cam.distortion is not None:
+        K_cv = cam.K.copy()
+        K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
+        xy = cv2.undistortPoints((uv - 0.5).reshape(-1, 1, 2), K_cv, np.array(cam.distortion))
+        xy = xy.reshape(-1, 2)
+    else:
+        xy = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]
+    d_C = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+    d_O = d_C @ frame.X_OC[:3, :3].T
+    return d_O / np.linalg.norm(d_O, axis=1, keepdims=True)
+
+
+def observed_rays(capture: CaptureSet, images: list[np.ndarray] | None = None,
+                  dtype=torch.float32) -> ObservedRays:
+    """Every pixel of every frame of `capture` as a ray with its observed colour."""
+    images = capture.load_images() if images is None else images
+    origins, directions, colours, frames = [], [], [], []
+    for i, (frame, image) in enumerate(zip(capture.frames, images, strict=True)):
+        d = frame_ray_directions(frame)
+        directions.append(d)
+        origins.append(np.broadcast_to(frame.X_OC[:3, 3], d.shape))
+        colours.append(image.reshape(-1, 3) / 255.0)
+        frames.append(np.full(len(d), i))
+    cat = lambda xs: torch.from_numpy(np.concatenate(xs)).to(dtype)  # noqa: E731
+    return ObservedRays(cat(origins), cat(directions), cat(colours),
+                        torch.from_numpy(np.concatenate(frames)))
+
+
+@dataclass
+class FitOutcome:
+    """z (2 + k,) of the winning start; q its articulation; image_loss its MSE on the evaluation
+    rays; start_losses (S,) and start_q (S,) of every start; steps run; seconds of wall time."""
+
+    z: torch.Tensor
+    q: float
+    image_loss: float
+    start_losses: np.ndarray
+    start_q: np.ndarray
+    steps: int
+    seconds: float
+
+
+def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Tensor,
+                  chunk: int = 4096) -> torch.Tensor:
+    """Image MSE (S,) of each code z (S, D) on the same rays (S, R, 3), target (R, 3)."""
+    losses = []
+    R = target.shape[0]
+    for s in range(0, R, chunk):
+        sub = Rays(rays.origins[:, s:s + chunk], rays.directions[:, s:s + chunk])
+        rgb = model.render(z, sub).rgb
+        losses.append(((rgb - target[s:s + chunk]) ** 2).sum(dim=(-1, -2)))
+    return torch.stack(losses).sum(0) / (3 * R)
+
+
+def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfig(),
+               z_obj_init: torch.Tensor | None = None) -> FitOutcome:
+    """Fit z to the observed rays with the networks frozen (see module docstring)."""
+    started = time.perf_counter()
+    model.eval()
+    flags = [p.requires_grad for p in model.parameters()]
+    for p in model.parameters():  # frozen networks: no gradient work for their weights
+        p.requires_grad_(False)
+    try:
+        return _fit(model, rays, config, z_obj_init, started)
+    finally:
+        for p, flag in zip(model.parameters(), flags, strict=True):
+            p.requires_grad_(flag)
+
+
+def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
+         started: float) -> FitOutcome:
+    S, k = config.restarts, model.config.latent_obj_dim
+    dtype, device = rays.rgb.dtype, rays.rgb.device
+    q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
+    z_obj = (z_obj_init.to(dtype).expand(S, k).clone() if z_obj_init is not None
+             else torch.zeros(S, k, dtype=dtype, device=device))
+    z = torch.cat([q_to_z_art(q0), z_obj], dim=-1).requires_grad_(True)
+    optimiser = torch.optim.Adam([z], lr=config.lr)
+    generator = torch.Generator(device="cpu").manual_seed(config.seed)
+    n = rays.rgb.shape[0]
+    best = torch.full((S,), math.inf, dtype=dtype)
+    since_best = torch.zeros(S, dtype=torch.long)
+    smoothed = None
+    active = torch.ones(S, dtype=torch.bool)
+    step = 0
+    for step in range(1, config.max_steps + 1):
+        index = torch.randint(n, (config.rays_per_step,), generator=generator).to(device)
+        batch_rays, target = rays.take(index, S)
+        rgb = model.render(z, batch_rays).rgb
+        per_code = ((rgb - target) ** 2).mean(dim=(-1, -2))  # (S,)
+        loss = per_code.sum() + config.latent_weight * S * latent_loss(z[:, 2:])
+        optimiser.zero_grad()
+        loss.backward()
+        z.grad[~active] = 0.0  # stopped starts keep their code
+        optimiser.step()
+        with torch.no_grad():
+            value = per_code.detach().cpu()
+            smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
+            improved = smoothed < best * (1.0 - config.min_improvement)
+            best = torch.where(improved, smoothed, best)
+            since_best = torch.where(improved, torch.zeros_like(since_best), since_best + 1)
+            if step >= config.min_steps:
+                active &= since_best < config.patience
+        if not active.any():
+            break
+    with torch.no_grad():
+        eval_index = torch.randperm(n, generator=generator)[:config.eval_rays].to(device)
+        eval_rays, eval_target = rays.take(eval_index, S)
+        final = _per_code_mse(model, z.detach(), eval_rays, eval_target).cpu()
+    winner = int(torch.argmin(final))
+    start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
+    return FitOutcome(z=z.detach()[winner].clone(), q=float(start_q[winner]),
+                      image_loss=float(final[winner]), start_losses=final.numpy(),
+                      start_q=start_q, steps=step, seconds=time.perf_counter() - started)

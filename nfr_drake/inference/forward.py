@@ -1,0 +1,83 @@
+"""Forward simulation of a fitted object: sweep z_art over q with z_obj fixed.
+
+For any articulation q and any camera, the fitted code gives keypoints (the keypoint head),
+RGB renders, segmentations and surface points (the field and the raymarcher). All positions are in
+the object frame O of the capture, metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from nfr_drake.data.capture import CaptureFrame, PinholeCamera
+from nfr_drake.inference.fit import frame_ray_directions
+from nfr_drake.nfr.latent import q_to_z_art
+from nfr_drake.nfr.model import NFRModel
+from nfr_drake.nfr.rays import Rays
+
+
+def code_at(z: torch.Tensor, q: float | np.ndarray) -> torch.Tensor:
+    """Codes (N, 2 + k) with z's object part and articulation(s) q (N,) (or one code for a float)."""
+    qs = torch.as_tensor(np.atleast_1d(q), dtype=z.dtype, device=z.device)
+    return torch.cat([q_to_z_art(qs), z[2:].expand(len(qs), -1)], dim=-1)
+
+
+@torch.no_grad()
+def keypoint_trajectory(model: NFRModel, z: torch.Tensor, q_grid: np.ndarray) -> np.ndarray:
+    """Keypoints (N, K, 3) in O for each q of q_grid (N,), z_obj fixed."""
+    return model.keypoints(code_at(z, q_grid)).double().cpu().numpy()
+
+
+@dataclass
+class SimulatedView:
+    """rgb uint8 (H, W, 3); labels uint8 (H, W) argmax class; points float32 (H, W, 3) surface
+    points in O; depth float32 (H, W) distance along each ray, m."""
+
+    rgb: np.ndarray
+    labels: np.ndarray
+    points: np.ndarray
+    depth: np.ndarray
+
+
+@torch.no_grad()
+def render_view(model: NFRModel, z: torch.Tensor, q: float, camera: PinholeCamera,
+                X_OC: np.ndarray, chunk: int = 8192) -> SimulatedView:
+    """Render the fitted object at articulation q from a camera at X_OC (4x4, OpenCV axes)."""
+    frame = CaptureFrame(image_path=None, X_OC=np.asarray(X_OC, float), camera=camera)
+    dtype = next(model.parameters()).dtype
+    device = next(model.parameters()).device
+    directions = torch.from_numpy(frame_ray_directions(frame)).to(dtype=dtype, device=device)
+    origin = torch.as_tensor(X_OC[:3, 3], dtype=dtype, device=device)
+    code = code_at(z.to(dtype=dtype, device=device), q)
+    rgb, logits, points, depth = [], [], [], []
+    for s in range(0, len(directions), chunk):
+        d = directions[s:s + chunk][None]
+        out = model.render(code, Rays(origin.expand_as(d), d))
+        rgb.append(out.rgb[0])
+        logits.append(out.logits[0])
+        points.append(out.points[0])
+        depth.append(out.depth[0])
+    H, W = camera.height, camera.width
+    rgb = torch.cat(rgb).clamp(0, 1).mul(255).round().to(torch.uint8).cpu().numpy()
+    return SimulatedView(rgb=rgb.reshape(H, W, 3),
+                         labels=torch.cat(logits).argmax(-1).to(torch.uint8).cpu().numpy()
+                         .reshape(H, W),
+                         points=torch.cat(points).float().cpu().numpy().reshape(H, W, 3),
+                         depth=torch.cat(depth).float().cpu().numpy().reshape(H, W))
+
+
+def semantic_point_cloud(model: NFRModel, z: torch.Tensor, q: float,
+                         views: list[tuple[PinholeCamera, np.ndarray]]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Surface points (N, 3) in O and their classes (N,) of the object at q, seen from `views`
+    (camera, X_OC); background pixels are dropped."""
+    points, classes = [], []
+    for camera, X_OC in views:
+        view = render_view(model, z, q, camera, X_OC)
+        mask = view.labels > 0
+        points.append(view.points[mask])
+        classes.append(view.labels[mask])
+    return np.concatenate(points), np.concatenate(classes)

@@ -1,0 +1,138 @@
+"""`nfr-drake infer`: fit a model to a capture set and forward-simulate the object's motion."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import cv2
+import numpy as np
+import torch
+import tyro
+
+from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.data.visualize import colorize_labels, image_grid
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.fit import FitConfig, FitOutcome, fit_latent, observed_rays
+from nfr_drake.inference.forward import keypoint_trajectory, render_view, semantic_point_cloud
+from nfr_drake.inference.result import FitResult
+from nfr_drake.nfr.checkpoint import load_model
+from nfr_drake.nfr.model import NFRModel
+
+
+class FittedModel:
+    """A loaded model folder: networks, the mean training code (fit start) and its metadata."""
+
+    def __init__(self, folder: Path, device: str = "cpu"):
+        self.folder = Path(folder)
+        self.model, codes, self.config = load_model(self.folder, device)
+        self.z_obj_mean = codes.mean(0)
+        self.category: str = self.config["category"]
+        self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
+
+    def check_capture(self, capture: CaptureSet, category: str | None = None) -> None:
+        """NfrDrakeError when the capture (its gt.json, or `category`) is of another category."""
+        claimed = category or (capture.gt or {}).get("category")
+        if claimed is not None and claimed != self.category:
+            raise NfrDrakeError(f"{capture.root}: a {claimed} capture, but {self.folder} is a "
+                                f"{self.category} model; use a {claimed} model")
+
+
+def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
+          q_grid: np.ndarray) -> tuple[FitResult, FitOutcome]:
+    """Fit z to the capture and forward-simulate keypoints over q_grid (N,)."""
+    started = time.perf_counter()
+    outcome = fit_latent(fitted.model, observed_rays(capture), fit_config, fitted.z_obj_mean)
+    names = fitted.keypoint_names
+    now = keypoint_trajectory(fitted.model, outcome.z, np.array([outcome.q]))[0]
+    trajectory = keypoint_trajectory(fitted.model, outcome.z, q_grid)
+    result = FitResult(
+        category=fitted.category, q=outcome.q,
+        keypoints={n: now[i] for i, n in enumerate(names)},
+        trajectory_q=np.asarray(q_grid, float),
+        trajectory={n: trajectory[:, i] for i, n in enumerate(names)},
+        image_loss=outcome.image_loss, seconds=time.perf_counter() - started,
+        z=outcome.z.double().cpu().numpy(),
+        extra={"model": str(fitted.folder), "steps": outcome.steps,
+               "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
+    return result, outcome
+
+
+def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: CaptureSet,
+                         max_views: int = 10) -> np.ndarray:
+    """uint8 RGB figure: observed views (top row), renders of the fit (middle), segmentation."""
+    images = capture.load_images()[:max_views]
+    rows = [[], [], []]
+    for frame, image in zip(capture.frames[:max_views], images, strict=True):
+        view = render_view(model, z, q, frame.camera, frame.X_OC)
+        size = (view.rgb.shape[1], view.rgb.shape[0])
+        rows[0].append(cv2.resize(image, size, interpolation=cv2.INTER_AREA))
+        rows[1].append(view.rgb)
+        rows[2].append(colorize_labels(view.labels))
+    return image_grid(rows)
+
+
+def infer_command(
+    capture: Annotated[Path, tyro.conf.Positional],
+    model: Path = Path("models/closet"),
+    out: Path = Path("result.json"),
+    report: Path | None = None,
+    point_cloud: Path | None = None,
+    handle_plot: Path | None = None,
+    category: str | None = None,
+    restarts: int = 4,
+    max_steps: int = 600,
+    trajectory_points: int = 21,
+    threads: int = 2,
+) -> None:
+    """Fit MODEL to the capture set CAPTURE and write the fit result (DESIGN.md format).
+
+    Args:
+        capture: capture-set folder (transforms.json + images).
+        model: model folder (model.safetensors + config.json).
+        out: result JSON to write.
+        report: optional PNG: observed views, renders of the fit and its segmentation.
+        point_cloud: optional PLY: semantically labelled points of the object at the fitted q.
+        handle_plot: optional PNG: predicted handle path over q against gt.json's (needs gt.json).
+        category: the capture's category, checked against the model's (gt.json's when omitted).
+        restarts: fits started at evenly spread q; the lowest image loss wins.
+        max_steps: optimiser steps at most per fit.
+        trajectory_points: points of the forward-simulated q grid over [0, 1].
+        threads: torch CPU threads.
+    """
+    torch.set_num_threads(threads)
+    cap = read_capture_set(capture)
+    fitted = FittedModel(model)
+    fitted.check_capture(cap, category)
+    if handle_plot is not None and cap.gt is None:
+        raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
+    result, outcome = infer(fitted, cap, FitConfig(restarts=restarts, max_steps=max_steps),
+                            np.linspace(0.0, 1.0, trajectory_points))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result.write(out)
+    print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
+          f"({outcome.steps} steps x {restarts} starts) -> {out}")
+    if report is not None:
+        figure = observed_vs_rendered(fitted.model, outcome.z, outcome.q, cap)
+        report.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(report), cv2.cvtColor(np.repeat(np.repeat(figure, 2, 0), 2, 1),
+                                              cv2.COLOR_RGB2BGR))
+        print(f"report: {report}")
+    if point_cloud is not None:
+        from nfr_drake.perception.pointcloud import write_semantic_ply
+
+        views = [(f.camera, f.X_OC) for f in cap.frames]
+        points, classes = semantic_point_cloud(fitted.model, outcome.z, outcome.q, views)
+        write_semantic_ply(point_cloud, points, classes)
+        print(f"point cloud: {point_cloud} ({len(points)} points)")
+    if handle_plot is not None:
+        from nfr_drake.eval.plots import plot_handle_paths
+
+        grid = np.asarray(cap.gt["trajectory"]["q"])
+        predicted = keypoint_trajectory(fitted.model, outcome.z, grid)[
+            :, fitted.keypoint_names.index("handle")]
+        plot_handle_paths(grid, np.asarray(cap.gt["trajectory"]["keypoints"]["handle"]),
+                          {"neural field": predicted}, handle_plot,
+                          f"{cap.root.name}: true q = {cap.gt['q']:.2f}, fitted q = {result.q:.2f}")
+        print(f"handle plot: {handle_plot}")

@@ -1,0 +1,138 @@
+"""Fitting and forward simulation mechanics on a small untrained model (no trained model needed)."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from nfr_drake.data.cameras import look_at
+from nfr_drake.data.capture import CaptureFrame, PinholeCamera, read_capture_set
+from nfr_drake.data.captures import captures_command
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.fit import FitConfig, fit_latent, frame_ray_directions, observed_rays
+from nfr_drake.inference.forward import keypoint_trajectory, render_view
+from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.result import FitResult
+from nfr_drake.nfr.checkpoint import write_model_folder
+from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.model import NFRAutoDecoder
+from nfr_drake.nfr.rays import pixel_centers, pixel_rays
+
+SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                       keypoint_hidden=16)
+
+
+@pytest.fixture(scope="module")
+def model_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("model") / "closet"
+    torch.manual_seed(0)
+    write_model_folder(folder, NFRAutoDecoder(SMALL, num_objects=3),
+                       {"category": "closet",
+                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    return folder
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("caps")
+    captures_command("closet", n=1, out=root, views=3, size=24)
+    return read_capture_set(root / "closet_000")
+
+
+def test_ray_directions_agree_with_the_training_rays():
+    camera = PinholeCamera(30.0, 32.0, 11.0, 13.0, 20, 24)
+    X_OC = look_at(np.array([1.5, 0.3, 0.8]), np.zeros(3))
+    ours = frame_ray_directions(CaptureFrame(None, X_OC, camera))
+    uv = pixel_centers(24, 20, dtype=torch.float64)[None]
+    theirs = pixel_rays(uv, torch.from_numpy(camera.K)[None], torch.from_numpy(X_OC)[None])
+    np.testing.assert_allclose(ours, theirs.directions[0].numpy(), atol=1e-12)
+
+
+def test_distorted_rays_pass_through_the_distorted_projection():
+    camera = PinholeCamera(40.0, 40.0, 16.0, 12.0, 32, 24, (0.1, -0.05, 0.002, -0.001))
+    X_OC = np.eye(4)
+    d = frame_ray_directions(CaptureFrame(None, X_OC, camera))
+    K_cv = camera.K.copy()
+    K_cv[:2, 2] -= 0.5
+    uv, _ = cv2.projectPoints(d.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K_cv,
+                              np.array(camera.distortion))
+    expected = pixel_centers(24, 32, dtype=torch.float64).numpy() - 0.5
+    np.testing.assert_allclose(uv.reshape(-1, 2), expected, atol=1e-3)
+
+
+def test_fit_moves_z_and_reports_every_start(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    assert rays.rgb.shape == (3 * 24 * 24, 3)
+    outcome = fit_latent(fitted.model, rays, FitConfig(restarts=3, max_steps=20, min_steps=5,
+                                                       rays_per_step=64, eval_rays=256),
+                         fitted.z_obj_mean)
+    assert outcome.z.shape == (2 + 8,) and 0.0 <= outcome.q <= 1.0
+    assert outcome.start_losses.shape == (3,) and outcome.image_loss == outcome.start_losses.min()
+    assert all(p.requires_grad for p in fitted.model.parameters())  # restored after the fit
+
+
+def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    config = FitConfig(restarts=2, max_steps=500, min_steps=10, patience=5, min_improvement=0.5,
+                       rays_per_step=32, eval_rays=64)
+    outcome = fit_latent(fitted.model, observed_rays(capture), config, fitted.z_obj_mean)
+    assert outcome.steps < 500
+
+
+def test_infer_writes_the_design_result_format(model_folder, capture, tmp_path):
+    fitted = FittedModel(model_folder)
+    result, outcome = infer(fitted, capture, FitConfig(restarts=2, max_steps=5, min_steps=0,
+                                                       rays_per_step=32, eval_rays=64),
+                            np.linspace(0, 1, 5))
+    result.write(tmp_path / "r.json")
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert set(doc) >= {"category", "q", "keypoints", "trajectory", "image_loss", "seconds"}
+    assert set(doc["keypoints"]) == {"handle", "hinge_top", "hinge_bottom", "goal"}
+    assert np.array(doc["trajectory"]["keypoints"]["handle"]).shape == (5, 3)
+    assert doc["trajectory"]["q"] == [0.0, 0.25, 0.5, 0.75, 1.0]
+    again = FitResult.read(tmp_path / "r.json")
+    np.testing.assert_allclose(again.trajectory["goal"], result.trajectory["goal"])
+    traj = keypoint_trajectory(fitted.model, outcome.z, np.array([outcome.q]))
+    np.testing.assert_allclose(traj[0, 0], result.keypoints["handle"], atol=1e-6)
+
+
+def test_render_view_any_resolution(model_folder):
+    fitted = FittedModel(model_folder)
+    z = torch.cat([torch.tensor([1.0, 0.0]), fitted.z_obj_mean])
+    camera = PinholeCamera.from_fov(17, 11, 0.9)
+    view = render_view(fitted.model, z, 0.4, camera, look_at(np.array([1.6, 0, 1]), np.zeros(3)))
+    assert view.rgb.shape == (11, 17, 3) and view.labels.shape == (11, 17)
+    assert view.rgb.dtype == np.uint8 and view.labels.max() < 4
+
+
+def test_wrong_category_is_refused(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    fitted.check_capture(capture)  # a closet capture for a closet model
+    with pytest.raises(NfrDrakeError, match="drawer capture, but .* closet model"):
+        fitted.check_capture(capture, category="drawer")
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "nfr_drake.cli", "infer", *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_cli_errors_exit_2_without_traceback(model_folder, capture, tmp_path):
+    bad_model = tmp_path / "bad"
+    bad_model.mkdir()
+    (bad_model / "config.json").write_text("{")
+    cases = [
+        (_cli(capture.root, "--model", bad_model, "--out", tmp_path / "r.json"), "not valid JSON"),
+        (_cli(tmp_path / "nowhere", "--model", model_folder), "capture set folder not found"),
+        (_cli(capture.root, "--model", model_folder, "--category", "drawer"), "closet model"),
+    ]
+    for result, message in cases:
+        assert result.returncode == 2, result.stderr
+        assert message in result.stderr and "Traceback" not in result.stderr
