@@ -125,6 +125,14 @@ class PhotoCamera:
             raise ConfigError(f"{path}: intrinsics file not found") from None
         except json.JSONDecodeError as err:
             raise ConfigError(f"{path}: malformed JSON ({err})") from None
+        return cls.from_json(d, str(path))
+
+    @classmethod
+    def from_json(cls, d: dict, source: str = "intrinsics") -> PhotoCamera:
+        """From a dict with the keys of `from_json_file`; `source` names it in errors."""
+        path = source
+        if not isinstance(d, dict):
+            raise ConfigError(f"{path}: expected a JSON object of intrinsics")
         missing = [k for k in ("fl_x", "fl_y", "cx", "cy", "w", "h") if k not in d]
         if missing:
             raise ConfigError(f"{path}: intrinsics need keys {', '.join(missing)}")

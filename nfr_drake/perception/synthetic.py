@@ -46,6 +46,7 @@ from nfr_drake.data.render import Lighting, drake_camera_info
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels
 from nfr_drake.perception.charuco import CharucoBoardSpec
+from nfr_drake.perception.intrinsics import PhotoCamera
 
 TRUTH_FILE = "truth.json"
 _RENDERER = "synthetic_vtk"
@@ -213,20 +214,38 @@ def orbit_poses(n: int, target_O: np.ndarray, distance_m: float = 2.0,
     return np.stack(poses)
 
 
-def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray) -> Path:
+def apply_distortion(rgb: np.ndarray, camera: PhotoCamera) -> np.ndarray:
+    """The photo a lens with `camera`'s distortion would take, from a pinhole image (H, W, 3)
+    with the same K. Each distorted pixel samples the pinhole image where its undistorted ray
+    lands (bilinear); pixels whose ray leaves the pinhole image are black."""
+    h, w = rgb.shape[:2]
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    grid = np.stack([u.ravel(), v.ravel()], axis=1).reshape(-1, 1, 2)
+    K = camera.K_opencv
+    pinhole = cv2.undistortPoints(grid, K, camera.dist_opencv, P=K).reshape(h, w, 2)
+    return cv2.remap(rgb, pinhole[..., 0], pinhole[..., 1], cv2.INTER_LINEAR)
+
+
+def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray,
+                       distortion: tuple[float, ...] = ()) -> Path:
     """Render one photo per pose into `out` (photo_XXX.png) with `truth.json`.
 
-    truth.json: intrinsics (nerfstudio keys), `X_OC` per photo name (4x4, OpenCV axes), `X_OB`
-    (the board), the board's geometry, q and the object's keypoints at q (metres, in O).
+    distortion: OpenCV coefficients (k1, k2, p1, p2[, k3]) applied to the renders, as a real
+    lens would. truth.json: `camera` (the photos' intrinsics, a valid `--intrinsics` file),
+    `X_OC` per photo name (4x4, OpenCV axes), `X_OB` (the board), the board's geometry, q and the
+    object's keypoints at q (metres, in O).
     """
+    c = scene.camera
+    camera = PhotoCamera(c.fx, c.fy, c.cx, c.cy, c.width, c.height, tuple(distortion))
     out.mkdir(parents=True, exist_ok=True)
     poses = {}
     for i, X_OC in enumerate(X_OCs):
         name = f"photo_{i:03d}.png"
-        write_image(out / name, scene.render(X_OC))
+        rgb = scene.render(X_OC)
+        write_image(out / name, apply_distortion(rgb, camera) if camera.has_distortion else rgb)
         poses[name] = np.asarray(X_OC).tolist()
     b = scene.room.board
-    truth = {"camera": scene.camera.to_json(), "X_OC": poses,
+    truth = {"camera": camera.to_json(), "X_OC": poses,
              "X_OB": board_pose(scene.room).tolist(),
              "board": {"squares": list(b.squares), "square_m": b.square_m, "marker_m": b.marker_m,
                        "dictionary": b.dictionary},
