@@ -21,6 +21,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "check a capture set (transforms.json and its images)"),
     "infer": ("nfr_drake.inference.infer:infer_command",
               "fit a model to a capture set and forward-simulate the object's motion"),
+    "eval": ("nfr_drake.eval.command:eval_command",
+             "evaluate the neural field and the baseline on held-out capture sets"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
     "poses": ("nfr_drake.perception.poses:poses_command",

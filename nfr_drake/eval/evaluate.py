@@ -110,11 +110,14 @@ def capture_dirs(root: Path) -> list[Path]:
 
 
 def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
-             limit: int | None = None) -> list[CaptureMetrics]:
+             limit: int | None = None,
+             on_prediction: Callable[[str, CaptureSet, str, Prediction], None] | None = None,
+             ) -> list[CaptureMetrics]:
     """Run every method on every capture of every set, appending rows to `csv_path`.
 
     Rows already in the CSV (same capture, set and method) are kept and not recomputed, so an
-    interrupted evaluation resumes.
+    interrupted evaluation resumes. `on_prediction(set_name, capture, method, prediction)` is
+    called for each new prediction (to keep trajectories for plots, say).
     """
     done: dict[tuple[str, str, str], CaptureMetrics] = {}
     if csv_path.exists():
@@ -138,7 +141,10 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
                         continue
                     capture = read_capture_set(d)
                     grid = np.asarray(capture.gt["trajectory"]["q"])
-                    metrics = score(capture, method(capture, grid), set_name, method_name)
+                    prediction = method(capture, grid)
+                    if on_prediction is not None:
+                        on_prediction(set_name, capture, method_name, prediction)
+                    metrics = score(capture, prediction, set_name, method_name)
                     writer.writerow(asdict(metrics))
                     f.flush()
                     results.append(metrics)

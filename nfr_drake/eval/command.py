@@ -1,0 +1,117 @@
+"""`nfr-drake eval`: the neural field and the baseline on held-out capture sets."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.eval.evaluate import Method, Prediction, capture_dirs, evaluate, summary_table
+from nfr_drake.eval.plots import plot_error_distributions, plot_handle_paths
+
+
+def neural_field_method(model_dir: Path, restarts: int, max_steps: int) -> Method:
+    """Fit + forward simulation, with renders of the observed views for PSNR and mIoU."""
+    from nfr_drake.inference.fit import FitConfig
+    from nfr_drake.inference.forward import render_view
+    from nfr_drake.inference.infer import FittedModel, infer
+
+    fitted = FittedModel(model_dir)
+    config = FitConfig(restarts=restarts, max_steps=max_steps)
+
+    def method(capture: CaptureSet, grid: np.ndarray) -> Prediction:
+        fitted.check_capture(capture)
+        result, outcome = infer(fitted, capture, config, grid)
+        views = [render_view(fitted.model, outcome.z, outcome.q, f.camera, f.X_OC)
+                 for f in capture.frames]
+        return Prediction(result.q, result.keypoints, result.trajectory, result.seconds,
+                          renders=[v.rgb for v in views], labels=[v.labels for v in views],
+                          image_loss=result.image_loss)
+
+    return method
+
+
+def baseline_method(baseline_dir: Path) -> Method:
+    """The image-encoder baseline, keypoints along q by the explicit geometric assumption."""
+    from nfr_drake.baseline.predict import predict_capture
+    from nfr_drake.baseline.train import load_baseline
+
+    model, doc = load_baseline(baseline_dir)
+    size = doc["training"]["image_size"]
+    names = model.config.keypoint_names
+
+    def method(capture: CaptureSet, grid: np.ndarray) -> Prediction:
+        started = time.perf_counter()
+        pred = predict_capture(model, capture, size, grid)
+        return Prediction(pred.q, {n: pred.keypoints[i] for i, n in enumerate(names)},
+                          {n: pred.trajectory[:, i] for i, n in enumerate(names)},
+                          time.perf_counter() - started)
+
+    return method
+
+
+def eval_command(
+    sets: list[Path],
+    out: Path,
+    model: Path | None = None,
+    baseline: Path | None = None,
+    limit: int | None = None,
+    restarts: int = 4,
+    max_steps: int = 600,
+    example_plots: int = 2,
+    threads: int = 2,
+) -> None:
+    """Evaluate methods on held-out capture sets; resumable (rows already in OUT/results.csv stay).
+
+    Writes OUT/results.csv (one row per capture and method), OUT/summary.md (medians and 90th
+    percentiles per set and method), OUT/errors.png (error distributions) and handle-path plots
+    of the first captures of each set.
+
+    Args:
+        sets: folders of capture sets (each a set; its folder name names it in the tables).
+        out: output folder.
+        model: neural-field model folder.
+        baseline: image-encoder baseline folder.
+        limit: use only the first n captures of each set.
+        restarts: neural-field fit starts.
+        max_steps: neural-field fit steps at most.
+        example_plots: handle-path plots per set.
+        threads: torch CPU threads.
+    """
+    torch.set_num_threads(threads)
+    methods: dict[str, Method] = {}
+    if model is not None:
+        methods["neural field"] = neural_field_method(model, restarts, max_steps)
+    if baseline is not None:
+        methods["baseline"] = baseline_method(baseline)
+    if not methods:
+        raise NfrDrakeError("give --model and/or --baseline")
+    named = {p.name: p for p in sets}
+    paths_dir = out / "handle_paths"
+
+    def keep_handle_path(set_name: str, capture: CaptureSet, method: str, pred: Prediction):
+        folder = paths_dir / set_name / capture.root.name
+        folder.mkdir(parents=True, exist_ok=True)
+        np.save(folder / f"{method.replace(' ', '_')}.npy", np.asarray(pred.trajectory["handle"]))
+
+    results = evaluate(methods, named, out / "results.csv", limit, keep_handle_path)
+    categories = {read_capture_set(capture_dirs(p)[0]).gt["category"] for p in sets}
+    unit = "deg" if categories == {"closet"} else "cm" if categories == {"drawer"} else "deg or cm"
+    table = summary_table(results, unit)
+    (out / "summary.md").write_text(table + "\n")
+    plot_error_distributions(results, unit, out / "errors.png")
+    for name, root in named.items():
+        for d in capture_dirs(root)[:example_plots]:
+            capture = read_capture_set(d)
+            grid = np.asarray(capture.gt["trajectory"]["q"])
+            saved = paths_dir / name / d.name
+            paths = {m: np.load(saved / f"{m.replace(' ', '_')}.npy") for m in methods
+                     if (saved / f"{m.replace(' ', '_')}.npy").exists()}
+            plot_handle_paths(grid, np.asarray(capture.gt["trajectory"]["keypoints"]["handle"]),
+                              paths, out / f"handle_{name}_{d.name}.png",
+                              f"{name}/{d.name}: true q = {capture.gt['q']:.2f}")
+    print(table)
