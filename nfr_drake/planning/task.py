@@ -1,0 +1,77 @@
+"""One task end to end: read the keypoint trajectory, plan, simulate on the true object, replay."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydrake.geometry import Meshcat
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder
+
+from nfr_drake.planning.grasp import carcass_box
+from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.planning.planner import PlannerConfig, PlanningError, PlanResult, plan_articulation
+from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
+from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
+from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, write_replay
+from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+
+
+@dataclass
+class TaskOutcome:
+    """Result of `run_task`: the plan (None if planning failed), its error, the simulation."""
+
+    q_target: float
+    keypoints: KeypointTrajectory
+    plan: PlanResult | None
+    planning_error: str
+    planning_seconds: float
+    simulation: SimulationResult | None
+    replay: Path | None
+
+    @property
+    def success(self) -> bool:
+        return self.simulation is not None and self.simulation.success
+
+
+def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
+    """The object's keypoint trajectory as `KeypointTrajectorySource` outputs it for the object at rest."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, 0.0)
+    model = obj.add_to(plant)
+    plant.Finalize()
+    joint = plant.GetJointByName(obj.joint_name, model)
+    source = AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+    set_joint_value(plant, plant.GetMyMutableContextFromRoot(context), joint,
+                    lower + obj.ground_truth.q_current * (upper - lower))
+    return source.get_keypoint_trajectory_output_port().Eval(source.GetMyContextFromRoot(context))
+
+
+def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | None = None,
+             meshcat: Meshcat | None = None, replay: Path | None = None,
+             planner_config: PlannerConfig = PlannerConfig(),
+             simulation_config: SimulationConfig = SimulationConfig()) -> TaskOutcome:
+    """Plan with `keypoints` (default: read from the object) and simulate on the true object.
+
+    With `replay`, a meshcat (given or made here) records the run and the keypoint paths used by the
+    planner and an HTML replay is written there.
+    """
+    kt = keypoints if keypoints is not None else read_keypoints(obj)
+    try:
+        plan = plan_articulation(kt, q_target, config=planner_config)
+    except PlanningError as err:
+        return TaskOutcome(q_target, kt, None, str(err), float("nan"), None, None)
+    if replay is not None and meshcat is None:
+        meshcat = Meshcat()
+    if meshcat is not None:
+        meshcat.Delete()
+        meshcat.DeleteRecording()
+        draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
+        draw_obstacle(meshcat, carcass_box(kt))
+    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config)
+    path = write_replay(meshcat, replay) if replay is not None else None
+    return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)

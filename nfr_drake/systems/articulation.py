@@ -1,0 +1,248 @@
+"""Simulating a planned grasp-and-articulate motion on the true object (docs/SIMULATION.md).
+
+A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm's joints are PD
+controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
+compensation as feed-forward. The grasp is two ball constraints, 2 cm either side of the tool frame
+along its x axis, tied to the true handle's bar axis: together a hinge about the bar (a cylindrical
+grasp). They are inactive until the hand reaches the handle and are switched on through the context
+only if the tool origin is then within `capture_radius` of the true handle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    MultibodyPlant,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.controllers import InverseDynamics
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from nfr_drake.planning.planner import PlanResult
+from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
+from nfr_drake.systems.robot import (
+    FINGER_OPEN,
+    HAND_BODIES,
+    NUM_ARM_JOINTS,
+    TOOL_FRAME,
+    add_floor,
+    add_panda,
+)
+from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+
+# Implicit PD gains of the actuators (arm joints 1-7, then the two fingers).
+_KP = np.array([1500.0, 1500.0, 1500.0, 1500.0, 400.0, 400.0, 200.0, 300.0, 300.0])
+_KD = np.array([120.0, 120.0, 100.0, 100.0, 25.0, 20.0, 10.0, 10.0, 10.0])
+_G = np.array([0.0, 0.0, -9.81])
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Options of `simulate_articulation`."""
+
+    time_step: float = 0.002
+    dwell: float = 0.5
+    """Time the hand rests on the handle while the fingers close, s; the grasp starts half-way."""
+    settle: float = 0.5
+    """Time after the plan ends before the outcome is measured, s."""
+    capture_radius: float = 0.02
+    """The grasp holds only if the tool origin is this close to the true handle, m."""
+    grasp_half_span: float = 0.02
+    """Ball constraints sit this far either side of the grasp point along the bar, m."""
+    finger_closed: float = 0.012
+    """Finger opening (each) when closed on a handle, m."""
+    sample_period: float = 0.02
+    """Period of the recorded outcome samples, s."""
+    revolute_tolerance: float = np.radians(5.0)
+    prismatic_tolerance: float = 0.02
+    drift_tolerance: float = 0.02
+
+
+@dataclass
+class SimulationResult:
+    """What the simulated arm did to the true object.
+
+    Attributes:
+        success: grasped, final articulation within tolerance, and drift within tolerance.
+        grasped: whether the grasp constraints were switched on.
+        joint_type: "revolute" (errors in rad) or "prismatic" (m).
+        q_target, q_final: articulations in [0, 1].
+        joint_error: |final - target| joint value, rad or m.
+        max_drift: largest distance between the tool origin and the true handle while grasped, m.
+        max_constraint_force: largest force the hand (and any contact) exerts on the handle's body
+            while grasped, from the body's Newton-Euler balance, N.
+        times: sample times, s, shape (M,); q_object: articulation, (M,); p_W_tool, p_W_handle: (M, 3).
+    """
+
+    success: bool
+    grasped: bool
+    joint_type: str
+    q_target: float
+    q_final: float
+    joint_error: float
+    max_drift: float
+    max_constraint_force: float
+    times: np.ndarray = field(repr=False)
+    q_object: np.ndarray = field(repr=False)
+    p_W_tool: np.ndarray = field(repr=False)
+    p_W_handle: np.ndarray = field(repr=False)
+
+    def summary(self) -> str:
+        unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
+        verdict = "SUCCESS" if self.success else "FAILURE"
+        return (f"{verdict}: articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
+                f"{self.joint_error * scale:.1f} {unit}), grasped {self.grasped}, hand-to-handle drift "
+                f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N")
+
+
+def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig) -> PiecewisePolynomial:
+    """The plan with a dwell at the grasp and the fingers closing during it; [q; v], 9 + 9 values."""
+    traj, t_g, dwell = plan.trajectory, plan.t_grasp, config.dwell
+    velocity = traj.MakeDerivative()
+    end = plan.duration + dwell + config.settle
+    times = np.unique(np.r_[np.arange(0.0, end, 0.01), t_g, t_g + dwell, end])
+
+    def plan_time(t):
+        return t if t <= t_g else max(t_g, t - dwell) if t < t_g + dwell else min(t - dwell, plan.duration)
+
+    qs, vs = [], []
+    for t in times:
+        tp = plan_time(t)
+        q = traj.value(tp).ravel().copy()
+        v = velocity.value(tp).ravel().copy() if (t <= t_g or t >= t_g + dwell) and tp < plan.duration \
+            else np.zeros_like(q)
+        closing = np.clip((t - t_g) / dwell, 0.0, 1.0)
+        q[NUM_ARM_JOINTS:] = FINGER_OPEN + closing * (config.finger_closed - FINGER_OPEN)
+        v[NUM_ARM_JOINTS:] = 0.0
+        qs.append(q)
+        vs.append(v)
+    qs, vs = np.array(qs).T, np.array(vs).T
+    return PiecewisePolynomial.FirstOrderHold(times, np.vstack([qs, vs]))
+
+
+def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
+                          meshcat: Meshcat | None = None,
+                          config: SimulationConfig = SimulationConfig()) -> SimulationResult:
+    """Run the plan on the true object and measure the outcome; records into `meshcat` if given."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap"), builder)
+    robot = add_panda(plant, plan.X_WB)
+    add_floor(plant)
+    model = obj.add_to(plant)
+    actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
+    robot_actuators = [a for a in actuators if a.model_instance() == robot]
+    for actuator, kp, kd in zip(robot_actuators, _KP, _KD, strict=True):
+        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    hand = plant.GetBodyByName("panda_hand", robot)
+    handle_body = plant.GetBodyByName(obj.handle_body_name, model)
+    X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
+    bar_B = obj.bar_B / np.linalg.norm(obj.bar_B)
+    constraint_ids = [
+        plant.AddBallConstraint(hand, X_HT @ np.array([sign * config.grasp_half_span, 0.0, 0.0]),
+                                handle_body, obj.p_BH + sign * config.grasp_half_span * bar_B)
+        for sign in (1.0, -1.0)]
+    plant.Finalize()
+
+    # The grasp is the constraints: the gripper does not touch the object's moving bodies.
+    hand_geometries = GeometrySet([g for name in HAND_BODIES
+                                   for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName(name, robot))])
+    joint = plant.GetJointByName(obj.joint_name, model)
+    moving_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)
+                     if b != joint.parent_body().index()]
+    moving_geometries = GeometrySet([g for body in moving_bodies for g in plant.GetCollisionGeometriesForBody(body)])
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
+
+    controller_plant = MultibodyPlant(0.0)
+    add_panda(controller_plant, plan.X_WB)
+    controller_plant.Finalize()
+    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
+        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+    builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
+    builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
+    desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, config)))
+    builder.Connect(desired.get_output_port(), plant.get_desired_state_input_port(robot))
+    AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth)
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    lower = joint.position_lower_limits()[0]
+    span = joint.position_upper_limits()[0] - lower
+    set_joint_value(plant, plant_context, joint, lower + obj.ground_truth.q_current * span)
+    plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
+    for cid in constraint_ids:
+        plant.SetConstraintActiveStatus(plant_context, cid, False)
+    if meshcat is not None:
+        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=False)
+    simulator.Initialize()
+
+    tool = plant.GetFrameByName(TOOL_FRAME, robot)
+    mass = handle_body.default_mass()
+    joint_index = joint.index()
+    t_activate = plan.t_grasp + 0.5 * config.dwell
+    end = plan.duration + config.dwell + config.settle
+    grasped = False
+    times, q_obj, p_tool, p_handle, forces = [], [], [], [], []
+    for t in np.r_[np.arange(0.0, end, config.sample_period), end]:
+        simulator.AdvanceTo(t)
+        X_WT = tool.CalcPoseInWorld(plant_context)
+        X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
+        p_WH = X_WHb @ obj.p_BH
+        if not grasped and t >= t_activate:
+            if np.linalg.norm(X_WT.translation() - p_WH) <= config.capture_radius:
+                for cid in constraint_ids:
+                    plant.SetConstraintActiveStatus(plant_context, cid, True)
+                grasped = True
+        times.append(t)
+        q_obj.append((joint.GetOnePosition(plant_context) - lower) / span)
+        p_tool.append(X_WT.translation())
+        p_handle.append(p_WH)
+        if grasped:
+            forces.append(_force_on_body(plant, plant_context, handle_body, joint_index, mass))
+    if meshcat is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+
+    p_tool, p_handle = np.array(p_tool), np.array(p_handle)
+    times = np.array(times)
+    drift = np.linalg.norm(p_tool - p_handle, axis=1)
+    max_drift = float(drift[times >= t_activate].max()) if grasped else float(drift[-1])
+    revolute = joint.type_name() == "revolute"
+    joint_error = abs(q_obj[-1] - q_target) * span
+    tolerance = config.revolute_tolerance if revolute else config.prismatic_tolerance
+    success = grasped and joint_error <= tolerance and max_drift <= config.drift_tolerance
+    return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
+                            float(q_obj[-1]), float(joint_error), max_drift,
+                            float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
+
+
+def _force_on_body(plant: MultibodyPlant, plant_context, body, joint_index, mass: float) -> float:
+    """|m a_cm - m g - F_joint| of `body`: the force from everything but gravity and its joint, N.
+
+    Assumes the body is the child of the joint at `joint_index` (a handle welded to the moving link
+    is not supported by this estimate: it then also counts the weld's force).
+    """
+    A_WB = plant.get_body_spatial_accelerations_output_port().Eval(plant_context)[body.index()]
+    V_WB = plant.EvalBodySpatialVelocityInWorld(plant_context, body)
+    X_WB = plant.EvalBodyPoseInWorld(plant_context, body)
+    p_BoBcm_W = X_WB.rotation() @ body.CalcCenterOfMassInBodyFrame(plant_context)
+    a_cm = A_WB.Shift(p_BoBcm_W, V_WB.rotational()).translational()
+    joint = plant.get_joint(joint_index)
+    F_reaction = plant.get_reaction_forces_output_port().Eval(plant_context)[joint_index]
+    R_WJc = joint.frame_on_child().CalcPoseInWorld(plant_context).rotation()
+    f_joint_W = R_WJc @ F_reaction.translational()
+    return float(np.linalg.norm(mass * (a_cm - _G) - f_joint_W))

@@ -1,0 +1,200 @@
+"""The neural field in a Drake diagram: cameras photograph the object, the fit runs, keypoints out.
+
+`NfrPerceptionSystem` reads the colour images of N cameras, fits the model's latent code when
+triggered (at initialisation, or by `refit`), never per simulation step, and outputs the
+forward-simulated `KeypointTrajectory` in the world frame and the estimated articulation q.
+
+`AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
+cameras, one RgbdSensor per camera pose, and the system. The perception render engine sees the
+object alone (the robot, the floor and any other geometry are hidden from it), against the
+background colour and lighting of the training renders: a stand-in for segmenting the object out
+of a real photo. Frame O of the model is the object's frame; its pose X_WO in the world is given
+(as it is for real photos through `nfr-drake poses --object-pose`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.value import Value
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    PerceptionProperties,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    Role,
+    RoleAssign,
+    SceneGraph,
+)
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
+
+from nfr_drake.data.capture import CaptureFrame, CaptureSet, PinholeCamera
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera_info
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.result import FitResult
+from nfr_drake.planning.keypoints import KeypointTrajectory
+
+PERCEPTION_RENDERER = "nfr_perception"
+
+
+class NfrPerceptionSystem(LeafSystem):
+    """Fits the neural field to N camera images and outputs the object's keypoint trajectory.
+
+    .. pydrake_system::
+
+        name: NfrPerceptionSystem
+        input_ports:
+        - camera_0_rgb
+        - ...
+        - camera_{N-1}_rgb
+        output_ports:
+        - keypoint_trajectory
+        - q_estimate
+        - fit_result
+
+    camera_i_rgb: ImageRgba8U of camera i (intrinsics `cameras[i]`, pose `X_WCs[i]`).
+    keypoint_trajectory: abstract `KeypointTrajectory` in W over [0, 1], q_current = the estimate.
+    q_estimate: BasicVector of size 1, the fitted articulation in [0, 1].
+    fit_result: abstract `FitResult` (positions in O).
+
+    The fit runs in an initialisation event and whenever `refit` is called; outputs read the stored
+    result. `fit_count` counts fits.
+    """
+
+    def __init__(self, model: FittedModel, cameras: list[PinholeCamera],
+                 X_WCs: list[RigidTransform], X_WO: RigidTransform,
+                 fit_config: FitConfig = FitConfig(), trajectory_points: int = 21):
+        super().__init__()
+        if len(cameras) != len(X_WCs) or not cameras:
+            raise ValueError("need one camera per pose, and at least one")
+        self._model, self._fit_config = model, fit_config
+        self._cameras = list(cameras)
+        X_OW = X_WO.inverse()
+        self._X_OCs = [(X_OW @ X_WC).GetAsMatrix4() for X_WC in X_WCs]
+        self._X_WO = X_WO
+        self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
+        self.fit_count = 0
+        self._image_ports = [
+            self.DeclareAbstractInputPort(f"camera_{i}_rgb", Value(ImageRgba8U()))
+            for i in range(len(cameras))]
+        self._result_index = self.DeclareAbstractState(Value[object](None))
+        ticket = {self.abstract_state_ticket(self._result_index)}
+        self._trajectory_port = self.DeclareAbstractOutputPort(
+            "keypoint_trajectory", lambda: Value[object](None), self._CalcKeypointTrajectory,
+            prerequisites_of_calc=ticket)
+        self._q_port = self.DeclareVectorOutputPort("q_estimate", 1, self._CalcQ,
+                                                    prerequisites_of_calc=ticket)
+        self._result_port = self.DeclareAbstractOutputPort(
+            "fit_result", lambda: Value[object](None), self._CalcFitResult,
+            prerequisites_of_calc=ticket)
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._Fit)
+
+    def get_camera_rgb_input_port(self, i: int):
+        return self._image_ports[i]
+
+    def get_keypoint_trajectory_output_port(self):
+        return self._trajectory_port
+
+    def get_q_estimate_output_port(self):
+        return self._q_port
+
+    def get_fit_result_output_port(self):
+        return self._result_port
+
+    def refit(self, context) -> FitResult:
+        """Fit again to the current camera images (this system's context); returns the result."""
+        result = self._run_fit(context)
+        context.get_mutable_abstract_state(self._result_index).set_value(result)
+        return result
+
+    def _run_fit(self, context) -> FitResult:
+        images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
+        frames = [CaptureFrame(Path(f"camera_{i}"), X_OC, camera)
+                  for i, (X_OC, camera) in enumerate(zip(self._X_OCs, self._cameras, strict=True))]
+        capture = CaptureSet(Path("drake_cameras"), frames)
+        result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images)
+        self.fit_count += 1
+        return result
+
+    def _Fit(self, context, state) -> None:
+        state.get_mutable_abstract_state(self._result_index).set_value(self._run_fit(context))
+
+    def _stored(self, context) -> FitResult:
+        result = context.get_abstract_state(self._result_index).get_value()
+        if result is None:
+            raise RuntimeError("NfrPerceptionSystem: no fit yet; initialise the simulator first")
+        return result
+
+    def _CalcKeypointTrajectory(self, context, output) -> None:
+        output.set_value(KeypointTrajectory.from_fit_result(self._stored(context).to_json(),
+                                                            self._X_WO))
+
+    def _CalcQ(self, context, output) -> None:
+        output.SetAtIndex(0, self._stored(context).q)
+
+    def _CalcFitResult(self, context, output) -> None:
+        output.set_value(self._stored(context))
+
+
+def hide_from_renderer(plant: MultibodyPlant, scene_graph: SceneGraph, renderer: str,
+                       keep: ModelInstanceIndex, other_renderers: tuple[str, ...] = ()) -> None:
+    """Make every perception geometry of `plant` outside model instance `keep` invisible to the
+    render engine `renderer`. Geometry that accepted every renderer keeps only `other_renderers`
+    (pydrake cannot list a scene graph's renderers). Call before creating a context."""
+    inspector = scene_graph.model_inspector()
+    others = set(other_renderers) - {renderer}
+    keep_bodies = set(plant.GetBodyIndices(keep))
+    for body_index in range(plant.num_bodies()):
+        if body_index in keep_bodies:
+            continue
+        frame_id = plant.GetBodyFrameIdIfExists(body_index)
+        if frame_id is None:
+            continue
+        for geometry_id in inspector.GetGeometries(frame_id, Role.kPerception):
+            props = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
+            if props.HasProperty("renderer", "accepting"):
+                props.UpdateProperty("renderer", "accepting",
+                                     props.GetProperty("renderer", "accepting") - {renderer})
+            else:
+                props.AddProperty("renderer", "accepting", others)
+            scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kPerception)
+            scene_graph.AssignRole(plant.get_source_id(), geometry_id, props, RoleAssign.kNew)
+
+
+def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph: SceneGraph,
+                     model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform,
+                     X_WCs: list[RigidTransform], camera: PinholeCamera,
+                     fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
+                     other_renderers: tuple[str, ...] = ()) -> NfrPerceptionSystem:
+    """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
+
+    `plant` must be finalised and hold every geometry of the scene; `other_renderers` names the
+    scene's other render engines, which keep seeing everything. Returns the system; its
+    RgbdSensors are named `nfr_camera_{i}`.
+    """
+    params = RenderEngineVtkParams(default_clear_color=list(DEFAULT_BACKGROUND_RGB),
+                                   lights=(lighting or Lighting()).drake_lights())
+    scene_graph.AddRenderer(PERCEPTION_RENDERER, MakeRenderEngineVtk(params))
+    hide_from_renderer(plant, scene_graph, PERCEPTION_RENDERER, object_model, other_renderers)
+    core = RenderCameraCore(PERCEPTION_RENDERER, drake_camera_info(camera),
+                            ClippingRange(0.05, 20.0), RigidTransform())
+    system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
+        FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config))
+    for i, X_WC in enumerate(X_WCs):
+        sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
+            parent_id=scene_graph.world_frame_id(), X_PB=X_WC,
+            color_camera=ColorRenderCamera(core, show_window=False),
+            depth_camera=DepthRenderCamera(core, DepthRange(0.05, 20.0))))
+        builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+        builder.Connect(sensor.color_image_output_port(), system.get_camera_rgb_input_port(i))
+    return system

@@ -1,0 +1,42 @@
+"""Meshcat drawings of keypoint trajectories and planner obstacles, and self-contained HTML replays."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Box, Meshcat, Rgba, Sphere
+from pydrake.math import RigidTransform
+
+from nfr_drake.planning.grasp import ObstacleBox
+from nfr_drake.planning.keypoints import KeypointTrajectory
+
+KEYPOINT_COLOURS = {"handle": Rgba(0.95, 0.15, 0.1, 1.0), "hinge_top": Rgba(0.1, 0.4, 0.95, 1.0),
+                    "hinge_bottom": Rgba(0.1, 0.4, 0.95, 1.0), "goal": Rgba(0.1, 0.75, 0.2, 1.0)}
+
+
+def draw_keypoint_trajectory(meshcat: Meshcat, kt: KeypointTrajectory, path: str = "keypoints",
+                             q_range: tuple[float, float] | None = None, line_width: float = 4.0) -> None:
+    """Each keypoint's path over `q_range` (default the whole grid) as a line, a sphere at q_current."""
+    lo, hi = q_range if q_range is not None else (kt.q_grid[0], kt.q_grid[-1])
+    q = np.linspace(min(lo, hi), max(lo, hi), 60)
+    for name in kt.names:
+        colour = KEYPOINT_COLOURS.get(name, Rgba(0.9, 0.6, 0.1, 1.0))
+        meshcat.SetLine(f"{path}/{name}/path", kt.point(name, q).T, line_width, colour)
+        meshcat.SetObject(f"{path}/{name}/now", Sphere(0.012), colour)
+        meshcat.SetTransform(f"{path}/{name}/now", RigidTransform(kt.point(name, kt.q_current)))
+
+
+def draw_obstacle(meshcat: Meshcat, box: ObstacleBox, path: str = "planner") -> None:
+    """A planner obstacle as a translucent box."""
+    meshcat.SetObject(f"{path}/{box.name}", Box(*box.size), Rgba(0.9, 0.2, 0.2, 0.15))
+    meshcat.SetTransform(f"{path}/{box.name}", box.X_WB)
+
+
+def write_replay(meshcat: Meshcat, path: Path) -> Path:
+    """Write the meshcat scene with its published recording as one offline HTML file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(meshcat.StaticHtml())
+    return path
+

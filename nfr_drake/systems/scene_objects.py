@@ -1,0 +1,149 @@
+"""Articulated objects as the simulation sees them: how to load one, its joint, its handle.
+
+Either a sampled `ArticulatedObject` or any SDFormat/URDF file with one revolute or prismatic joint.
+The ground-truth keypoint trajectory is read from the model (handle point, hinge axis or slide).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Role
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJoint
+from pydrake.systems.framework import DiagramBuilder
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.objects.articulated import ArticulatedObject
+from nfr_drake.objects.plant import add_articulated_object
+from nfr_drake.planning.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
+
+_Z = np.array([0.0, 0.0, 1.0])
+_HINGE_HALF_SPAN = 0.25  # hinge keypoints of a loaded model: this far along the axis from the handle's foot
+
+
+def set_joint_value(plant: MultibodyPlant, plant_context, joint, value: float) -> None:
+    """Set a one-dof joint's position (rad or m) in `plant_context`."""
+    q = plant.GetPositions(plant_context)
+    q[joint.position_start()] = value
+    plant.SetPositions(plant_context, q)
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """An articulated object placed in the world.
+
+    Attributes:
+        category: "closet" (revolute joint) or "drawer" (prismatic joint).
+        add_to: adds the object to a plant with its base welded at its pose; returns its instance.
+        joint_name, handle_body_name: names within the object's model instance.
+        p_BH: handle grip centre in the handle body's frame B, m, shape (3,).
+        bar_B: unit axis of the grip in B, shape (3,).
+        ground_truth: the true keypoint trajectory, in W.
+    """
+
+    category: str
+    add_to: Callable[[MultibodyPlant], ModelInstanceIndex]
+    joint_name: str
+    handle_body_name: str
+    p_BH: np.ndarray
+    bar_B: np.ndarray
+    ground_truth: KeypointTrajectory
+
+    @staticmethod
+    def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> SceneObject:
+        """A sampled object at articulation q."""
+        axis_M = np.asarray(obj.axis_O) if obj.joint_type == "revolute" else np.array([0.0, 1.0, 0.0])
+        return SceneObject(
+            category=obj.category,
+            add_to=lambda plant: add_articulated_object(plant, obj, X_WO),
+            joint_name=obj.joint_name,
+            handle_body_name=obj.moving_link_name,
+            p_BH=np.asarray(obj.moving_keypoints["handle"], dtype=float),
+            bar_B=axis_M,
+            ground_truth=KeypointTrajectory.from_articulated_object(obj, X_WO, q))
+
+    @staticmethod
+    def from_model_file(path: Path, joint_name: str, handle_body_name: str, X_WO: RigidTransform,
+                        q: float, grid_size: int = DEFAULT_GRID_SIZE) -> SceneObject:
+        """A model file; the parent body of `joint_name` is welded at X_WO, the joint set to q.
+
+        The handle point is the mean origin of the handle body's collision (else visual) geometries,
+        or the body origin when it has none.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise NfrDrakeError(f"object model {path} does not exist")
+
+        def add_to(plant: MultibodyPlant) -> ModelInstanceIndex:
+            try:
+                models = Parser(plant, "object").AddModels(str(path))
+            except RuntimeError as err:
+                first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+                raise NfrDrakeError(
+                    f"Drake could not load {path}: {first}\n  Drake reads SDFormat (.sdf) and URDF "
+                    "(.urdf) whose meshes are .obj, .gltf/.glb or .vtk; convert other meshes (e.g. "
+                    ".stl, .dae) to .obj or .gltf (meshlab, blender or trimesh do this), or replace "
+                    "collision meshes with primitives, and check package:// paths resolve.") from None
+            if len(models) != 1:
+                raise NfrDrakeError(f"{path} holds {len(models)} models; give a file with one")
+            model = models[0]
+            if not plant.HasJointNamed(joint_name, model):
+                names = [plant.get_joint(j).name() for j in plant.GetJointIndices(model)]
+                raise NfrDrakeError(f"{path} has no joint {joint_name!r}; its joints: {names}")
+            if not plant.HasBodyNamed(handle_body_name, model):
+                names = [plant.get_body(b).name() for b in plant.GetBodyIndices(model)]
+                raise NfrDrakeError(f"{path} has no body {handle_body_name!r}; its bodies: {names}")
+            joint = plant.GetJointByName(joint_name, model)
+            plant.WeldFrames(plant.world_frame(), joint.parent_body().body_frame(), X_WO)
+            return model
+
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        model = add_to(plant)
+        plant.Finalize()
+        joint = plant.GetJointByName(joint_name, model)
+        if not isinstance(joint, (RevoluteJoint, PrismaticJoint)):
+            raise NfrDrakeError(f"joint {joint_name!r} is a {joint.type_name()} joint; "
+                                "need revolute or prismatic")
+        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+        if not (np.isfinite(lower) and np.isfinite(upper) and upper > lower):
+            raise NfrDrakeError(f"joint {joint_name!r} needs finite limits (lower < upper) to map q in [0, 1]")
+        body = plant.GetBodyByName(handle_body_name, model)
+        inspector = scene_graph.model_inspector()
+        frame_id = plant.GetBodyFrameIdOrThrow(body.index())
+        geometries = (inspector.GetGeometries(frame_id, Role.kProximity)
+                      or inspector.GetGeometries(frame_id, Role.kIllustration))
+        p_BH = (np.mean([inspector.GetPoseInFrame(g).translation() for g in geometries], axis=0)
+                if geometries else np.zeros(3))
+
+        context = plant.CreateDefaultContext()
+        revolute = isinstance(joint, RevoluteJoint)
+        q_grid = np.linspace(0.0, 1.0, grid_size)
+        names = ("handle", "hinge_top", "hinge_bottom") if revolute else ("handle",)
+        p_WK = np.zeros((grid_size, len(names), 3))
+        for i, qi in enumerate(q_grid):
+            set_joint_value(plant, context, joint, lower + qi * (upper - lower))
+            X_WB = plant.EvalBodyPoseInWorld(context, body)
+            p_WK[i, 0] = X_WB @ p_BH
+            X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
+            axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
+            if revolute:
+                a = axis_W if axis_W @ _Z >= 0 else -axis_W
+                foot = X_WJ.translation() + ((p_WK[i, 0] - X_WJ.translation()) @ a) * a
+                p_WK[i, 1], p_WK[i, 2] = foot + _HINGE_HALF_SPAN * a, foot - _HINGE_HALF_SPAN * a
+            if i == 0:
+                R_BW = X_WB.rotation().inverse()
+                bar_W = axis_W if revolute else np.cross(_Z, axis_W)
+                if np.linalg.norm(bar_W) < 1e-6:
+                    raise NfrDrakeError(f"prismatic joint {joint_name!r} is vertical; only horizontal "
+                                        "slides (drawers) are supported")
+                bar_B = R_BW @ (bar_W / np.linalg.norm(bar_W))
+        category = "closet" if revolute else "drawer"
+        kt = KeypointTrajectory(category, q_grid, names, p_WK, q)
+        return SceneObject(category, add_to, joint_name, handle_body_name, p_BH, bar_B, kt)
