@@ -39,11 +39,15 @@ class FittedModel:
                                 f"{self.category} model; use a {claimed} model")
 
 
-def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
-          q_grid: np.ndarray) -> tuple[FitResult, FitOutcome]:
-    """Fit z to the capture and forward-simulate keypoints over q_grid (N,)."""
+def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
+          images: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome]:
+    """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
+
+    `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
+    """
     started = time.perf_counter()
-    outcome = fit_latent(fitted.model, observed_rays(capture), fit_config, fitted.z_obj_mean)
+    rays = observed_rays(capture, images)
+    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean)
     names = fitted.keypoint_names
     now = keypoint_trajectory(fitted.model, outcome.z, np.array([outcome.q]))[0]
     trajectory = keypoint_trajectory(fitted.model, outcome.z, q_grid)

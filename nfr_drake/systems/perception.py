@@ -6,7 +6,7 @@ forward-simulated `KeypointTrajectory` in the world frame and the estimated arti
 
 `AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
 cameras, one RgbdSensor per camera pose, and the system. The perception render engine sees the
-object alone (the robot, the floor and any other geometry are hidden from it), against the
+object alone (the robot, the floor and any other geometry lose their perception role), against the
 background colour and lighting of the training renders: a stand-in for segmenting the object out
 of a real photo. Frame O of the model is the object's frame; its pose X_WO in the world is given
 (as it is for real photos through `nfr-drake poses --object-pose`).
@@ -24,16 +24,14 @@ from pydrake.geometry import (
     DepthRange,
     DepthRenderCamera,
     MakeRenderEngineVtk,
-    PerceptionProperties,
     RenderCameraCore,
     RenderEngineVtkParams,
     Role,
-    RoleAssign,
     SceneGraph,
 )
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.multibody.tree import BodyIndex, ModelInstanceIndex
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 
@@ -146,46 +144,36 @@ class NfrPerceptionSystem(LeafSystem):
         output.set_value(self._stored(context))
 
 
-def hide_from_renderer(plant: MultibodyPlant, scene_graph: SceneGraph, renderer: str,
-                       keep: ModelInstanceIndex, other_renderers: tuple[str, ...] = ()) -> None:
-    """Make every perception geometry of `plant` outside model instance `keep` invisible to the
-    render engine `renderer`. Geometry that accepted every renderer keeps only `other_renderers`
-    (pydrake cannot list a scene graph's renderers). Call before creating a context."""
+def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:
+    """Remove the perception role of every geometry of `plant` outside model instance `keep`, so
+    render engines (RgbdSensors) see that model alone; Meshcat (illustration role) and contact
+    (proximity role) are unaffected. pydrake cannot restrict a geometry to some renderers
+    (its ("renderer", "accepting") property needs a C++ std::set), hence all of them.
+    Call before creating a context."""
     inspector = scene_graph.model_inspector()
-    others = set(other_renderers) - {renderer}
-    keep_bodies = set(plant.GetBodyIndices(keep))
-    for body_index in range(plant.num_bodies()):
-        if body_index in keep_bodies:
-            continue
-        frame_id = plant.GetBodyFrameIdIfExists(body_index)
-        if frame_id is None:
+    keep_bodies = {int(i) for i in plant.GetBodyIndices(keep)}
+    for i in range(plant.num_bodies()):
+        frame_id = plant.GetBodyFrameIdIfExists(BodyIndex(i))
+        if i in keep_bodies or frame_id is None:
             continue
         for geometry_id in inspector.GetGeometries(frame_id, Role.kPerception):
-            props = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
-            if props.HasProperty("renderer", "accepting"):
-                props.UpdateProperty("renderer", "accepting",
-                                     props.GetProperty("renderer", "accepting") - {renderer})
-            else:
-                props.AddProperty("renderer", "accepting", others)
             scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kPerception)
-            scene_graph.AssignRole(plant.get_source_id(), geometry_id, props, RoleAssign.kNew)
 
 
 def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph: SceneGraph,
                      model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform,
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
-                     fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
-                     other_renderers: tuple[str, ...] = ()) -> NfrPerceptionSystem:
+                     fit_config: FitConfig = FitConfig(),
+                     lighting: Lighting | None = None) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
-    `plant` must be finalised and hold every geometry of the scene; `other_renderers` names the
-    scene's other render engines, which keep seeing everything. Returns the system; its
-    RgbdSensors are named `nfr_camera_{i}`.
+    `plant` must be finalised and hold every geometry of the scene; render engines then see the
+    object alone (`render_only`). Returns the system; its RgbdSensors are named `nfr_camera_{i}`.
     """
     params = RenderEngineVtkParams(default_clear_color=list(DEFAULT_BACKGROUND_RGB),
                                    lights=(lighting or Lighting()).drake_lights())
     scene_graph.AddRenderer(PERCEPTION_RENDERER, MakeRenderEngineVtk(params))
-    hide_from_renderer(plant, scene_graph, PERCEPTION_RENDERER, object_model, other_renderers)
+    render_only(plant, scene_graph, object_model)
     core = RenderCameraCore(PERCEPTION_RENDERER, drake_camera_info(camera),
                             ClippingRange(0.05, 20.0), RigidTransform())
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
