@@ -26,6 +26,9 @@ _Z = np.array([0.0, 0.0, 1.0])
 CARCASS_SETBACK = 0.05
 """Distance from the handle (at q = 0) back to the front face of the keypoint-derived carcass box, m.
 Handles of both categories stand 4.5-7 cm in front of the carcass."""
+_DRAWER_HALF_WIDTH = 0.4
+_DRAWER_DEPTH = 0.5
+_DRAWER_HEIGHT = 0.42
 
 
 @dataclass(frozen=True)
@@ -92,10 +95,11 @@ class ObstacleBox:
 def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
     """A box inside the object's static part, from the keypoints alone.
 
-    Its front face is CARCASS_SETBACK behind the closed handle, across the front normal (the handle
+    Its front face is `CARCASS_SETBACK` behind the closed handle, across the front normal (the handle
     tangent at q = 0). Closet: it spans the hinge line to its mirror image about the `goal` keypoint
-    (the carcass centre) and the floor to `hinge_top`. Drawer: 0.3 m wide, 0.3 m deep, from the floor
-    to 5 cm above the handle (the keypoints do not say more; the true carcass is larger).
+    (the carcass centre) and the floor to `hinge_top`. Drawer: centred on the handle, `2 * _DRAWER_HALF_WIDTH` wide, `_DRAWER_DEPTH` deep, from the floor
+    to `_DRAWER_HEIGHT` (the keypoints say nothing of the drawer carcass's size: the box covers the
+    largest one of the category).
     """
     n = handle_tangent(kt, 0.0)
     n = _unit(n - (n @ _Z) * _Z, "the horizontal front normal")
@@ -109,8 +113,8 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
         depth = max(2.0 * (front - goal @ n), 0.1)
         height = kt.point("hinge_top", 0.0)[2]
     else:
-        half_width, centre_lat, depth = 0.15, p_handle @ lateral, 0.3
-        height = p_handle[2] + 0.05
+        half_width, centre_lat, depth = _DRAWER_HALF_WIDTH, p_handle @ lateral, _DRAWER_DEPTH
+        height = max(_DRAWER_HEIGHT, p_handle[2] + 0.05)
     size = np.array([depth, 2.0 * half_width, height])
     centre = (front - depth / 2) * n + centre_lat * lateral + height / 2 * _Z
     R = RotationMatrix(np.column_stack([n, lateral, _Z]))

@@ -54,11 +54,13 @@ def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
 def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | None = None,
              meshcat: Meshcat | None = None, replay: Path | None = None,
              planner_config: PlannerConfig = PlannerConfig(),
-             simulation_config: SimulationConfig = SimulationConfig()) -> TaskOutcome:
+             simulation_config: SimulationConfig = SimulationConfig(),
+             reference: KeypointTrajectory | None = None) -> TaskOutcome:
     """Plan with `keypoints` (default: read from the object) and simulate on the true object.
 
     With `replay`, a meshcat (given or made here) records the run and the keypoint paths used by the
-    planner and an HTML replay is written there.
+    planner and an HTML replay is written there. `reference` (e.g. the true keypoints when the
+    planner used predicted ones) is drawn too, under "keypoints_true".
     """
     kt = keypoints if keypoints is not None else read_keypoints(obj)
     try:
@@ -71,6 +73,9 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         meshcat.Delete()
         meshcat.DeleteRecording()
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
+        if reference is not None:
+            draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
+                                     (reference.q_current, q_target), line_width=2.0)
         draw_obstacle(meshcat, carcass_box(kt))
     simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config)
     path = write_replay(meshcat, replay) if replay is not None else None

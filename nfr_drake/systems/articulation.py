@@ -2,10 +2,10 @@
 
 A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm's joints are PD
 controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
-compensation as feed-forward. The grasp is two ball constraints, 2 cm either side of the tool frame
-along its x axis, tied to the true handle's bar axis: together a hinge about the bar (a cylindrical
-grasp). They are inactive until the hand reaches the handle and are switched on through the context
-only if the tool origin is then within `capture_radius` of the true handle.
+compensation as feed-forward. The grasp is a ball constraint between the tool frame's origin and the
+true handle point (optionally two along the bar: a hinge about it). It is inactive until the hand
+rests on the handle and is switched on through the context only if the tool origin is then within
+`capture_radius` of the true handle.
 """
 
 from __future__ import annotations
@@ -56,8 +56,9 @@ class SimulationConfig:
     """Time after the plan ends before the outcome is measured, s."""
     capture_radius: float = 0.02
     """The grasp holds only if the tool origin is this close to the true handle, m."""
-    grasp_half_span: float = 0.02
-    """Ball constraints sit this far either side of the grasp point along the bar, m."""
+    grasp_half_span: float = 0.0
+    """0: one ball constraint at the grasp point (a point grasp, rotations free). > 0: two, this far
+    either side of it along the bar (a hinge about the bar), m."""
     finger_closed: float = 0.012
     """Finger opening (each) when closed on a handle, m."""
     sample_period: float = 0.02
@@ -147,10 +148,11 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     handle_body = plant.GetBodyByName(obj.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
     bar_B = obj.bar_B / np.linalg.norm(obj.bar_B)
+    span_points = (1.0, -1.0) if config.grasp_half_span > 0.0 else (0.0,)
     constraint_ids = [
         plant.AddBallConstraint(hand, X_HT @ np.array([sign * config.grasp_half_span, 0.0, 0.0]),
                                 handle_body, obj.p_BH + sign * config.grasp_half_span * bar_B)
-        for sign in (1.0, -1.0)]
+        for sign in span_points]
     plant.Finalize()
 
     # The grasp is the constraints: the gripper does not touch the object's moving bodies.
