@@ -13,6 +13,8 @@ from nfr_drake.errors import NfrDrakeError
 
 # name -> ("module:function", one-line description). The function's signature is the CLI.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("nfr_drake.systems.demo:demo_command",
+             "the main job: photograph an unseen closet, fit, plan and open it in simulation"),
     "generate": ("nfr_drake.data.generate:generate_command",
                  "render a training dataset of one category with Drake"),
     "captures": ("nfr_drake.data.captures:captures_command",

@@ -36,7 +36,7 @@ class FitConfig:
     Attributes:
         restarts: codes fitted in parallel; start i has q = (i + 0.5) / restarts.
         max_steps: Adam steps at most.
-        min_steps: steps before the stopping rule may end the fit.
+        min_steps_fraction: share of `max_steps` run before the stopping rule may end the fit.
         rays_per_step: random pixels (over all views) per step, shared by all restarts.
         lr: Adam learning rate of z.
         latent_weight: weight of the Gaussian prior on z_obj (training's value keeps codes where the
@@ -49,7 +49,7 @@ class FitConfig:
 
     restarts: int = 4
     max_steps: int = 600
-    min_steps: int = 150
+    min_steps_fraction: float = 0.25
     rays_per_step: int = 512
     lr: float = 1e-2
     latent_weight: float = 1e-3
@@ -62,8 +62,8 @@ class FitConfig:
         for name in ("restarts", "max_steps", "rays_per_step", "patience", "eval_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
-        if not 0 <= self.min_steps <= self.max_steps:
-            raise ConfigError("FitConfig.min_steps must lie in [0, max_steps]")
+        if not 0.0 <= self.min_steps_fraction <= 1.0:
+            raise ConfigError("FitConfig.min_steps_fraction must lie in [0, 1]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
 
@@ -192,7 +192,7 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
             improved = smoothed < best * (1.0 - config.min_improvement)
             best = torch.where(improved, smoothed, best)
             since_best = torch.where(improved, torch.zeros_like(since_best), since_best + 1)
-            if step >= config.min_steps:
+            if step >= config.min_steps_fraction * config.max_steps:
                 active &= since_best < config.patience
         if not active.any():
             break
