@@ -1,0 +1,76 @@
+"""Planning with ground-truth keypoints over sampled objects: success rate and planning time."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.command import OPEN_TARGET
+from nfr_drake.planning.task import run_task
+from nfr_drake.systems.scene_objects import SceneObject
+
+FIELDS = ("category", "seed", "index", "width", "height", "q_target", "planned", "success",
+          "planning_seconds", "q_final", "joint_error", "max_drift", "max_constraint_force", "error")
+
+
+@dataclass(frozen=True)
+class PlanningEvalConfig:
+    """Which objects: `count` per category, object i drawn from object_rng(SEED_DOMAIN_TRAIN, seed, i)."""
+
+    count: int = 50
+    seed: int = 7
+    categories: tuple[str, ...] = ("closet", "drawer")
+
+
+def evaluate_one(category: str, seed: int, index: int) -> dict:
+    """Open one sampled object from q = 0 to its category's open target; one CSV row."""
+    obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, index))
+    q_target = OPEN_TARGET[category]
+    outcome = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.0), q_target)
+    sim = outcome.simulation
+    return dict(category=category, seed=seed, index=index, width=round(obj.params["width"], 4),
+                height=round(obj.params["height"], 4), q_target=q_target, planned=outcome.plan is not None,
+                success=outcome.success, planning_seconds=round(outcome.planning_seconds, 3),
+                q_final=round(sim.q_final, 4) if sim else "", joint_error=round(sim.joint_error, 4) if sim else "",
+                max_drift=round(sim.max_drift, 4) if sim else "",
+                max_constraint_force=round(sim.max_constraint_force, 1) if sim else "",
+                error=outcome.planning_error[:300])
+
+
+def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
+    """Run (or resume: rows already in `csv_path` are kept) and return all rows."""
+    csv_path = Path(csv_path)
+    rows = list(csv.DictReader(csv_path.open())) if csv_path.is_file() else []
+    done = {(r["category"], int(r["seed"]), int(r["index"])) for r in rows}
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    with csv_path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=FIELDS)
+        if not rows:
+            writer.writeheader()
+        for category in config.categories:
+            for i in range(config.count):
+                if (category, config.seed, i) in done:
+                    continue
+                row = evaluate_one(category, config.seed, i)
+                writer.writerow(row)
+                f.flush()
+                rows.append({k: str(v) for k, v in row.items()})
+    return rows
+
+
+def summarise(rows: list[dict]) -> dict[str, dict[str, float]]:
+    """Per category and overall: count, success rate, planned rate, median and p90 planning time."""
+    out = {}
+    for name in sorted({r["category"] for r in rows}) + ["all"]:
+        sel = [r for r in rows if name == "all" or r["category"] == name]
+        planned = [float(r["planning_seconds"]) for r in sel if r["planned"] == "True"]
+        out[name] = dict(count=len(sel), success=np.mean([r["success"] == "True" for r in sel]),
+                         planned=np.mean([r["planned"] == "True" for r in sel]),
+                         median_s=float(np.median(planned)) if planned else float("nan"),
+                         p90_s=float(np.percentile(planned, 90)) if planned else float("nan"))
+    return out

@@ -1,0 +1,83 @@
+"""`nfr-drake plan`: plan, simulate and replay opening or closing one articulated object."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.planner import PlanningError
+from nfr_drake.planning.task import run_task
+from nfr_drake.systems.scene_objects import SceneObject
+
+OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
+"""Default articulation an `open` task reaches (and a `close` task starts from)."""
+
+
+def plan_command(
+    object: Path | None = None,
+    joint: str | None = None,
+    handle_body: str | None = None,
+    category: Literal["closet", "drawer"] | None = None,
+    seed: int = 0,
+    task: Literal["open", "close"] = "open",
+    start_q: float | None = None,
+    target_q: float | None = None,
+    object_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    object_yaw_deg: float = 0.0,
+    replay: Path = Path("out/plan/replay.html"),
+    live: bool = False,
+) -> int:
+    """Plan grasping the handle and opening (or closing) an object, simulate it, write a replay.
+
+    Args:
+        object: SDFormat or URDF file with one revolute or prismatic joint (finite limits).
+        joint: the joint to articulate (with --object).
+        handle_body: the body whose origin/geometry centre is the handle (with --object).
+        category: instead of --object, plan on a sampled object of this category.
+        seed: which sampled object (object_rng(SEED_DOMAIN_TRAIN, seed, 0)).
+        task: "open" (start_q -> target_q upward) or "close".
+        start_q: articulation in [0, 1] at the start (default 0 to open, the open target to close).
+        target_q: articulation to reach (default 0.6 for doors, 1.0 for drawers to open; 0 to close).
+        object_xyz: position of the object's base in the world, m.
+        object_yaw_deg: its rotation about the vertical, degrees.
+        replay: where to write the self-contained HTML replay.
+        live: keep the live meshcat view open after the run until Enter is pressed.
+
+    Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
+    """
+    X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, np.radians(object_yaw_deg)), np.asarray(object_xyz))
+    if (object is None) == (category is None):
+        raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category")
+    if object is not None:
+        if joint is None or handle_body is None:
+            raise NfrDrakeError("--object needs --joint and --handle-body")
+        scene_object = SceneObject.from_model_file(object, joint, handle_body, X_WO, 0.0)
+    else:
+        obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, 0))
+        scene_object = SceneObject.from_articulated_object(obj, X_WO, 0.0)
+    open_q = OPEN_TARGET[scene_object.category]
+    q0 = start_q if start_q is not None else (0.0 if task == "open" else open_q)
+    q1 = target_q if target_q is not None else (open_q if task == "open" else 0.0)
+    for name, value in (("start_q", q0), ("target_q", q1)):
+        if not 0.0 <= value <= 1.0:
+            raise NfrDrakeError(f"{name} {value} is outside [0, 1]")
+    scene_object = replace(scene_object, ground_truth=scene_object.ground_truth.with_current(q0))
+
+    from pydrake.geometry import Meshcat
+
+    meshcat = Meshcat()
+    print(f"live view: {meshcat.web_url()}")
+    outcome = run_task(scene_object, q1, meshcat=meshcat, replay=replay)
+    if outcome.plan is None:
+        raise PlanningError(outcome.planning_error)
+    print(f"{outcome.simulation.summary()}; planning {outcome.planning_seconds:.2f} s; "
+          f"replay {outcome.replay}")
+    if live:
+        input("press Enter to quit (the live view closes) ")
+    return 0 if outcome.success else 1
