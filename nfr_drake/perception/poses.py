@@ -38,6 +38,7 @@ from nfr_drake.perception.sfm import (
     ReconstructionError,
     SfmOptions,
     camera_poses,
+    exif_focal_prior,
     image_cameras,
     run_sfm,
 )
@@ -156,8 +157,11 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             known = sorted(set(alignment.anchors) & {p.name for p in photos})
             check_not_collinear(np.array([alignment.anchors[n] for n in known]).reshape(-1, 3), known)
         work_camera = _working_camera(camera, photos) if camera else None
+        focal_prior = None
+        if camera is None and len({p.size for p in photos}) == 1:
+            focal_prior = exif_focal_prior(photos_dir / photos[0].name, *photos[0].size)
         sfm = run_sfm(image_dir, [p.work_name for p in photos], work, work_camera, sfm_options,
-                      progress)
+                      progress, focal_prior)
         by_work = {p.work_name: p.name for p in photos}
         rec = sfm.reconstruction
         X_RCs = {by_work[n]: X for n, X in camera_poses(rec).items()}
@@ -205,7 +209,9 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             unregistered=unregistered,
             mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
             points3D=len(points), num_models=sfm.num_models,
-            calibration="known" if camera else "self-calibrated", alignment=aligned, frame=frame,
+            calibration="known" if camera else "self-calibrated" + (
+                " from the EXIF focal length" if focal_prior else ""),
+            alignment=aligned, frame=frame,
             frames={f"images/frame_{i:03d}.png": n for i, n in enumerate(registered)},
             cameras={n: cameras[n].to_json() for n in registered}, board_poses=board_details,
             seconds={**sfm.seconds, "total": time.perf_counter() - start})

@@ -15,6 +15,7 @@ class PoseReport:
 
     registered / unregistered: photo names; frames: capture-set file path -> photo name;
     mean_reprojection_error_px: over all observations of the sparse model (working-size pixels);
+    calibration: "known", "self-calibrated" or "self-calibrated from the EXIF focal length";
     cameras: the photos' intrinsics as used (nerfstudio keys + distortion, working size);
     board_poses: photo name -> ChArUco corners and PnP reprojection error, with --charuco;
     seconds: wall time per stage.
@@ -48,8 +49,8 @@ class PoseReport:
         lines = [f"registered {len(self.registered)} of {self.photos} photos"
                  + (f"; not registered: {', '.join(self.unregistered)}" if self.unregistered else ""),
                  f"sparse model: {self.points3D} points, mean reprojection error "
-                 f"{self.mean_reprojection_error_px:.3f} px at {self.working_size_px} px "
-                 f"({self.calibration} intrinsics)"]
+                 f"{self.mean_reprojection_error_px:.3f} px at {self.working_size_px} px; "
+                 f"intrinsics {self.calibration}"]
         if self.alignment is None:
             lines.append("no metric alignment: poses are in the reconstruction's arbitrary frame "
                          "and scale")

@@ -60,7 +60,12 @@ class SfmResult:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def _reader_options(camera: PhotoCamera | None) -> pycolmap.ImageReaderOptions:
+def _reader_options(camera: PhotoCamera | None, focal_prior: tuple[float, int, int] | None
+                    ) -> pycolmap.ImageReaderOptions:
+    if camera is None and focal_prior is not None:
+        f, w, h = focal_prior
+        return pycolmap.ImageReaderOptions(camera_model=SELF_CALIBRATION_MODEL,
+                                           camera_params=f"{f:.17g},{w / 2},{h / 2},0")
     if camera is None:
         return pycolmap.ImageReaderOptions(camera_model=SELF_CALIBRATION_MODEL)
     model, params = camera.colmap_model()
@@ -83,12 +88,15 @@ def _mapping_options(known_intrinsics: bool, options: SfmOptions) -> pycolmap.In
 
 def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
             options: SfmOptions | None = None,
-            progress: Callable[[str], None] | None = print) -> SfmResult:
+            progress: Callable[[str], None] | None = print,
+            focal_prior: tuple[float, int, int] | None = None) -> SfmResult:
     """Reconstruct cameras and sparse points from the images `image_names` in `image_dir`.
 
     Args:
         camera: intrinsics of every image (all must have its size), held fixed; None to
             self-calibrate one SIMPLE_RADIAL camera per image size.
+        focal_prior: (focal length px, width, height) to start self-calibration from, for images
+            of that size (e.g. from the photos' EXIF); default COLMAP's 1.2 x the longer side.
         work_dir: receives `database.db` and the mapper's `sparse/` models.
         progress: called with one line per stage; None for silence.
     Raises ReconstructionError when no model is found.
@@ -98,13 +106,14 @@ def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Pho
     pycolmap.logging.minloglevel = 0 if options.verbose else 1
     try:
         return _run_sfm(image_dir, image_names, work_dir, camera, options,
-                        progress or (lambda _: None))
+                        progress or (lambda _: None), focal_prior)
     finally:
         pycolmap.logging.minloglevel = previous_level
 
 
 def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
-             options: SfmOptions, say: Callable[[str], None]) -> SfmResult:
+             options: SfmOptions, say: Callable[[str], None],
+             focal_prior: tuple[float, int, int] | None) -> SfmResult:
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "database.db"
     database.unlink(missing_ok=True)
@@ -119,8 +128,8 @@ def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Ph
     extraction.sift.first_octave = options.first_octave
     pycolmap.extract_features(
         database, image_dir, image_names=image_names,
-        camera_mode=pycolmap.CameraMode.SINGLE if camera else pycolmap.CameraMode.AUTO,
-        reader_options=_reader_options(camera), extraction_options=extraction,
+        camera_mode=pycolmap.CameraMode.SINGLE if camera or focal_prior else pycolmap.CameraMode.AUTO,
+        reader_options=_reader_options(camera, focal_prior), extraction_options=extraction,
         device=pycolmap.Device.cpu)
     seconds["extraction"] = time.perf_counter() - start
 
@@ -146,6 +155,15 @@ def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Ph
     say(f"registered {best.num_reg_images()} of {n} images, {best.num_points3D()} points, "
         f"mean reprojection error {best.compute_mean_reprojection_error():.3f} px")
     return SfmResult(best, len(models), seconds)
+
+
+def exif_focal_prior(photo: Path, width: int, height: int) -> tuple[float, int, int] | None:
+    """The focal length (px) of a photo's EXIF data (focal length with the sensor size, or the
+    35 mm equivalent), scaled to width x height, as `run_sfm`'s focal_prior; None without EXIF."""
+    exif = pycolmap.infer_camera_from_image(photo)
+    if not exif.has_prior_focal_length:
+        return None
+    return exif.mean_focal_length() * max(width, height) / max(exif.width, exif.height), width, height
 
 
 def camera_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.ndarray]:

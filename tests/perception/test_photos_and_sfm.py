@@ -1,0 +1,44 @@
+"""Photo folders (listing, resizing) and the EXIF focal-length prior of self-calibration."""
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from nfr_drake.perception.photos import PhotoFolderError, prepare_photos, working_size
+from nfr_drake.perception.sfm import exif_focal_prior
+
+
+def test_working_size():
+    assert working_size((3072, 2048), 1024) == (1024, 683)
+    assert working_size((480, 640), 1024) == (480, 640)  # never enlarged
+
+
+def test_prepare_photos(tmp_path):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    Image.fromarray(np.zeros((400, 600, 3), np.uint8)).save(photos / "b.jpg")
+    Image.fromarray(np.zeros((100, 150, 3), np.uint8)).save(photos / "a.png")
+    (photos / "notes.txt").write_text("not a photo")
+    prepared = prepare_photos(photos, tmp_path / "work", 300)
+    assert [(p.name, p.work_name, p.original_size, p.size) for p in prepared] == [
+        ("a.png", "a.png", (150, 100), (150, 100)), ("b.jpg", "b.png", (600, 400), (300, 200))]
+    assert Image.open(tmp_path / "work" / "b.png").size == (300, 200)
+    Image.fromarray(np.zeros((10, 10, 3), np.uint8)).save(photos / "a.jpg")
+    with pytest.raises(PhotoFolderError, match="share a name"):
+        prepare_photos(photos, tmp_path / "work", 300)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PhotoFolderError, match="no photos"):
+        prepare_photos(tmp_path / "empty", tmp_path / "w2", 300)
+
+
+def test_exif_focal_prior(tmp_path):
+    path = tmp_path / "phone.jpg"
+    Image.fromarray(np.zeros((300, 400, 3), np.uint8)).save(path)
+    assert exif_focal_prior(path, 200, 150) is None
+    exif = Image.Exif()
+    exif.get_ifd(0x8769)[0xA405] = 28  # FocalLengthIn35mmFilm
+    Image.fromarray(np.zeros((300, 400, 3), np.uint8)).save(path, exif=exif)
+    f, w, h = exif_focal_prior(path, 200, 150)
+    assert (w, h) == (200, 150)
+    # 28 mm on a 36 x 24 mm frame: about 0.78 to 0.81 of the longer side (COLMAP uses the diagonal).
+    assert 0.7 * 200 < f < 0.9 * 200
