@@ -20,9 +20,10 @@ import cv2
 import numpy as np
 import tyro
 
-from nfr_drake.data.capture import write_capture_set
+from nfr_drake.data.capture import PinholeCamera, write_capture_set
 from nfr_drake.errors import ConfigError
 from nfr_drake.perception.alignment import (
+    AlignmentResult,
     Similarity,
     align_to_camera_poses,
     align_to_centres,
@@ -118,23 +119,7 @@ def _ply_text(points: np.ndarray, colors: np.ndarray) -> str:
     return "\n".join(header + rows) + "\n"
 
 
-def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
-                   camera: PhotoCamera | None = None, X_WO: np.ndarray | None = None,
-                   max_size: int = 1024, min_registered: int = 3,
-                   sfm_options: SfmOptions = DEFAULT_SFM, work_dir: Path | None = None,
-                   progress=_progress) -> PoseReport:
-    """Estimate metric camera poses of the photos in `photos_dir` and write the capture set `out`.
-
-    Args:
-        alignment: the board or the anchors (camera centres in W, metres, by photo name).
-        camera: intrinsics of the photos at their original size, held fixed; None to
-            self-calibrate (SIMPLE_RADIAL).
-        X_WO: pose of the object frame O in W (4x4); None means O = W.
-        max_size: the photos' longer side for SfM and in the capture set, pixels.
-        min_registered: fewer registered photos is an error.
-        work_dir: keeps the resized photos, COLMAP database and models; default a temporary folder.
-    Returns the report (also written to `out/report.json`). Raises NfrDrakeError subclasses.
-    """
+def _check_request(alignment: Alignment, out: Path, max_size: int) -> None:
     if alignment.charuco is not None and alignment.anchors is not None:
         raise ConfigError("align with either a ChArUco board or anchors, not both")
     if alignment.charuco is None and alignment.anchors is None and not alignment.allow_unaligned:
@@ -145,6 +130,53 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         raise ConfigError(f"{out} already exists; choose another --out")
     if max_size < 64:
         raise ConfigError(f"max_size {max_size} px is too small for feature matching")
+
+
+def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_dir: Path,
+           work_names: dict[str, str], X_RCs: dict[str, np.ndarray],
+           cameras: dict[str, PhotoCamera]) -> tuple[AlignmentResult | None, dict[str, dict]]:
+    """The similarity R -> W from the board (photos in `work_names`) or the anchors, and the
+    board detections per photo; (None, {}) when unaligned."""
+    if estimator is not None:
+        X_BCs, details = _board_poses(estimator, image_dir, work_names, cameras)
+        if len(X_BCs) < 2:
+            raise BoardNotFoundError(_board_message(estimator, len(X_BCs), "registered photo(s)"))
+        return align_to_camera_poses(X_RCs, X_BCs, "charuco"), details
+    if alignment.anchors is not None:
+        return align_to_centres(X_RCs, alignment.anchors), {}
+    return None, {}
+
+
+def _undistorted_images(image_dir: Path, work_names: list[str], cameras: list[PhotoCamera]
+                        ) -> tuple[list[np.ndarray], list[PinholeCamera] | PinholeCamera]:
+    """Undistorted RGB images (H, W, 3) and their pinhole camera(s): one if all are equal."""
+    images, pinholes = [], []
+    for work_name, camera in zip(work_names, cameras, strict=True):
+        undistorted, pinhole = camera.undistort(cv2.imread(str(image_dir / work_name)))
+        images.append(cv2.cvtColor(undistorted, cv2.COLOR_BGR2RGB))
+        pinholes.append(pinhole)
+    return images, pinholes[0] if all(c == pinholes[0] for c in pinholes) else pinholes
+
+
+def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
+                   camera: PhotoCamera | None = None, X_WO: np.ndarray | None = None,
+                   max_size: int = 1024, min_registered: int = 3,
+                   sfm_options: SfmOptions = DEFAULT_SFM, work_dir: Path | None = None,
+                   progress=_progress) -> PoseReport:
+    """Estimate metric camera poses of the photos in `photos_dir` and write the capture set `out`.
+
+    Args:
+        alignment: the board or the anchors (camera centres in W, metres, by photo name).
+        camera: intrinsics of the photos at their original size, held fixed; None to
+            self-calibrate (SIMPLE_RADIAL, started from the EXIF focal length when there is one).
+        X_WO: pose of the object frame O in W (4x4); None means O = W.
+        max_size: the photos' longer side for SfM and in the capture set, pixels.
+        min_registered: fewer registered photos is an error.
+        work_dir: keeps the resized photos, COLMAP database and models; default a temporary folder.
+        progress: called with one line per step.
+    Returns the report (also written to `out/report.json`). Raises NfrDrakeError subclasses.
+    """
+    _check_request(alignment, out, max_size)
     estimator = CharucoPoseEstimator(alignment.charuco) if alignment.charuco else None
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="nfr_poses_") as tmp:
@@ -152,20 +184,23 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         image_dir = work / "images"
         progress(f"resizing photos from {photos_dir} to at most {max_size} px")
         photos = prepare_photos(photos_dir, image_dir, max_size)
+        work_name = {p.name: p.work_name for p in photos}
+        # Cheap checks before the costly reconstruction.
         with_board = _photos_with_board(estimator, image_dir, photos) if estimator else []
         if alignment.anchors is not None:
-            known = sorted(set(alignment.anchors) & {p.name for p in photos})
+            known = sorted(set(alignment.anchors) & set(work_name))
             check_not_collinear(np.array([alignment.anchors[n] for n in known]).reshape(-1, 3), known)
+
         work_camera = _working_camera(camera, photos) if camera else None
         focal_prior = None
         if camera is None and len({p.size for p in photos}) == 1:
             focal_prior = exif_focal_prior(photos_dir / photos[0].name, *photos[0].size)
         sfm = run_sfm(image_dir, [p.work_name for p in photos], work, work_camera, sfm_options,
                       progress, focal_prior)
-        by_work = {p.work_name: p.name for p in photos}
         rec = sfm.reconstruction
-        X_RCs = {by_work[n]: X for n, X in camera_poses(rec).items()}
-        cameras = {by_work[n]: c for n, c in image_cameras(rec).items()}
+        photo_name = {p.work_name: p.name for p in photos}
+        X_RCs = {photo_name[n]: X for n, X in camera_poses(rec).items()}
+        cameras = {photo_name[n]: c for n, c in image_cameras(rec).items()}
         registered = sorted(X_RCs)
         unregistered = [p.name for p in photos if p.name not in X_RCs]
         if len(registered) < min_registered:
@@ -173,37 +208,25 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
                 f"only {len(registered)} of {len(photos)} photos registered (need {min_registered}); "
                 f"not registered: {', '.join(unregistered)}")
 
-        board_details = {}
         if estimator is not None:
-            progress("detecting the ChArUco board in the registered photos")
-            work_names = {p.name: p.work_name for p in photos
-                          if p.name in X_RCs and p.name in with_board}
-            X_BCs, board_details = _board_poses(estimator, image_dir, work_names, cameras)
-            if len(X_BCs) < 2:
-                raise BoardNotFoundError(_board_message(estimator, len(X_BCs), "registered photo(s)"))
-            aligned = align_to_camera_poses(X_RCs, X_BCs, "charuco")
-        elif alignment.anchors is not None:
-            aligned = align_to_centres(X_RCs, alignment.anchors)
-        else:
-            aligned = None
+            progress("estimating the ChArUco board's pose in the registered photos")
+        aligned, board_details = _align(
+            alignment, estimator, image_dir,
+            {n: work_name[n] for n in registered if n in with_board}, X_RCs, cameras)
         S = aligned.similarity if aligned else Similarity.identity()
         X_OW = np.linalg.inv(X_WO) if X_WO is not None else np.eye(4)
         X_OCs = [X_OW @ S.apply_pose(X_RCs[n]) for n in registered]
+        points = list(rec.points3D.values())
+        p_O = S.apply(np.array([p.xyz for p in points]).reshape(-1, 3)) @ X_OW[:3, :3].T + X_OW[:3, 3]
+        colors = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
 
         progress(f"writing the capture set {out}")
-        images, pinholes = [], []
-        name_to_work = {p.name: p.work_name for p in photos}
-        for name in registered:
-            bgr = cv2.imread(str(image_dir / name_to_work[name]))
-            undistorted, pinhole = cameras[name].undistort(bgr)
-            images.append(cv2.cvtColor(undistorted, cv2.COLOR_BGR2RGB))
-            pinholes.append(pinhole)
-        points = [p for p in rec.points3D.values()]
-        p_R = np.array([p.xyz for p in points]).reshape(-1, 3)
-        p_O = S.apply(p_R) @ X_OW[:3, :3].T + X_OW[:3, 3]
-        colors = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
-        frame = ("O" if X_WO is not None else "O = W (no object pose given)") if aligned else \
-            "R (unaligned: SfM's frame and arbitrary scale)"
+        images, pinholes = _undistorted_images(image_dir, [work_name[n] for n in registered],
+                                               [cameras[n] for n in registered])
+        if aligned is None:
+            frame = "R (unaligned: SfM's frame and arbitrary scale)"
+        else:
+            frame = "O" if X_WO is not None else "O = W (no object pose given)"
         report = PoseReport(
             photos=len(photos), working_size_px=max(photos[0].size), registered=registered,
             unregistered=unregistered,
@@ -215,8 +238,7 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             frames={f"images/frame_{i:03d}.png": n for i, n in enumerate(registered)},
             cameras={n: cameras[n].to_json() for n in registered}, board_poses=board_details,
             seconds={**sfm.seconds, "total": time.perf_counter() - start})
-        shared = pinholes[0] if all(c == pinholes[0] for c in pinholes) else pinholes
-        write_capture_set(out, images, X_OCs, shared,
+        write_capture_set(out, images, X_OCs, pinholes,
                           extra_files={REPORT_FILE: report.dumps(), POINTS_FILE: _ply_text(p_O, colors)})
     return report
 
