@@ -1,0 +1,206 @@
+"""Model folders and resumable training checkpoints, written atomically, read without unpickling.
+
+Model folder (DESIGN.md): `model.safetensors` (weights of the networks, plus the training objects'
+codes under `codes.weight`) and `config.json` (format, architecture, category, keypoint names,
+training data and command). A resumable checkpoint adds `optimizer.safetensors` (Adam moments,
+RNG states) and `trainer.json` (step, parameter groups, sampler RNG state).
+
+Folders are written under a temporary name and renamed into place, so a reader (or `--resume`
+after a kill) never sees half a checkpoint. Tensors are read with safetensors only; `torch.load`
+is never called.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load_file, save_file
+from torch import nn
+
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.model import NFRAutoDecoder, NFRModel
+
+MODEL_FORMAT = "nfr-drake-model"
+MODEL_VERSION = 1
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+OPTIMIZER_FILE = "optimizer.safetensors"
+TRAINER_FILE = "trainer.json"
+CODES_KEY = "codes.weight"
+
+
+class CheckpointError(NfrDrakeError):
+    """A model folder or checkpoint is missing, corrupt, or of another architecture."""
+
+
+def _write_json(path: Path, data: dict) -> None:
+    path.write_text(json.dumps(data, indent=2) + "\n")
+
+
+def _replace_dir(tmp: Path, final: Path) -> None:
+    """Move the complete folder tmp to final, replacing what was there."""
+    old = final.with_name(final.name + ".old")
+    if old.exists():
+        shutil.rmtree(old)
+    if final.exists():
+        os.replace(final, old)
+    os.replace(tmp, final)
+    if old.exists():
+        shutil.rmtree(old)
+
+
+def model_state(module: NFRAutoDecoder) -> dict[str, torch.Tensor]:
+    """Flat name -> tensor of the networks (`model.` prefix dropped) and the code table."""
+    state = {k.removeprefix("model."): v for k, v in module.state_dict().items()}
+    return {k: v.detach().cpu().contiguous() for k, v in state.items()}
+
+
+def write_model_folder(folder: Path, module: NFRAutoDecoder, info: dict) -> None:
+    """Write `model.safetensors` + `config.json` atomically. `info` adds category, keypoint_names,
+    training data/command etc. to config.json."""
+    folder = Path(folder)
+    tmp = folder.with_name(folder.name + ".tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    save_file(model_state(module), str(tmp / WEIGHTS_FILE))
+    config = {"format": MODEL_FORMAT, "version": MODEL_VERSION,
+              "architecture": module.model.config.to_json(),
+              "num_objects": module.codes.num_objects, **info}
+    _write_json(tmp / CONFIG_FILE, config)
+    _replace_dir(tmp, folder)
+
+
+def read_model_config(folder: Path) -> dict:
+    """config.json of a model folder, checked for format and version."""
+    path = Path(folder) / CONFIG_FILE
+    if not path.is_file():
+        raise CheckpointError(f"{folder}: no {CONFIG_FILE}; not a model folder")
+    try:
+        config = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise CheckpointError(f"{path}: not valid JSON ({err})") from None
+    if config.get("format") != MODEL_FORMAT:
+        raise CheckpointError(f"{path}: format is {config.get('format')!r}, expected {MODEL_FORMAT!r}")
+    if config.get("version") != MODEL_VERSION:
+        raise CheckpointError(f"{path}: version {config.get('version')} is not supported "
+                              f"(this code reads version {MODEL_VERSION})")
+    return config
+
+
+def _read_tensors(path: Path) -> dict[str, torch.Tensor]:
+    if not path.is_file():
+        raise CheckpointError(f"{path}: missing")
+    try:
+        return load_file(str(path))
+    except (SafetensorError, OSError, ValueError) as err:
+        raise CheckpointError(f"{path}: not a readable safetensors file ({err})") from None
+
+
+def _load_strict(module: nn.Module, state: dict[str, torch.Tensor], where: Path) -> None:
+    expected = module.state_dict()
+    missing = sorted(set(expected) - set(state))
+    unexpected = sorted(set(state) - set(expected))
+    wrong = sorted(k for k in set(expected) & set(state) if expected[k].shape != state[k].shape)
+    if missing or unexpected or wrong:
+        parts = []
+        if missing:
+            parts.append(f"missing {missing[:4]}{'...' if len(missing) > 4 else ''}")
+        if unexpected:
+            parts.append(f"unexpected {unexpected[:4]}{'...' if len(unexpected) > 4 else ''}")
+        if wrong:
+            parts.append("shape mismatch " + ", ".join(
+                f"{k}: file {tuple(state[k].shape)} vs model {tuple(expected[k].shape)}"
+                for k in wrong[:3]))
+        raise CheckpointError(f"{where}: weights do not match the architecture in config.json "
+                              f"({'; '.join(parts)})")
+    module.load_state_dict(state, strict=True)
+
+
+def load_model(folder: Path, device: torch.device | str = "cpu"
+               ) -> tuple[NFRModel, torch.Tensor, dict]:
+    """Read a model folder: (networks in eval mode, training codes z_obj (N, k), config.json)."""
+    folder = Path(folder)
+    config = read_model_config(folder)
+    try:
+        arch = NFRModelConfig.from_json(config["architecture"])
+    except (KeyError, TypeError, ConfigError) as err:
+        raise CheckpointError(f"{folder / CONFIG_FILE}: bad architecture ({err})") from None
+    state = _read_tensors(folder / WEIGHTS_FILE)
+    codes = state.pop(CODES_KEY, None)
+    if codes is None:
+        raise CheckpointError(f"{folder / WEIGHTS_FILE}: no {CODES_KEY}")
+    model = NFRModel(arch)
+    _load_strict(model, state, folder / WEIGHTS_FILE)
+    return model.to(device).eval(), codes.to(device), config
+
+
+def load_auto_decoder(folder: Path, module: NFRAutoDecoder) -> dict:
+    """Load a model folder's weights and codes into an existing training module (strict)."""
+    config = read_model_config(folder)
+    state = _read_tensors(Path(folder) / WEIGHTS_FILE)
+    state = {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
+    _load_strict(module, state, Path(folder) / WEIGHTS_FILE)
+    return config
+
+
+def optimizer_tensors(optimizer: torch.optim.Optimizer) -> tuple[dict[str, torch.Tensor], dict]:
+    """Split an optimizer's state_dict into tensors (for safetensors) and JSON (groups, scalars)."""
+    sd = optimizer.state_dict()
+    tensors, scalars = {}, {}
+    for idx, st in sd["state"].items():
+        for key, value in st.items():
+            if torch.is_tensor(value):
+                tensors[f"state.{idx}.{key}"] = value.detach().cpu().contiguous()
+            else:
+                scalars[f"{idx}.{key}"] = value
+    return tensors, {"param_groups": sd["param_groups"], "scalars": scalars}
+
+
+def load_optimizer_tensors(optimizer: torch.optim.Optimizer, tensors: dict[str, torch.Tensor],
+                           meta: dict) -> None:
+    state: dict[int, dict] = {}
+    for name, value in tensors.items():
+        _, idx, key = name.split(".", 2)
+        state.setdefault(int(idx), {})[key] = value
+    for name, value in meta["scalars"].items():
+        idx, key = name.split(".", 1)
+        state.setdefault(int(idx), {})[key] = value
+    optimizer.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
+
+
+def write_checkpoint(folder: Path, module: NFRAutoDecoder, optimizer: torch.optim.Optimizer,
+                     info: dict, trainer: dict) -> None:
+    """A resumable checkpoint: model folder + optimizer moments + trainer state, atomically."""
+    folder = Path(folder)
+    tmp = folder.with_name(folder.name + ".tmp")
+    write_model_folder(tmp, module, info)
+    tensors, meta = optimizer_tensors(optimizer)
+    tensors["rng.torch"] = torch.get_rng_state()
+    save_file(tensors, str(tmp / OPTIMIZER_FILE))
+    _write_json(tmp / TRAINER_FILE, {**trainer, "optimizer": meta})
+    _replace_dir(tmp, folder)
+
+
+def read_checkpoint(folder: Path, module: NFRAutoDecoder,
+                    optimizer: torch.optim.Optimizer) -> dict:
+    """Restore module, optimizer and torch RNG from `write_checkpoint`; returns trainer.json."""
+    folder = Path(folder)
+    load_auto_decoder(folder, module)
+    tensors = _read_tensors(folder / OPTIMIZER_FILE)
+    torch.set_rng_state(tensors.pop("rng.torch"))
+    try:
+        trainer = json.loads((folder / TRAINER_FILE).read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"{folder / TRAINER_FILE}: unreadable ({err})") from None
+    try:
+        load_optimizer_tensors(optimizer, tensors, trainer["optimizer"])
+    except (KeyError, ValueError) as err:
+        raise CheckpointError(f"{folder}: optimizer state does not match ({err})") from None
+    return trainer

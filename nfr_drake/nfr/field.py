@@ -1,0 +1,55 @@
+"""The field Phi: x in frame O -> feature vector v, with weights generated per code by H(z)."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from nfr_drake.nfr.hyper import LayerWeights
+
+
+def positional_encoding(x: torch.Tensor, frequencies: int, base: float) -> torch.Tensor:
+    """x (..., 3) -> (..., 3 + 6 F): [x, sin(w_i x), cos(w_i x)] with w_i = base 2**i, i < F."""
+    if frequencies == 0:
+        return x
+    w = base * 2.0 ** torch.arange(frequencies, dtype=x.dtype, device=x.device)  # (F,)
+    angles = (x[..., None, :] * w[:, None]).flatten(-2)  # (..., F*3)
+    return torch.cat([x, torch.sin(angles), torch.cos(angles)], dim=-1)
+
+
+def encoding_dim(frequencies: int) -> int:
+    """Size of `positional_encoding`'s output for 3-D inputs."""
+    return 3 + 6 * frequencies
+
+
+def field_forward(h: torch.Tensor, weights: list[LayerWeights], layer_norm: bool) -> torch.Tensor:
+    """Apply the generated MLP per code: h (B, R, in) -> (B, R, out of the last layer).
+
+    Hidden layers: linear, optional layer norm (no affine), ReLU. The last layer is linear.
+    """
+    last = len(weights) - 1
+    for i, (w, b) in enumerate(weights):
+        h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2))
+        if i < last:
+            if layer_norm:
+                h = F.layer_norm(h, h.shape[-1:])
+            h = torch.relu(h)
+    return h
+
+
+class Field(nn.Module):
+    """Phi: points p_OX (B, R, 3) in frame O -> features (B, R, n), given the generated weights.
+
+    Stateless apart from the encoding settings; the weights come from `HyperNetwork(z)`.
+    """
+
+    def __init__(self, center: tuple[float, float, float], frequencies: int, base: float,
+                 layer_norm: bool):
+        super().__init__()
+        self.register_buffer("center", torch.tensor(center, dtype=torch.float32), persistent=False)
+        self.frequencies, self.base, self.layer_norm = frequencies, base, layer_norm
+
+    def forward(self, p_OX: torch.Tensor, weights: list[LayerWeights]) -> torch.Tensor:
+        h = positional_encoding(p_OX - self.center.to(p_OX.dtype), self.frequencies, self.base)
+        return field_forward(h, weights, self.layer_norm)
