@@ -1,9 +1,11 @@
 """Grasp-and-articulate motions from a keypoint trajectory: base placement, chained IK, trajectory optimisation.
 
-The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (`s_pregrasp`, the hand
-`pregrasp_distance` back along the approach), grasp (`s_grasp`, at rest, tool frame on the handle),
-then the handle keypoints from the current q to the target q at T = `num_waypoints` evenly spaced
-times in [s_grasp, 1] (the paper's T waypoints), ending at rest. Only the keypoint trajectory is
+The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (the tool frame
+`pregrasp_distance` back from the handle along its own z axis), grasp (at rest, tool frame on the
+handle), then the handle keypoints from the current q to the target q (the paper's T waypoints,
+evenly spaced in q and in s), ending at rest. The normalised times of these knots and the duration
+come from the chained IK: each segment gets the time its joints need at the velocity limits, the
+approach at least `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the keypoint trajectory is
 used; obstacles are the floor and the keypoint-derived carcass box.
 """
 
@@ -22,6 +24,7 @@ from pydrake.multibody.inverse_kinematics import (
 )
 from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
+from pydrake.math import BsplineBasis
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
@@ -31,10 +34,13 @@ from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
 
 # Franka datasheet (Panda) joint acceleration limits, rad/s^2.
+_SPEED_MARGIN = 1.5
+_IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on the rest
 _ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
 _Z = np.array([0.0, 0.0, 1.0])
 _SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
 _WRIST_REACH = 0.80  # farthest shoulder-to-wrist-centre distance used, m (elbow nearly straight)
+_PREFERRED_DISTANCE = 0.62  # base to handle-path centroid, m (most chained IKs succeed there)
 _BASE_CLEARANCE = 0.3  # base axis to the moving part's sweep, m
 
 
@@ -48,16 +54,19 @@ class PlannerConfig:
 
     num_waypoints: int = 10
     """T: handle waypoints from the current to the target articulation."""
-    s_pregrasp: float = 0.25
-    s_grasp: float = 0.4
+    approach_speed: float = 0.1
+    """Speed of the tool from pre-grasp to grasp, m/s."""
+    handle_speed: float = 0.12
+    """Largest mean speed of the handle while articulating, m/s."""
     pregrasp_distance: float = 0.10
     """How far back along the approach the pre-grasp holds the tool frame, m."""
     position_tolerance: float = 0.003
     """Half-width of the box the tool origin must lie in at each waypoint, m."""
     bar_tolerance_deg: float = 3.0
     """Allowed angle between the tool's x axis and the handle's bar axis."""
-    grasp_cone_deg: float = 5.0
-    """Allowed angle between the tool's z axis and the approach at pre-grasp and grasp."""
+    grasp_cone_deg: float = 30.0
+    """Allowed angle between the tool's z axis and the approach at pre-grasp and grasp: the hand may
+    come in obliquely about the bar (e.g. from above for a low drawer handle)."""
     follow_cone_deg: float = 35.0
     """Same while following the handle: the hand may turn about the bar (a cylindrical grasp); past
     about 35 degrees the Panda hand's 0.2 m wide palm would touch a door 3 cm behind the bar."""
@@ -73,8 +82,8 @@ class PlannerConfig:
     max_base_candidates: int = 12
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.s_pregrasp < self.s_grasp < 1.0:
-            raise NfrDrakeError("planner: need 0 < s_pregrasp < s_grasp < 1")
+        if min(self.approach_speed, self.handle_speed, self.velocity_scale) <= 0.0:
+            raise NfrDrakeError("planner: speeds and velocity_scale must be positive")
         if self.num_waypoints < 2:
             raise NfrDrakeError("planner: num_waypoints must be at least 2")
 
@@ -129,7 +138,8 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
 
     Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
     part's sweep by `_BASE_CLEARANCE` and the wrist centre of every waypoint (0.21 m back along the
-    approach) is within `_WRIST_REACH` of the shoulder; they are ranked by the farthest such reach.
+    approach) is within `_WRIST_REACH` of the shoulder. Ranked by closeness to `_PREFERRED_DISTANCE`
+    from the centroid (nearer bases cramp the arm), then by the farthest wrist reach.
     """
     p = np.array([w.p_WH for w in waypoints])
     wrists = p + np.array([-0.21 * w.approach_W for w in waypoints])
@@ -145,16 +155,19 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
             if reach.max() > _WRIST_REACH or np.linalg.norm((wrists - p_WB)[:, :2], axis=1).min() < 0.2:
                 continue
             yaw = np.arctan2(*(c - p_WB)[1::-1])
-            scored.append((reach.max(), RigidTransform(RollPitchYaw(0, 0, yaw), p_WB)))
+            score = abs(rho - _PREFERRED_DISTANCE) + 0.1 * reach.max()
+            scored.append((score, RigidTransform(RollPitchYaw(0, 0, yaw), p_WB)))
     scored.sort(key=lambda item: item[0])
     return [X for _, X in scored[:max_count]]
 
 
 class _Stage:
-    """One IK target: a tool position and its orientation constraints."""
+    """One IK target: the point `p_GQ` of the tool frame G at `p_WQ`, and the tool's orientation."""
 
-    def __init__(self, name: str, p_WT: np.ndarray, wp: HandleWaypoint, cone_deg: float, flip: bool):
-        self.name, self.p_WT, self.wp, self.cone, self.flip = name, p_WT, wp, np.radians(cone_deg), flip
+    def __init__(self, name: str, p_WQ: np.ndarray, p_GQ: np.ndarray, wp: HandleWaypoint, cone_deg: float,
+                 flip: bool):
+        self.name, self.p_WQ, self.p_GQ, self.wp = name, p_WQ, p_GQ, wp
+        self.cone, self.flip = np.radians(cone_deg), flip
 
     def bar_W(self) -> np.ndarray:
         return -self.wp.bar_W if self.flip else self.wp.bar_W
@@ -165,8 +178,8 @@ def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
     plant, ctx, W, G = scene.plant, scene.plant_context, scene.plant.world_frame(), scene.tool_frame
     tol = np.full(3, cfg.position_tolerance)
     return [
-        (f"{stage.name} position", PositionConstraint(plant, W, stage.p_WT - tol, stage.p_WT + tol,
-                                                      G, np.zeros(3), ctx)),
+        (f"{stage.name} position", PositionConstraint(plant, W, stage.p_WQ - tol, stage.p_WQ + tol,
+                                                      G, stage.p_GQ, ctx)),
         (f"{stage.name} bar alignment", AngleBetweenVectorsConstraint(
             plant, W, stage.bar_W(), G, np.array([1.0, 0, 0]), 0.0, np.radians(cfg.bar_tolerance_deg), ctx)),
         (f"{stage.name} approach cone", AngleBetweenVectorsConstraint(
@@ -175,11 +188,13 @@ def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
 
 
 def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
-    first = waypoints[0]
-    stages = [_Stage("pre-grasp", first.p_WH - cfg.pregrasp_distance * first.approach_W, first,
-                     cfg.grasp_cone_deg, flip),
-              _Stage("grasp", first.p_WH, first, cfg.grasp_cone_deg, flip)]
-    stages += [_Stage(f"handle waypoint {i} (q={w.q:.2f})", w.p_WH, w, cfg.follow_cone_deg, flip)
+    """Pre-grasp (the point `pregrasp_distance` ahead of the tool along its z on the handle), grasp,
+    then the handle waypoints."""
+    first, origin = waypoints[0], np.zeros(3)
+    ahead = np.array([0.0, 0.0, cfg.pregrasp_distance])
+    stages = [_Stage("pre-grasp", first.p_WH, ahead, first, cfg.grasp_cone_deg, flip),
+              _Stage("grasp", first.p_WH, origin, first, cfg.grasp_cone_deg, flip)]
+    stages += [_Stage(f"handle waypoint {i} (q={w.q:.2f})", w.p_WH, origin, w, cfg.follow_cone_deg, flip)
                for i, w in enumerate(waypoints[1:], start=1)]
     return stages
 
@@ -191,8 +206,10 @@ def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray,
     solver = SnoptSolver()
     q_prev = scene.full_q(q_start)
     # First seed: the home posture turned to face the handle.
-    p_BH = scene.X_WB.inverse() @ stages[1].p_WT
+    p_BH = scene.X_WB.inverse() @ stages[1].p_WQ
     q_seed = scene.full_q(np.r_[np.arctan2(p_BH[1], p_BH[0]), Q_HOME[1:]])
+    ik_options = SolverOptions()
+    ik_options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
     sols = []
     for stage in stages:
         ik = InverseKinematics(plant, scene.plant_context)
@@ -203,7 +220,7 @@ def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray,
         ik.prog().AddBoundingBoxConstraint(q_prev[NUM_ARM_JOINTS:], q_prev[NUM_ARM_JOINTS:],
                                            q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
-        result = solver.Solve(ik.prog(), q_seed)
+        result = solver.Solve(ik.prog(), q_seed, ik_options)
         if not result.is_success():
             return None, stage.name
         q_prev = q_seed = result.GetSolution(q)
@@ -211,24 +228,64 @@ def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray,
     return sols, ""
 
 
-def _initial_guess(trajopt: KinematicTrajectoryOptimization, s_knots: np.ndarray, q_knots: np.ndarray
-                   ) -> BsplineTrajectory:
-    """A B-spline whose control points follow the piecewise-linear path through (s_knots, q_knots)."""
+def _initial_guess(trajopt: KinematicTrajectoryOptimization, s_knots: np.ndarray, q_knots: np.ndarray,
+                   duration: float) -> BsplineTrajectory:
+    """A B-spline over [0, duration] whose control points follow the piecewise-linear path through
+    (s_knots, q_knots)."""
     n = trajopt.num_control_points()
     s_cp = np.linspace(0.0, 1.0, n)
     cps = np.stack([np.interp(s_cp, s_knots, q_knots[:, j]) for j in range(q_knots.shape[1])])
-    return BsplineTrajectory(trajopt.basis(), cps)
+    basis = trajopt.basis()
+    return BsplineTrajectory(BsplineBasis(basis.order(), np.asarray(basis.knots()) * duration), cps)
+
+
+def _knot_times(stages: list[_Stage], q_knots: np.ndarray, vmax: np.ndarray, cfg: PlannerConfig
+                ) -> tuple[np.ndarray, float]:
+    """Normalised times of the knots (start, then each stage), shape (len(stages) + 1,), and the duration.
+
+    Each segment takes the longest of: its joints' displacement at `vmax / _SPEED_MARGIN` (a cubic
+    B-spline's peak speed exceeds its mean), the approach at `approach_speed`, the handle's move at
+    `handle_speed`.
+    """
+    dq = np.abs(np.diff(q_knots, axis=0))[:, :NUM_ARM_JOINTS]
+    tau = np.max(dq / vmax[:NUM_ARM_JOINTS], axis=1) * _SPEED_MARGIN
+    tau[1] = max(tau[1], cfg.pregrasp_distance / cfg.approach_speed)
+    handle_steps = np.linalg.norm(np.diff([st.p_WQ for st in stages[1:]], axis=0), axis=1)
+    tau[2:] = np.maximum(tau[2:], handle_steps / cfg.handle_speed)
+    tau = np.maximum(tau, 0.05)
+    duration = float(np.clip(tau.sum(), cfg.min_duration, cfg.max_duration))
+    s_knots = np.r_[0.0, np.cumsum(tau)] / tau.sum()
+    s_knots[-1] = 1.0
+    return s_knots, duration
 
 
 def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarray], q_start: np.ndarray,
-              cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, list[str]]:
+              cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, float, list[str]]:
+    """KinematicTrajectoryOptimization at a fixed duration (velocity and acceleration bounds are then
+    linear), warm-started from the chained IK; retried once at 1.6 times the duration.
+
+    Returns the trajectory (None on failure), the grasp's normalised time, the failed constraints.
+    """
+    q0 = scene.full_q(q_start)
+    q_knots = np.stack([q0, *ik_sols])
+    vmax = cfg.velocity_scale * scene.plant.GetVelocityUpperLimits()
+    s_knots, duration = _knot_times(stages, q_knots, vmax, cfg)
+    failed = []
+    for scale in (1.0, 1.6):
+        traj, failed = _optimise_at(scene, stages, s_knots, q_knots, min(scale * duration, cfg.max_duration), cfg)
+        if traj is not None:
+            break
+    return traj, float(s_knots[2]), failed
+
+
+def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray, q_knots: np.ndarray,
+                 duration: float, cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, list[str]]:
     plant = scene.plant
     nq = plant.num_positions()
     trajopt = KinematicTrajectoryOptimization(nq, cfg.num_control_points, spline_order=4)
     prog = trajopt.get_mutable_prog()
-    trajopt.AddDurationCost(1.0)
-    trajopt.AddPathLengthCost(0.2)
-    q0 = scene.full_q(q_start)
+    trajopt.AddPathEnergyCost(1.0)
+    q0 = q_knots[0]
     lower, upper = plant.GetPositionLowerLimits().copy(), plant.GetPositionUpperLimits().copy()
     lower[NUM_ARM_JOINTS:] = upper[NUM_ARM_JOINTS:] = q0[NUM_ARM_JOINTS:]
     trajopt.AddPositionBounds(lower, upper)
@@ -236,17 +293,15 @@ def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarr
     trajopt.AddVelocityBounds(-vmax, vmax)
     amax = np.r_[cfg.acceleration_scale * _ACCEL_LIMITS, np.ones(nq - NUM_ARM_JOINTS)]
     trajopt.AddAccelerationBounds(-amax, amax)
-    trajopt.AddDurationConstraint(cfg.min_duration, cfg.max_duration)
+    trajopt.AddDurationConstraint(duration, duration)
 
     described = []
     b = trajopt.AddPathPositionConstraint(q0, q0, 0.0)
     described.append(("start configuration", b))
     zeros = np.zeros(nq)
-    for s, what in ((0.0, "start"), (cfg.s_grasp, "grasp"), (1.0, "end")):
+    for s, what in ((0.0, "start"), (s_knots[2], "grasp"), (1.0, "end")):
         described.append((f"at rest at {what}", trajopt.AddPathVelocityConstraint(zeros, zeros, s)))
-    s_follow = np.linspace(cfg.s_grasp, 1.0, len(stages) - 1)
-    s_stage = np.r_[cfg.s_pregrasp, s_follow]
-    for stage, s in zip(stages, s_stage, strict=True):
+    for stage, s in zip(stages, s_knots[1:], strict=True):
         for name, c in _constraints(scene, stage, cfg):
             described.append((name, trajopt.AddPathPositionConstraint(c, s)))
     collision = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, scene.plant_context,
@@ -256,9 +311,7 @@ def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarr
     for name, binding in described:
         binding.evaluator().set_description(name)
 
-    s_knots = np.r_[0.0, s_stage]
-    q_knots = np.stack([q0, *ik_sols])
-    trajopt.SetInitialGuess(_initial_guess(trajopt, s_knots, q_knots))
+    trajopt.SetInitialGuess(_initial_guess(trajopt, s_knots, q_knots, duration))
     options = SolverOptions()
     options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
     result = SnoptSolver().Solve(prog, None, options)
@@ -291,12 +344,12 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
                 failures.append(f"IK of {failed}")
                 continue
             t1 = time.perf_counter()
-            traj, failed_constraints = _optimise(scene, stages, sols, q_start, config)
+            traj, s_grasp, failed_constraints = _optimise(scene, stages, sols, q_start, config)
             t2 = time.perf_counter()
             if traj is None:
                 failures.append("trajectory optimisation: " + ", ".join(failed_constraints))
                 continue
-            return PlanResult(traj, X_WB, config.s_grasp, waypoints, flip,
+            return PlanResult(traj, X_WB, s_grasp, waypoints, flip,
                               {"placement": t1 - t0, "trajopt": t2 - t1, "total": t2 - t0})
     summary = "; ".join(dict.fromkeys(failures)) or "no robot base position clears the handle path"
     raise PlanningError(f"no feasible motion from q={kt.q_current:.2f} to q={q_target:.2f}: {summary}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
@@ -14,7 +15,7 @@ from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, PlanResult, plan_articulation
 from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
-from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, write_replay
+from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 
 
@@ -77,6 +78,15 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
                                      (reference.q_current, q_target), line_width=2.0)
         draw_obstacle(meshcat, carcass_box(kt))
+        # Look at the handle path and the robot from the robot's side, 45 degrees off its axis.
+        p_handle = kt.point("handle", (kt.q_current + q_target) / 2)
+        p_base = plan.X_WB.translation()
+        centre = (p_handle + p_base) / 2 + [0.0, 0.0, 0.2]
+        away = p_base - p_handle
+        away[2] = 0.0
+        away = away / np.linalg.norm(away)
+        side = np.cross([0.0, 0.0, 1.0], away)
+        frame_camera(meshcat, centre, centre + 1.3 * away + 1.3 * side + [0.0, 0.0, 0.9])
     simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config)
     path = write_replay(meshcat, replay) if replay is not None else None
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)

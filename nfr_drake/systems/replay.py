@@ -33,6 +33,12 @@ def draw_obstacle(meshcat: Meshcat, box: ObstacleBox, path: str = "planner") -> 
     meshcat.SetTransform(f"{path}/{box.name}", box.X_WB)
 
 
+def frame_camera(meshcat: Meshcat, p_W_target: np.ndarray, p_W_camera: np.ndarray) -> None:
+    """Point the default camera from `p_W_camera` at `p_W_target` (m, (3,)) and hide the grid."""
+    meshcat.SetCameraPose(np.asarray(p_W_camera, dtype=float), np.asarray(p_W_target, dtype=float))
+    meshcat.SetProperty("/Grid", "visible", False)
+
+
 def write_replay(meshcat: Meshcat, path: Path) -> Path:
     """Write the meshcat scene with its published recording as one offline HTML file."""
     path = Path(path)
