@@ -26,7 +26,7 @@ from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
-from nfr_drake.nfr.rays import Rays, pixel_centers
+from nfr_drake.nfr.rays import Rays, pixel_centers, pixel_rays
 
 
 @dataclass(frozen=True)
@@ -85,22 +85,22 @@ class ObservedRays:
 
 
 def frame_ray_directions(frame: CaptureFrame) -> np.ndarray:
-    """Unit directions in O of every pixel centre of a frame, row-major, (H W, 3).
+    """Unit directions in O of every pixel centre of a frame, row-major, (H W, 3), float64.
 
-    Distortion (OpenCV k1 k2 p1 p2) is undone before the pinhole back-projection.
+    Pinhole frames use the training ray generator (`pixel_rays`); with OpenCV distortion
+    (k1 k2 p1 p2) the pixel centres are undistorted first.
     """
     cam = frame.camera
-    uv = pixel_centers(cam.height, cam.width, dtype=torch.float64).numpy()
+    uv = pixel_centers(cam.height, cam.width, dtype=torch.float64)
+    K = torch.from_numpy(cam.K)
     if cam.distortion is not None:
         K_cv = cam.K.copy()
         K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
-        xy = cv2.undistortPoints((uv - 0.5).reshape(-1, 1, 2), K_cv, np.array(cam.distortion))
-        xy = xy.reshape(-1, 2)
-    else:
-        xy = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]
-    d_C = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
-    d_O = d_C @ frame.X_OC[:3, :3].T
-    return d_O / np.linalg.norm(d_O, axis=1, keepdims=True)
+        xy = cv2.undistortPoints((uv.numpy() - 0.5).reshape(-1, 1, 2), K_cv,
+                                 np.array(cam.distortion)).reshape(-1, 2)
+        uv, K = torch.from_numpy(xy), torch.eye(3, dtype=torch.float64)  # normalised coordinates
+    rays = pixel_rays(uv[None], K[None], torch.from_numpy(frame.X_OC)[None])
+    return rays.directions[0].numpy()
 
 
 def observed_rays(capture: CaptureSet, images: list[np.ndarray] | None = None,

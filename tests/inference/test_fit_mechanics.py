@@ -18,7 +18,7 @@ from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import write_model_folder
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRAutoDecoder
-from nfr_drake.nfr.rays import pixel_centers, pixel_rays
+from nfr_drake.nfr.rays import pixel_centers
 
 SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
                        pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
@@ -42,13 +42,15 @@ def capture(tmp_path_factory):
     return read_capture_set(root / "closet_000")
 
 
-def test_ray_directions_agree_with_the_training_rays():
+def test_pinhole_rays_project_back_onto_their_pixel_centres():
     camera = PinholeCamera(30.0, 32.0, 11.0, 13.0, 20, 24)
     X_OC = look_at(np.array([1.5, 0.3, 0.8]), np.zeros(3))
-    ours = frame_ray_directions(CaptureFrame(None, X_OC, camera))
-    uv = pixel_centers(24, 20, dtype=torch.float64)[None]
-    theirs = pixel_rays(uv, torch.from_numpy(camera.K)[None], torch.from_numpy(X_OC)[None])
-    np.testing.assert_allclose(ours, theirs.directions[0].numpy(), atol=1e-12)
+    d_O = frame_ray_directions(CaptureFrame(None, X_OC, camera))
+    d_C = d_O @ X_OC[:3, :3]  # R_CO d_O, row-wise
+    uv = d_C[:, :2] / d_C[:, 2:] * [camera.fx, camera.fy] + [camera.cx, camera.cy]
+    rows, cols = np.divmod(np.arange(24 * 20), 20)
+    np.testing.assert_allclose(uv, np.stack([cols + 0.5, rows + 0.5], 1), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(d_O, axis=1), 1.0)
 
 
 def test_distorted_rays_pass_through_the_distorted_projection():
