@@ -77,8 +77,8 @@ class NFRModelConfig:
 
     def __post_init__(self):
         _positive(self, "latent_obj_dim", "hyper_hidden", "field_width", "field_layers",
-                  "feature_dim", "march_steps", "march_max_step", "lstm_hidden", "pixel_hidden", "num_classes",
-                  "num_keypoints", "keypoint_hidden", "bound_radius", "min_depth",
+                  "feature_dim", "march_steps", "march_max_step", "lstm_hidden", "pixel_hidden",
+                  "num_classes", "num_keypoints", "keypoint_hidden", "bound_radius", "min_depth",
                   "pe_base_frequency")
         if self.field_layers < 2:
             raise ConfigError("NFRModelConfig.field_layers must be at least 2 (hidden + output)")

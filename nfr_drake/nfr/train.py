@@ -348,8 +348,11 @@ def _write_json_atomic(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
+_DEFAULT_CONFIG = TrainConfig()
+
+
 def train_command(data: Path, out: Path,
-                  config: Annotated[TrainConfig, tyro.conf.arg(name="")] = TrainConfig(),
+                  config: Annotated[TrainConfig, tyro.conf.arg(name="")] = _DEFAULT_CONFIG,
                   resume: bool = False) -> int:
     """Train the neural field (auto-decoder) on a dataset written by `nfr-drake generate`.
 
