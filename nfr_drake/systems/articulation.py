@@ -79,8 +79,8 @@ class SimulationResult:
         q_target, q_final: articulations in [0, 1].
         joint_error: |final - target| joint value, rad or m.
         max_drift: largest distance between the tool origin and the true handle while grasped, m.
-        max_constraint_force: largest force the hand (and any contact) exerts on the handle's body
-            while grasped, from the body's Newton-Euler balance, N.
+        max_constraint_force: largest force the hand (and any contact) exerts on the moving part
+            while grasped, from its bodies' momentum balance, N.
         times: sample times, s, shape (M,); q_object: articulation, (M,); p_W_tool, p_W_handle: (M, 3).
     """
 
@@ -193,8 +193,6 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     simulator.Initialize()
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
-    mass = handle_body.default_mass()
-    joint_index = joint.index()
     t_activate = plan.t_grasp + 0.5 * config.dwell
     end = plan.duration + config.dwell + config.settle
     grasped = False
@@ -214,7 +212,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         p_tool.append(X_WT.translation())
         p_handle.append(p_WH)
         if grasped:
-            forces.append(_force_on_body(plant, plant_context, handle_body, joint_index, mass))
+            forces.append(_force_on_moving_part(plant, plant_context, moving_bodies, joint))
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
@@ -232,19 +230,17 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
 
 
-def _force_on_body(plant: MultibodyPlant, plant_context, body, joint_index, mass: float) -> float:
-    """|m a_cm - m g - F_joint| of `body`: the force from everything but gravity and its joint, N.
-
-    Assumes the body is the child of the joint at `joint_index` (a handle welded to the moving link
-    is not supported by this estimate: it then also counts the weld's force).
-    """
-    A_WB = plant.get_body_spatial_accelerations_output_port().Eval(plant_context)[body.index()]
-    V_WB = plant.EvalBodySpatialVelocityInWorld(plant_context, body)
-    X_WB = plant.EvalBodyPoseInWorld(plant_context, body)
-    p_BoBcm_W = X_WB.rotation() @ body.CalcCenterOfMassInBodyFrame(plant_context)
-    a_cm = A_WB.Shift(p_BoBcm_W, V_WB.rotational()).translational()
-    joint = plant.get_joint(joint_index)
-    F_reaction = plant.get_reaction_forces_output_port().Eval(plant_context)[joint_index]
+def _force_on_moving_part(plant: MultibodyPlant, plant_context, bodies, joint) -> float:
+    """|sum_i m_i (a_i - g) - F_joint| over the moving bodies: the force on the moving part from
+    everything but gravity and its joint (the hand, and any contact), N."""
+    A = plant.get_body_spatial_accelerations_output_port().Eval(plant_context)
+    total = np.zeros(3)
+    for body in bodies:
+        V_WB = plant.EvalBodySpatialVelocityInWorld(plant_context, body)
+        X_WB = plant.EvalBodyPoseInWorld(plant_context, body)
+        p_BoBcm_W = X_WB.rotation() @ body.CalcCenterOfMassInBodyFrame(plant_context)
+        a_cm = A[body.index()].Shift(p_BoBcm_W, V_WB.rotational()).translational()
+        total += body.get_mass(plant_context) * (a_cm - _G)
+    F_reaction = plant.get_reaction_forces_output_port().Eval(plant_context)[int(joint.index())]
     R_WJc = joint.frame_on_child().CalcPoseInWorld(plant_context).rotation()
-    f_joint_W = R_WJc @ F_reaction.translational()
-    return float(np.linalg.norm(mass * (a_cm - _G) - f_joint_W))
+    return float(np.linalg.norm(total - R_WJc @ F_reaction.translational()))

@@ -1,0 +1,66 @@
+"""`nfr-drake plan` on a user's URDF model, and its error messages."""
+
+import pytest
+
+from nfr_drake.cli import main
+
+CABINET_URDF = """<?xml version="1.0"?>
+<robot name="cabinet">
+  <link name="frame">
+    <inertial><mass value="10"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="-0.2 0 0.3"/><geometry><box size="0.4 0.5 0.6"/></geometry></collision>
+    <visual><origin xyz="-0.2 0 0.3"/><geometry><box size="0.4 0.5 0.6"/></geometry></visual>
+  </link>
+  <link name="door">
+    <inertial><origin xyz="0.01 0.25 0.3"/><mass value="2"/>
+      <inertia ixx="0.05" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.01 0.25 0.3"/><geometry><box size="0.02 0.48 0.58"/></geometry></collision>
+    <visual><origin xyz="0.01 0.25 0.3"/><geometry><box size="0.02 0.48 0.58"/></geometry></visual>
+  </link>
+  <link name="handle">
+    <inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <visual><geometry>HANDLE_GEOMETRY</geometry></visual>
+    <collision><geometry><cylinder radius="0.01" length="0.12"/></geometry></collision>
+  </link>
+  <joint name="hinge" type="revolute">
+    <parent link="frame"/><child link="door"/><origin xyz="0 -0.25 0"/><axis xyz="0 0 -1"/>
+    <limit lower="0" upper="1.5708" effort="50" velocity="5"/><dynamics damping="1"/>
+  </joint>
+  <joint name="handle_fix" type="fixed">
+    <parent link="door"/><child link="handle"/><origin xyz="0.06 0.43 0.32"/>
+  </joint>
+</robot>
+"""
+
+
+def _write(tmp_path, geometry='<cylinder radius="0.01" length="0.12"/>'):
+    path = tmp_path / "cabinet.urdf"
+    path.write_text(CABINET_URDF.replace("HANDLE_GEOMETRY", geometry))
+    return path
+
+
+def test_plans_user_model(tmp_path, capsys):
+    replay = tmp_path / "replay.html"
+    status = main(["plan", "--object", str(_write(tmp_path)), "--joint", "hinge", "--handle-body", "handle",
+                   "--object-xyz", "0.1", "0.0", "0.0", "--replay", str(replay)])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "SUCCESS: articulation 0.5" in out and "planning" in out and str(replay) in out
+    assert replay.stat().st_size > 100_000
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--joint", "lid", "--handle-body", "handle"], "has no joint 'lid'; its joints"),
+    (["--joint", "handle_fix", "--handle-body", "handle"], "need revolute or prismatic"),
+    (["--joint", "hinge"], "--object needs --joint and --handle-body"),
+])
+def test_user_errors_exit_2(tmp_path, capsys, args, message):
+    assert main(["plan", "--object", str(_write(tmp_path)), *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_unloadable_model_says_what_to_do(tmp_path, capsys):
+    path = _write(tmp_path, '<mesh filename="handle.3ds"/>')
+    assert main(["plan", "--object", str(path), "--joint", "hinge", "--handle-body", "handle"]) == 2
+    err = capsys.readouterr().err
+    assert "Drake could not load" in err and "convert" in err

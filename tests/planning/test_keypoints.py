@@ -1,0 +1,74 @@
+"""Keypoint trajectories and the grasp geometry derived from them."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.grasp import carcass_box, handle_waypoints
+from nfr_drake.planning.keypoints import KeypointTrajectory
+
+X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, 0.4), [0.3, -0.2, 0.0])
+
+
+def _object(category, seed=0):
+    return sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, 0))
+
+
+@pytest.mark.parametrize("category", ["closet", "drawer"])
+def test_ground_truth_in_world(category):
+    obj = _object(category)
+    kt = KeypointTrajectory.from_articulated_object(obj, X_WO, 0.3, grid_size=21)
+    assert kt.p_WK.shape == (21, len(obj.keypoint_names), 3)
+    for q in (0.0, 0.35, 1.0):  # the door's arc is interpolated by chords: < 2 mm off at 21 points
+        p_OK = obj.keypoint_array(q)
+        expected = (X_WO.rotation().matrix() @ p_OK.T).T + X_WO.translation()
+        np.testing.assert_allclose(kt.at(q), expected, atol=2e-3)
+    assert kt.at(np.array([0.1, 0.2])).shape == (2, len(obj.keypoint_names), 3)
+    assert kt.q_current == pytest.approx(0.3)
+
+
+def test_fit_result_round_trip():
+    obj = _object("closet")
+    q = np.linspace(0, 1, 5)
+    result = {"category": "closet", "q": 0.25, "trajectory": {
+        "q": q.tolist(), "keypoints": {n: obj.keypoint_array(q)[:, i].tolist()
+                                       for i, n in enumerate(obj.keypoint_names)}}}
+    kt = KeypointTrajectory.from_fit_result(result, RigidTransform())
+    np.testing.assert_allclose(kt.point("handle", 0.5), obj.keypoints(0.5)["handle"], atol=1e-9)
+    with pytest.raises(NfrDrakeError, match="no usable keypoint trajectory"):
+        KeypointTrajectory.from_fit_result({"category": "closet"}, RigidTransform())
+
+
+def test_rejects_bad_input():
+    with pytest.raises(NfrDrakeError, match="shape"):
+        KeypointTrajectory("drawer", np.linspace(0, 1, 3), ("handle",), np.zeros((4, 1, 3)), 0.0)
+    with pytest.raises(NfrDrakeError, match="lacks keypoints"):
+        KeypointTrajectory("closet", np.linspace(0, 1, 3), ("handle",), np.zeros((3, 1, 3)), 0.0)
+
+
+def test_drawer_grasp_frame():
+    kt = KeypointTrajectory.from_articulated_object(_object("drawer"), RigidTransform(), 0.0)
+    (wp,) = handle_waypoints(kt, np.array([0.5]))
+    np.testing.assert_allclose(wp.approach_W, [-1, 0, 0], atol=1e-9)  # minus the pull direction
+    np.testing.assert_allclose(np.abs(wp.bar_W), [0, 1, 0], atol=1e-9)  # horizontal bar
+    R = wp.X_WG().rotation().matrix()
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_closet_grasp_frame_and_box():
+    obj = _object("closet")
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    wps = handle_waypoints(kt, np.linspace(0, 1, 5))
+    for w in wps:
+        np.testing.assert_allclose(w.bar_W, [0, 0, 1], atol=1e-9)  # the hinge axis
+        # The approach points into the door: against the door's outward normal.
+        n_O = obj.X_OM(w.q)[:3, :3] @ np.array([1.0, 0, 0])
+        assert w.approach_W @ n_O < -np.cos(np.radians(20))
+    box = carcass_box(kt)
+    p_BH = box.X_WB.inverse() @ obj.keypoints(0.0)["handle"]
+    assert np.any(np.abs(p_BH) > box.size / 2 + 0.04)  # the handle is well outside the box
+    p_BG = box.X_WB.inverse() @ obj.keypoints(0.0)["goal"]
+    assert np.all(np.abs(p_BG) <= box.size / 2 + 1e-9)  # the carcass centre is inside

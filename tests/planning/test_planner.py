@@ -1,0 +1,37 @@
+"""The planner, from ground-truth keypoint trajectories only."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.planning.planner import PlanningError, plan_articulation
+from nfr_drake.planning.scene import build_planning_scene
+
+
+@pytest.mark.parametrize("category,seed,q_target", [("closet", 0, 0.6), ("drawer", 3, 1.0)])
+def test_plan_follows_handle(category, seed, q_target):
+    obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    plan = plan_articulation(kt, q_target)
+    scene = build_planning_scene(plan.X_WB, [])
+    plant, ctx = scene.plant, scene.plant_context
+
+    def tool_at(t):
+        plant.SetPositions(ctx, plan.trajectory.value(t).ravel())
+        return scene.tool_frame.CalcPoseInWorld(ctx).translation()
+
+    np.testing.assert_allclose(tool_at(plan.t_grasp), obj.keypoints(0.0)["handle"], atol=4e-3)
+    np.testing.assert_allclose(tool_at(plan.duration), obj.keypoints(q_target)["handle"], atol=4e-3)
+    q = np.array([plan.trajectory.value(t).ravel() for t in np.linspace(0, plan.duration, 50)])
+    assert np.all(q >= plant.GetPositionLowerLimits() - 1e-6)
+    assert np.all(q <= plant.GetPositionUpperLimits() + 1e-6)
+    assert plan.seconds["total"] > 0.0
+
+
+def test_unreachable_handle_reports():
+    obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform([0.0, 0.0, 2.0]), 0.0)
+    with pytest.raises(PlanningError, match="no feasible motion from q=0.00 to q=1.00"):
+        plan_articulation(kt, 1.0)

@@ -1,0 +1,39 @@
+"""Planned motions executed on the true object in the SAP simulation, and the success check."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.task import read_keypoints, run_task
+from nfr_drake.systems.scene_objects import SceneObject
+
+
+def test_drawer_opens(drawer_outcome):
+    sim = drawer_outcome.simulation
+    assert drawer_outcome.success, sim.summary()
+    assert sim.grasped and sim.joint_type == "prismatic"
+    assert sim.joint_error <= 0.02 and sim.max_drift <= 0.02
+    assert 0.0 < sim.max_constraint_force < 500.0
+    # The drawer moved because the hand pulled it: it was closed until the grasp.
+    assert sim.q_object[0] == pytest.approx(0.0, abs=1e-3)
+    assert np.all(sim.q_object[sim.times < drawer_outcome.plan.t_grasp] < 0.01)
+
+
+def test_shifted_keypoints_fail(drawer_object):
+    """A plan made from keypoints 5 cm off misses the true handle and the check says so."""
+    wrong = read_keypoints(drawer_object).shifted([0.0, 0.0, 0.05])
+    outcome = run_task(drawer_object, 1.0, keypoints=wrong)
+    assert outcome.plan is not None
+    assert not outcome.success
+    assert outcome.simulation.max_drift > 0.02
+
+
+def test_closet_opens_and_closes():
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    opened = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.0), 0.6)
+    assert opened.success, opened.simulation.summary() if opened.simulation else opened.planning_error
+    assert opened.simulation.joint_error <= np.radians(5.0)
+    closed = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.6), 0.0)
+    assert closed.success, closed.simulation.summary() if closed.simulation else closed.planning_error
+    assert closed.simulation.q_final < 0.06
