@@ -34,9 +34,11 @@ def evaluate_one(category: str, seed: int, index: int) -> dict:
     outcome = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.0), q_target)
     sim = outcome.simulation
     return dict(category=category, seed=seed, index=index, width=round(obj.params["width"], 4),
-                height=round(obj.params["height"], 4), q_target=q_target, planned=outcome.plan is not None,
+                height=round(obj.params["height"], 4), q_target=q_target,
+                planned=outcome.plan is not None,
                 success=outcome.success, planning_seconds=round(outcome.planning_seconds, 3),
-                q_final=round(sim.q_final, 4) if sim else "", joint_error=round(sim.joint_error, 4) if sim else "",
+                q_final=round(sim.q_final, 4) if sim else "",
+                joint_error=round(sim.joint_error, 4) if sim else "",
                 max_drift=round(sim.max_drift, 4) if sim else "",
                 max_constraint_force=round(sim.max_constraint_force, 1) if sim else "",
                 error=outcome.planning_error[:300])

@@ -97,9 +97,9 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
 
     Its front face is `CARCASS_SETBACK` behind the closed handle, across the front normal (the handle
     tangent at q = 0). Closet: it spans the hinge line to its mirror image about the `goal` keypoint
-    (the carcass centre) and the floor to `hinge_top`. Drawer: centred on the handle, `2 * _DRAWER_HALF_WIDTH` wide, `_DRAWER_DEPTH` deep, from the floor
-    to `_DRAWER_HEIGHT` (the keypoints say nothing of the drawer carcass's size: the box covers the
-    largest one of the category).
+    (the carcass centre) and the floor to `hinge_top`. Drawer: centred on the handle,
+    `2 * _DRAWER_HALF_WIDTH` wide, `_DRAWER_DEPTH` deep, from the floor to `_DRAWER_HEIGHT` (the
+    keypoints say nothing of the drawer carcass's size: the box covers the category's largest).
     """
     n = handle_tangent(kt, 0.0)
     n = _unit(n - (n @ _Z) * _Z, "the horizontal front normal")

@@ -1,12 +1,13 @@
-"""Grasp-and-articulate motions from a keypoint trajectory: base placement, chained IK, trajectory optimisation.
+"""Grasp-and-articulate motions from a keypoint trajectory: base placement, chained IK, trajectory
+optimisation.
 
 The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (the tool frame
 `pregrasp_distance` back from the handle along its own z axis), grasp (at rest, tool frame on the
 handle), then the handle keypoints from the current q to the target q (the paper's T waypoints,
-evenly spaced in q and in s), ending at rest. The normalised times of these knots and the duration
+evenly spaced in q), ending at rest. The normalised times of these knots and the duration
 come from the chained IK: each segment gets the time its joints need at the velocity limits, the
-approach at least `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the keypoint trajectory is
-used; obstacles are the floor and the keypoint-derived carcass box.
+approach at least `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the
+keypoint trajectory is used; obstacles are the floor and the keypoint-derived carcass box.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import BsplineBasis, RigidTransform, RollPitchYaw
 from pydrake.multibody.inverse_kinematics import (
     AngleBetweenVectorsConstraint,
     InverseKinematics,
@@ -24,7 +25,6 @@ from pydrake.multibody.inverse_kinematics import (
 )
 from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
-from pydrake.math import BsplineBasis
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
@@ -272,7 +272,8 @@ def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarr
     s_knots, duration = _knot_times(stages, q_knots, vmax, cfg)
     failed = []
     for scale in (1.0, 1.6):
-        traj, failed = _optimise_at(scene, stages, s_knots, q_knots, min(scale * duration, cfg.max_duration), cfg)
+        T = min(scale * duration, cfg.max_duration)
+        traj, failed = _optimise_at(scene, stages, s_knots, q_knots, T, cfg)
         if traj is not None:
             break
     return traj, float(s_knots[2]), failed
@@ -307,7 +308,8 @@ def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray
     collision = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, scene.plant_context,
                                                     None, 0.05)
     for s in np.linspace(0.0, 1.0, cfg.collision_samples + 1)[1:]:
-        described.append((f"collision clearance at s={s:.2f}", trajopt.AddPathPositionConstraint(collision, s)))
+        binding = trajopt.AddPathPositionConstraint(collision, s)
+        described.append((f"collision clearance at s={s:.2f}", binding))
     for name, binding in described:
         binding.evaluator().set_description(name)
 

@@ -54,8 +54,8 @@ def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
 
 def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | None = None,
              meshcat: Meshcat | None = None, replay: Path | None = None,
-             planner_config: PlannerConfig = PlannerConfig(),
-             simulation_config: SimulationConfig = SimulationConfig(),
+             planner_config: PlannerConfig | None = None,
+             simulation_config: SimulationConfig | None = None,
              reference: KeypointTrajectory | None = None) -> TaskOutcome:
     """Plan with `keypoints` (default: read from the object) and simulate on the true object.
 
@@ -65,7 +65,7 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
     """
     kt = keypoints if keypoints is not None else read_keypoints(obj)
     try:
-        plan = plan_articulation(kt, q_target, config=planner_config)
+        plan = plan_articulation(kt, q_target, config=planner_config or PlannerConfig())
     except PlanningError as err:
         return TaskOutcome(q_target, kt, None, str(err), float("nan"), None, None)
     if replay is not None and meshcat is None:
@@ -87,6 +87,6 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         away = away / np.linalg.norm(away)
         side = np.cross([0.0, 0.0, 1.0], away)
         frame_camera(meshcat, centre, centre + 1.3 * away + 1.3 * side + [0.0, 0.0, 0.9])
-    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config)
+    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig())
     path = write_replay(meshcat, replay) if replay is not None else None
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
-from pydrake.math import RigidTransform
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
     MultibodyPlant,
@@ -156,12 +155,14 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     plant.Finalize()
 
     # The grasp is the constraints: the gripper does not touch the object's moving bodies.
-    hand_geometries = GeometrySet([g for name in HAND_BODIES
-                                   for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName(name, robot))])
+    hand_bodies = [plant.GetBodyByName(name, robot) for name in HAND_BODIES]
+    hand_geometries = GeometrySet([g for body in hand_bodies
+                                   for g in plant.GetCollisionGeometriesForBody(body)])
     joint = plant.GetJointByName(obj.joint_name, model)
     moving_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)
                      if b != joint.parent_body().index()]
-    moving_geometries = GeometrySet([g for body in moving_bodies for g in plant.GetCollisionGeometriesForBody(body)])
+    moving_geometries = GeometrySet([g for body in moving_bodies
+                                     for g in plant.GetCollisionGeometriesForBody(body)])
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
 

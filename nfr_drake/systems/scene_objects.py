@@ -113,7 +113,8 @@ class SceneObject:
                                 "need revolute or prismatic")
         lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
         if not (np.isfinite(lower) and np.isfinite(upper) and upper > lower):
-            raise NfrDrakeError(f"joint {joint_name!r} needs finite limits (lower < upper) to map q in [0, 1]")
+            raise NfrDrakeError(f"joint {joint_name!r} needs finite limits (lower < upper) to map q "
+                                "onto [0, 1]")
         body = plant.GetBodyByName(handle_body_name, model)
         inspector = scene_graph.model_inspector()
         frame_id = plant.GetBodyFrameIdOrThrow(body.index())

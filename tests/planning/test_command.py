@@ -18,7 +18,8 @@ CABINET_URDF = """<?xml version="1.0"?>
     <visual><origin xyz="0.01 0.25 0.3"/><geometry><box size="0.02 0.48 0.58"/></geometry></visual>
   </link>
   <link name="handle">
-    <inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <inertial><mass value="0.1"/>
+      <inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
     <visual><geometry>HANDLE_GEOMETRY</geometry></visual>
     <collision><geometry><cylinder radius="0.01" length="0.12"/></geometry></collision>
   </link>
