@@ -2,11 +2,15 @@
 board at known poses (through a distorting lens); `estimate_poses` must find those poses in O."""
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from nfr_drake.data.capture import PinholeCamera, read_capture_set
+from nfr_drake.cli import main
+from nfr_drake.data.capture import PinholeCamera, read_capture_set, write_capture_set
+from nfr_drake.data.render import ObjectRenderer
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.perception.alignment import rotation_angle
 from nfr_drake.perception.charuco import CharucoBoardSpec
@@ -86,3 +90,38 @@ def test_self_calibration(photos, tmp_path):
     for name, (error_m, error_deg) in _pose_errors(capture, report, photos[1]).items():
         assert error_m < 0.020, f"{name}: centre off by {1000 * error_m:.1f} mm"
         assert error_deg < 0.5, f"{name}: rotation off by {error_deg:.2f} deg"
+
+
+@pytest.fixture(scope="module")
+def closet_model():
+    """The trained closet model: $NFR_DRAKE_CLOSET_MODEL or models/closet in the repository."""
+    folder = Path(os.environ.get("NFR_DRAKE_CLOSET_MODEL",
+                                 Path(__file__).parents[2] / "models" / "closet"))
+    if not (folder / "model.safetensors").is_file():
+        pytest.skip(f"no trained closet model at {folder} (set NFR_DRAKE_CLOSET_MODEL)")
+    return folder
+
+
+@pytest.mark.slow
+def test_infer_on_estimated_poses_matches_true_poses(closet_model, known, scene, photos, tmp_path):
+    """`nfr-drake infer` with the estimated poses finds nearly the q and keypoints it finds with
+    the true ones. Both capture sets hold the same object-only renders (the model was trained
+    without a room around the object), so only the poses differ."""
+    capture, report = known
+    truth = photos[1]
+    camera = scene.camera.scaled(256, 192)
+    renderer = ObjectRenderer(scene.obj, camera)
+    names = [report.frames[f"images/{f.image_path.name}"] for f in capture.frames]
+    X_true = [np.array(truth["X_OC"][n]) for n in names]
+    images = [renderer.render_rgb(scene.q, X) for X in X_true]
+    results = {}
+    for label, poses in (("true", X_true), ("estimated", [f.X_OC for f in capture.frames])):
+        write_capture_set(tmp_path / label, images, poses, camera)
+        out = tmp_path / f"{label}.json"
+        assert main(["infer", str(tmp_path / label), "--model", str(closet_model), "--out", str(out),
+                     "--category", "closet"]) == 0
+        results[label] = json.loads(out.read_text())
+    assert abs(results["true"]["q"] - results["estimated"]["q"]) < 0.05
+    for name, p_true in results["true"]["keypoints"].items():
+        distance = np.linalg.norm(np.subtract(results["estimated"]["keypoints"][name], p_true))
+        assert distance < 0.02, f"{name}: {1000 * distance:.0f} mm apart"
