@@ -8,6 +8,7 @@ Resumable (rows already in the CSV are kept). Prints a markdown table for docs/E
 from __future__ import annotations
 
 import datetime
+import os
 import platform
 import sys
 from pathlib import Path
@@ -17,16 +18,31 @@ import tyro
 from nfr_drake.eval.planning import PlanningEvalConfig, evaluate_planning, summarise
 
 
-def main(count: int = 50, seed: int = 7, csv: Path = Path("out/planning_eval.csv")) -> None:
-    rows = evaluate_planning(PlanningEvalConfig(count=count, seed=seed), csv)
-    print(f"command: python benchmarks/planning_eval.py --count {count} --seed {seed} --csv {csv}")
-    print(f"date: {datetime.date.today()}, machine: {platform.node()} {platform.machine()} "
-          f"{platform.processor() or ''}, python {sys.version.split()[0]}")
-    print("| category | objects | planned | success | median planning s | p90 planning s |")
-    print("|---|---|---|---|---|---|")
+def _cpu() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines() if Path("/proc/cpuinfo").is_file() else []:
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine()
+
+
+def main(count: int = 50, seed: int = 7, csv: Path = Path("out/planning_eval.csv"),
+         categories: tuple[str, ...] = ("closet", "drawer"), closet_target: float = 0.6,
+         drawer_target: float = 1.0) -> None:
+    """Evaluate (resuming from `csv`) and print the command, date, machine and a markdown table."""
+    config = PlanningEvalConfig(count=count, seed=seed, categories=categories,
+                                closet_target=closet_target, drawer_target=drawer_target)
+    rows = evaluate_planning(config, csv)
+    print(f"command: python benchmarks/planning_eval.py --count {count} --seed {seed} --csv {csv} "
+          f"--categories {' '.join(categories)} --closet-target {closet_target} "
+          f"--drawer-target {drawer_target}")
+    print(f"date: {datetime.date.today()}, machine: {_cpu()}, {os.cpu_count()} cores, "
+          f"python {sys.version.split()[0]}")
+    print("| category | objects | target q | planned | success | median planning s | p90 planning s |")
+    print("|---|---|---|---|---|---|---|")
+    targets = {"closet": closet_target, "drawer": drawer_target}
     for name, s in summarise(rows).items():
-        print(f"| {name} | {s['count']} | {s['planned']:.0%} | {s['success']:.0%} | "
-              f"{s['median_s']:.2f} | {s['p90_s']:.2f} |")
+        print(f"| {name} | {s['count']} | {targets.get(name, '')} | {s['planned']:.0%} | "
+              f"{s['success']:.0%} | {s['median_s']:.2f} | {s['p90_s']:.2f} |")
 
 
 if __name__ == "__main__":

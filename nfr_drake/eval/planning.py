@@ -20,17 +20,19 @@ FIELDS = ("category", "seed", "index", "width", "height", "q_target", "planned",
 
 @dataclass(frozen=True)
 class PlanningEvalConfig:
-    """Which objects: `count` per category, object i drawn from object_rng(SEED_DOMAIN_TRAIN, seed, i)."""
+    """Which objects: `count` per category, object i drawn from object_rng(SEED_DOMAIN_TRAIN, seed, i),
+    each opened from q = 0 to its category's target."""
 
     count: int = 50
     seed: int = 7
     categories: tuple[str, ...] = ("closet", "drawer")
+    closet_target: float = OPEN_TARGET["closet"]
+    drawer_target: float = OPEN_TARGET["drawer"]
 
 
-def evaluate_one(category: str, seed: int, index: int) -> dict:
-    """Open one sampled object from q = 0 to its category's open target; one CSV row."""
+def evaluate_one(category: str, seed: int, index: int, q_target: float) -> dict:
+    """Open one sampled object from q = 0 to `q_target`; one CSV row."""
     obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, index))
-    q_target = OPEN_TARGET[category]
     outcome = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.0), q_target)
     sim = outcome.simulation
     return dict(category=category, seed=seed, index=index, width=round(obj.params["width"], 4),
@@ -58,7 +60,8 @@ def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
             for i in range(config.count):
                 if (category, config.seed, i) in done:
                     continue
-                row = evaluate_one(category, config.seed, i)
+                target = config.closet_target if category == "closet" else config.drawer_target
+                row = evaluate_one(category, config.seed, i, target)
                 writer.writerow(row)
                 f.flush()
                 rows.append({k: str(v) for k, v in row.items()})

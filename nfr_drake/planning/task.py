@@ -78,7 +78,7 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
                                      (reference.q_current, q_target), line_width=2.0)
         draw_obstacle(meshcat, carcass_box(kt))
-        # Look at the handle path and the robot from the robot's side, 45 degrees off its axis.
+        # Look at the handle path and the robot from the side, from above.
         p_handle = kt.point("handle", (kt.q_current + q_target) / 2)
         p_base = plan.X_WB.translation()
         centre = (p_handle + p_base) / 2 + [0.0, 0.0, 0.2]
@@ -86,7 +86,7 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         away[2] = 0.0
         away = away / np.linalg.norm(away)
         side = np.cross([0.0, 0.0, 1.0], away)
-        frame_camera(meshcat, centre, centre + 1.3 * away + 1.3 * side + [0.0, 0.0, 0.9])
+        frame_camera(meshcat, centre, centre + 0.3 * away + 1.2 * side + [0.0, 0.0, 0.8])
     simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig())
     path = write_replay(meshcat, replay) if replay is not None else None
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)

@@ -16,13 +16,18 @@ KEYPOINT_COLOURS = {"handle": Rgba(0.95, 0.15, 0.1, 1.0), "hinge_top": Rgba(0.1,
 
 
 def draw_keypoint_trajectory(meshcat: Meshcat, kt: KeypointTrajectory, path: str = "keypoints",
-                             q_range: tuple[float, float] | None = None, line_width: float = 4.0) -> None:
-    """Each keypoint's path over `q_range` (default the whole grid) as a line, a sphere at q_current."""
+                             q_range: tuple[float, float] | None = None, line_width: float = 4.0,
+                             num_beads: int = 10) -> None:
+    """Each keypoint's path over `q_range` (default the whole grid) as a line with beads at
+    `num_beads` evenly spaced articulations, and a larger sphere at q_current."""
     lo, hi = q_range if q_range is not None else (kt.q_grid[0], kt.q_grid[-1])
     q = np.linspace(min(lo, hi), max(lo, hi), 60)
     for name in kt.names:
         colour = KEYPOINT_COLOURS.get(name, Rgba(0.9, 0.6, 0.1, 1.0))
         meshcat.SetLine(f"{path}/{name}/path", kt.point(name, q).T, line_width, colour)
+        for i, p in enumerate(kt.point(name, np.linspace(min(lo, hi), max(lo, hi), num_beads))):
+            meshcat.SetObject(f"{path}/{name}/bead{i}", Sphere(0.006), colour)
+            meshcat.SetTransform(f"{path}/{name}/bead{i}", RigidTransform(p))
         meshcat.SetObject(f"{path}/{name}/now", Sphere(0.012), colour)
         meshcat.SetTransform(f"{path}/{name}/now", RigidTransform(kt.point(name, kt.q_current)))
 
