@@ -10,8 +10,6 @@ approach at least `pregrasp_distance / approach_speed`, the handle at most `hand
 keypoint trajectory is used; obstacles are the floor and the keypoint-derived carcass box.
 """
 
-from __future__ import annotations
-
 import time
 from dataclasses import dataclass, field
 
@@ -48,7 +46,7 @@ class PlanningError(NfrDrakeError):
     """No motion satisfies the constraints; the message names those that failed."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class PlannerConfig:
     """Options of `plan_articulation`."""
 
@@ -324,12 +322,13 @@ def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray
 
 
 def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray = Q_HOME,
-                      config: PlannerConfig = PlannerConfig()) -> PlanResult:
+                      config: PlannerConfig | None = None) -> PlanResult:
     """Plan grasping the handle and moving it from `kt.q_current` to `q_target`.
 
     q_start: the arm's joint positions at t = 0, rad, shape (7,). Raises PlanningError naming the
     constraints that failed.
     """
+    config = config or PlannerConfig()
     t0 = time.perf_counter()
     if not 0.0 <= q_target <= 1.0:
         raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")

@@ -8,8 +8,6 @@ rests on the handle and is switched on through the context only if the tool orig
 `capture_radius` of the true handle.
 """
 
-from __future__ import annotations
-
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,7 +42,7 @@ _KD = np.array([120.0, 120.0, 100.0, 100.0, 25.0, 20.0, 10.0, 10.0, 10.0])
 _G = np.array([0.0, 0.0, -9.81])
 
 
-@dataclass(frozen=True)
+@dataclass
 class SimulationConfig:
     """Options of `simulate_articulation`."""
 
@@ -62,7 +60,7 @@ class SimulationConfig:
     """Finger opening (each) when closed on a handle, m."""
     sample_period: float = 0.02
     """Period of the recorded outcome samples, s."""
-    revolute_tolerance: float = np.radians(5.0)
+    revolute_tolerance: float = float(np.radians(5.0))
     prismatic_tolerance: float = 0.02
     drift_tolerance: float = 0.02
 
@@ -131,8 +129,9 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig) -> Pie
 
 def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                           meshcat: Meshcat | None = None,
-                          config: SimulationConfig = SimulationConfig()) -> SimulationResult:
+                          config: SimulationConfig | None = None) -> SimulationResult:
     """Run the plan on the true object and measure the outcome; records into `meshcat` if given."""
+    config = config or SimulationConfig()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap"), builder)
