@@ -1,6 +1,6 @@
-"""Open (or close) a sampled articulated object with the Panda: plan from keypoints, simulate, replay.
+"""Open or close a sampled object with ground-truth keypoints: plan, simulate, replay.
 
-    python systems/open_articulated_object.py systems/open_drawer.yaml
+    python systems/ground_truth_plan.py systems/ground_truth_open_drawer.yaml
 
 The scenario YAML holds a `Scenario` (fields below, any left out keep their defaults), loaded with
 Drake's yaml_load_typed. The diagrams are built by nfr_drake (planning.task.run_task).
