@@ -352,5 +352,6 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
                 continue
             return PlanResult(traj, X_WB, s_grasp, waypoints, flip,
                               {"placement": t1 - t0, "trajopt": t2 - t1, "total": t2 - t0})
-    summary = "; ".join(dict.fromkeys(failures)) or "no robot base position clears the handle path"
+    summary = "; ".join(dict.fromkeys(failures)) or (
+        "no robot base position both reaches every handle waypoint and clears the moving part's sweep")
     raise PlanningError(f"no feasible motion from q={kt.q_current:.2f} to q={q_target:.2f}: {summary}")

@@ -60,6 +60,13 @@ def test_user_errors_exit_2(tmp_path, capsys, args, message):
     assert message in capsys.readouterr().err
 
 
+def test_infeasible_plan_exits_2(tmp_path, capsys):
+    status = main(["plan", "--object", str(_write(tmp_path)), "--joint", "hinge", "--handle-body", "handle",
+                   "--object-xyz", "0", "0", "2.5"])
+    assert status == 2
+    assert "no feasible motion from q=0.00 to q=0.60" in capsys.readouterr().err
+
+
 def test_unloadable_model_says_what_to_do(tmp_path, capsys):
     path = _write(tmp_path, '<mesh filename="handle.3ds"/>')
     assert main(["plan", "--object", str(path), "--joint", "hinge", "--handle-body", "handle"]) == 2

@@ -33,5 +33,5 @@ def test_plan_follows_handle(category, seed, q_target):
 def test_unreachable_handle_reports():
     obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform([0.0, 0.0, 2.0]), 0.0)
-    with pytest.raises(PlanningError, match="no feasible motion from q=0.00 to q=1.00"):
+    with pytest.raises(PlanningError, match="no feasible motion from q=0.00 to q=1.00: no robot base"):
         plan_articulation(kt, 1.0)
