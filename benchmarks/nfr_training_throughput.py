@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 
-DEFAULT = {"threads": 2, "images": 12, "rays": 384, "width": 64, "steps": 20, "warmup": 4}
+DEFAULT = {"threads": 1, "images": 12, "rays": 384, "width": 64, "steps": 12, "warmup": 3}
 
 SWEEPS = {
     "default": [{}],

@@ -208,8 +208,9 @@ class TrainConfig:
     """Optimiser and schedule."""
     objects: int | None = None
     """Use only the first n complete objects of the dataset (None = all)."""
-    threads: int = 2
-    """torch intra-op threads per process (CPU)."""
+    threads: int = 1
+    """torch intra-op threads per process (CPU). 1 by default: on a shared 2-core machine a second
+    OpenMP thread stalls whenever another process holds a core (docs/BENCHMARKS.md)."""
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """'auto' = CUDA when available, else CPU."""
     seed: int = 0

@@ -64,7 +64,7 @@ def plot_curves(run_dir: Path, out: Path) -> None:
         axes[0].semilogy(s, train[key], label=key, lw=0.8)
     axes[0].set_title("training loss terms (unweighted)")
     axes[0].legend(fontsize=7)
-    axes[1].plot(s, train["psnr"], lw=0.8, label="train rays")
+    axes[1].plot(s, train["psnr"], lw=0.8, label="train rays (object-weighted)")
     if val:
         axes[1].plot(val["step"], val["psnr"], "o-", label="val images")
     axes[1].set_title("PSNR (dB)")
