@@ -86,3 +86,29 @@ def plot_curves(run_dir: Path, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=90)
     plt.close(fig)
+
+
+def q_sweep_figure(model, codes, data, objects: list[int], out: Path, steps: int = 5,
+                   view: int = 0) -> None:
+    """For each training object: its true image at q = 0 and the model's RGB and segmentation at
+    `steps` values of q in [0, 1], from the camera of articulation 0, `view`. One PNG."""
+    import torch
+
+    from nfr_drake.nfr.latent import q_to_z_art
+    from nfr_drake.nfr.render import render_images
+
+    S = data.spec.size
+    qs = torch.linspace(0, 1, steps)
+    K = torch.from_numpy(data.camera.K.astype(np.float32)).expand(steps, 3, 3)
+    rows = []
+    for j in objects:
+        rec = data.records[j]
+        X = torch.from_numpy(np.asarray(rec.X_OC[0, view])).expand(steps, 4, 4)
+        z = torch.cat([q_to_z_art(qs), codes[j].expand(steps, -1)], dim=-1)
+        with torch.no_grad():
+            img = render_images(model, z, K, X, S, S)
+        gt = np.asarray(rec.rgb[0, view], np.float32) / 255.0
+        rows.append([gt] + list(img.rgb.numpy()))
+        rows.append([colorize_labels(np.asarray(rec.label[0, view]))]
+                    + list(colorize_labels(img.labels.numpy())))
+    save_png(Path(out), image_grid(rows))
