@@ -71,7 +71,7 @@ class PlannerConfig:
     min_distance: float = 0.01
     """Clearance between the robot and the floor / carcass box (and itself), m."""
     collision_samples: int = 24
-    num_control_points: int = 18
+    num_control_points: int = 22
     velocity_scale: float = 0.5
     """Fraction of the datasheet velocity limits the plan may use."""
     acceleration_scale: float = 0.3
