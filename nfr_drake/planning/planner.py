@@ -31,10 +31,9 @@ from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
 
-# Franka datasheet (Panda) joint acceleration limits, rad/s^2.
-_SPEED_MARGIN = 1.5
+_SPEED_MARGIN = 1.5  # peak over mean joint speed allowed for in the knot timing
 _IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on the rest
-_ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
+_ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # Panda datasheet, rad/s^2
 _Z = np.array([0.0, 0.0, 1.0])
 _SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
 _WRIST_REACH = 0.80  # farthest shoulder-to-wrist-centre distance used, m (elbow nearly straight)
@@ -97,7 +96,8 @@ class PlanResult:
         s_grasp: normalised time of the grasp; the grasp happens at t = s_grasp * duration.
         waypoints: the handle waypoints (current q to target q).
         flip: whether the hand is turned 180 degrees about the approach (grasp frame convention).
-        seconds: wall time per stage ("placement", "trajopt", "total").
+        seconds: wall time: "placement" (base candidates, their chained IK and any failed
+            optimisations), "trajopt" (the successful optimisation), "total".
     """
 
     trajectory: BsplineTrajectory
