@@ -39,6 +39,8 @@ _SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
 _WRIST_REACH = 0.80  # farthest shoulder-to-wrist-centre distance used, m (elbow nearly straight)
 _PREFERRED_DISTANCE = 0.62  # base to handle-path centroid, m (most chained IKs succeed there)
 _BASE_CLEARANCE = 0.3  # base axis to the moving part's sweep, m
+_WRIST_OFFSET = 0.21  # tool point to the wrist centre, back along the approach, m
+_MIN_WRIST_RADIUS = 0.2  # wrist centres closer to the base axis than this cramp the arm, m
 
 
 class PlanningError(NfrDrakeError):
@@ -135,12 +137,13 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
     """Robot base poses on the floor facing the handle path, most reachable first.
 
     Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
-    part's sweep by `_BASE_CLEARANCE` and the wrist centre of every waypoint (0.21 m back along the
-    approach) is within `_WRIST_REACH` of the shoulder. Ranked by closeness to `_PREFERRED_DISTANCE`
+    part's sweep by `_BASE_CLEARANCE` and the wrist centre of every waypoint (`_WRIST_OFFSET` back
+    along the approach) is within `_WRIST_REACH` of the shoulder and `_MIN_WRIST_RADIUS` off the base
+    axis. Ranked by closeness to `_PREFERRED_DISTANCE`
     from the centroid (nearer bases cramp the arm), then by the farthest wrist reach.
     """
     p = np.array([w.p_WH for w in waypoints])
-    wrists = p + np.array([-0.21 * w.approach_W for w in waypoints])
+    wrists = p - _WRIST_OFFSET * np.array([w.approach_W for w in waypoints])
     swept = _swept_points(kt, waypoints)
     c = p.mean(axis=0)
     scored = []
@@ -150,7 +153,8 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
             if np.min(np.linalg.norm((swept - p_WB)[:, :2], axis=1)) < _BASE_CLEARANCE:
                 continue
             reach = np.linalg.norm(wrists - (p_WB + [0, 0, _SHOULDER_HEIGHT]), axis=1)
-            if reach.max() > _WRIST_REACH or np.linalg.norm((wrists - p_WB)[:, :2], axis=1).min() < 0.2:
+            radius = np.linalg.norm((wrists - p_WB)[:, :2], axis=1)
+            if reach.max() > _WRIST_REACH or radius.min() < _MIN_WRIST_RADIUS:
                 continue
             yaw = np.arctan2(*(c - p_WB)[1::-1])
             score = abs(rho - _PREFERRED_DISTANCE) + 0.1 * reach.max()
