@@ -37,12 +37,14 @@ def main(count: int = 50, seed: int = 7, csv: Path = Path("out/planning_eval.csv
           f"--drawer-target {drawer_target}")
     print(f"date: {datetime.date.today()}, machine: {_cpu()}, {os.cpu_count()} cores, "
           f"python {sys.version.split()[0]}")
-    print("| category | objects | target q | planned | success | median planning s | p90 planning s |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"load average at the end: {os.getloadavg()[0]:.1f}")
+    print("| category | objects | target q | planned | success | median planning s | p90 planning s "
+          "| median planning CPU s |")
+    print("|---|---|---|---|---|---|---|---|")
     targets = {"closet": closet_target, "drawer": drawer_target}
     for name, s in summarise(rows).items():
         print(f"| {name} | {s['count']} | {targets.get(name, '')} | {s['planned']:.0%} | "
-              f"{s['success']:.0%} | {s['median_s']:.2f} | {s['p90_s']:.2f} |")
+              f"{s['success']:.0%} | {s['median_s']:.2f} | {s['p90_s']:.2f} | {s['median_cpu_s']:.2f} |")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ from nfr_drake.planning.task import run_task
 from nfr_drake.systems.scene_objects import SceneObject
 
 FIELDS = ("category", "seed", "index", "width", "height", "q_target", "planned", "success",
-          "planning_seconds", "q_final", "joint_error", "max_drift", "max_constraint_force", "error")
+          "planning_seconds", "planning_cpu_seconds", "q_final", "joint_error", "max_drift",
+          "max_constraint_force", "error")
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,7 @@ def evaluate_one(category: str, seed: int, index: int, q_target: float) -> dict:
                 height=round(obj.params["height"], 4), q_target=q_target,
                 planned=outcome.plan is not None,
                 success=outcome.success, planning_seconds=round(outcome.planning_seconds, 3),
+                planning_cpu_seconds=round(outcome.plan.seconds["cpu"], 3) if outcome.plan else "",
                 q_final=round(sim.q_final, 4) if sim else "",
                 joint_error=round(sim.joint_error, 4) if sim else "",
                 max_drift=round(sim.max_drift, 4) if sim else "",
@@ -69,13 +71,16 @@ def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
 
 
 def summarise(rows: list[dict]) -> dict[str, dict[str, float]]:
-    """Per category and overall: count, success rate, planned rate, median and p90 planning time."""
+    """Per category and overall: count, success rate, planned rate, median and p90 planning wall time,
+    median planning CPU time."""
     out = {}
     for name in sorted({r["category"] for r in rows}) + ["all"]:
         sel = [r for r in rows if name == "all" or r["category"] == name]
         planned = [float(r["planning_seconds"]) for r in sel if r["planned"] == "True"]
+        cpu = [float(r["planning_cpu_seconds"]) for r in sel if r["planned"] == "True"]
         out[name] = dict(count=len(sel), success=np.mean([r["success"] == "True" for r in sel]),
                          planned=np.mean([r["planned"] == "True" for r in sel]),
                          median_s=float(np.median(planned)) if planned else float("nan"),
-                         p90_s=float(np.percentile(planned, 90)) if planned else float("nan"))
+                         p90_s=float(np.percentile(planned, 90)) if planned else float("nan"),
+                         median_cpu_s=float(np.median(cpu)) if cpu else float("nan"))
     return out
