@@ -1,7 +1,7 @@
 """Fit time of the neural field per 10-view capture set (issue target: at most 20 s on 2 cores).
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
-       [--n 5] [--threads 2] [--max-steps 600] [--restarts 4]
+       [--n 5] [--threads 2] [--max-steps 400] [--restarts 4]
 Create the captures with `nfr-drake captures --category closet --n 5 --out DIR --size 64`.
 Prints seconds per capture (fit + forward simulation of 21 keypoint sets), steps run, and the
 articulation error against gt.json, as a markdown table with its median.
@@ -30,12 +30,12 @@ def main() -> None:
     parser.add_argument("--captures", type=Path, required=True)
     parser.add_argument("--n", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--max-steps", type=int, default=600)
+    parser.add_argument("--max-steps", type=int, default=400)
     parser.add_argument("--restarts", type=int, default=4)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig(restarts=args.restarts, max_steps=args.max_steps)
+    config = FitConfig.budget(args.restarts, args.max_steps)
     print(f"{date.today()}, {platform.machine()}, {os.cpu_count()} CPUs, {args.threads} threads, "
           f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}")
     print("| capture | views | image size | seconds | steps | q error |")

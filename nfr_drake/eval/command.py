@@ -21,7 +21,7 @@ def neural_field_method(model_dir: Path, restarts: int, max_steps: int) -> Metho
     from nfr_drake.inference.infer import FittedModel, infer
 
     fitted = FittedModel(model_dir)
-    config = FitConfig(restarts=restarts, max_steps=max_steps)
+    config = FitConfig.budget(restarts, max_steps)
 
     def method(capture: CaptureSet, grid: np.ndarray) -> Prediction:
         fitted.check_capture(capture)
@@ -61,7 +61,7 @@ def eval_command(
     baseline: Path | None = None,
     limit: int | None = None,
     restarts: int = 4,
-    max_steps: int = 600,
+    max_steps: int = 400,
     example_plots: int = 2,
     threads: int = 2,
 ) -> None:

@@ -1,11 +1,11 @@
 """Auto-decoding: find the latent code z = [z_art, z_obj] of an unseen object from posed images.
 
 The networks stay frozen; only z moves, by Adam on the image loss (paper: lambda_1 = lambda_2 = 0)
-plus SRN's latent prior. Several codes are fitted at once, their z_art started at evenly spread
-articulations (multi-start), because the image loss has local minima in q (a door seen from one
-side at q and near 1 - q looks alike); the code with the lowest image loss on a fixed evaluation set
-of rays wins. Each start stops when its loss has not improved by `min_improvement` for `patience`
-steps (or at `max_steps`).
+plus SRN's latent prior. The image loss has local minima in q, so the fit explores first: several
+codes, their z_art started at evenly spread articulations, are fitted together for
+`explore_steps`; the one with the lowest image loss on a fixed evaluation set of rays is then
+refined alone until its loss has not improved by `min_improvement` for `patience` steps, or
+`max_steps` steps in all have run.
 
 Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
 views works (the paper's claim of robustness to camera parameters never seen in training).
@@ -34,36 +34,42 @@ class FitConfig:
     """Options of the auto-decoding fit.
 
     Attributes:
-        restarts: codes fitted in parallel; start i has q = (i + 0.5) / restarts.
-        max_steps: Adam steps at most.
-        min_steps_fraction: share of `max_steps` run before the stopping rule may end the fit.
-        rays_per_step: random pixels (over all views) per step, shared by all restarts.
+        restarts: codes explored in parallel; start i has q = (i + 0.5) / restarts.
+        explore_steps: Adam steps of the exploration phase (all starts).
+        max_steps: Adam steps at most, exploration included.
+        rays_per_step: random pixels (over all views) per step, shared by all starts.
         lr: Adam learning rate of z.
         latent_weight: weight of the Gaussian prior on z_obj (training's value keeps codes where the
             networks have seen them).
-        patience: steps without an improvement of `min_improvement` (relative) that end the fit.
+        patience: refinement steps without an improvement of `min_improvement` that end the fit.
         min_improvement: relative improvement of the smoothed loss that counts as progress.
-        eval_rays: fixed rays on which the restarts' final losses are compared.
+        eval_rays: fixed rays on which the starts are compared and the final loss is measured.
         seed: seed of ray sampling.
     """
 
     restarts: int = 4
-    max_steps: int = 600
-    min_steps_fraction: float = 0.25
-    rays_per_step: int = 512
+    explore_steps: int = 120
+    max_steps: int = 400
+    rays_per_step: int = 256
     lr: float = 1e-2
     latent_weight: float = 1e-3
-    patience: int = 100
+    patience: int = 60
     min_improvement: float = 0.01
-    eval_rays: int = 8192
+    eval_rays: int = 4096
     seed: int = 0
+
+    @classmethod
+    def budget(cls, restarts: int = 4, max_steps: int = 400) -> FitConfig:
+        """Defaults with another number of starts and steps (exploration capped by max_steps)."""
+        return cls(restarts=restarts, max_steps=max_steps,
+                   explore_steps=min(cls.explore_steps, max_steps))
 
     def __post_init__(self):
         for name in ("restarts", "max_steps", "rays_per_step", "patience", "eval_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
-        if not 0.0 <= self.min_steps_fraction <= 1.0:
-            raise ConfigError("FitConfig.min_steps_fraction must lie in [0, 1]")
+        if not 0 <= self.explore_steps <= self.max_steps:
+            raise ConfigError("FitConfig.explore_steps must lie in [0, max_steps]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
 
@@ -121,8 +127,9 @@ def observed_rays(capture: CaptureSet, images: list[np.ndarray] | None = None,
 
 @dataclass
 class FitOutcome:
-    """z (2 + k,) of the winning start; q its articulation; image_loss its MSE on the evaluation
-    rays; start_losses (S,) and start_q (S,) of every start; steps run; seconds of wall time."""
+    """z (2 + k,) of the refined winning start; q its articulation; image_loss its MSE on the
+    evaluation rays; start_losses (S,) and start_q (S,) of every start after exploration; steps
+    run in all; seconds of wall time."""
 
     z: torch.Tensor
     q: float
@@ -160,6 +167,37 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
             p.requires_grad_(flag)
 
 
+def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
+          generator: torch.Generator, steps: int, stop_early: bool) -> int:
+    """Up to `steps` Adam steps on the codes z (S, D), in place; returns the steps run.
+
+    With `stop_early`, stops when the smoothed summed loss has not improved by
+    `min_improvement` (relative) for `patience` steps.
+    """
+    z.requires_grad_(True)
+    optimiser = torch.optim.Adam([z], lr=config.lr)
+    n, S = rays.rgb.shape[0], z.shape[0]
+    best, smoothed, since_best = math.inf, None, 0
+    for step in range(1, steps + 1):
+        index = torch.randint(n, (config.rays_per_step,), generator=generator).to(rays.rgb.device)
+        batch_rays, target = rays.take(index, S)
+        rgb = model.render(z, batch_rays).rgb
+        image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
+        loss = image + config.latent_weight * S * latent_loss(z[:, 2:])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        value = float(image)
+        smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
+        if smoothed < best * (1.0 - config.min_improvement):
+            best, since_best = smoothed, 0
+        else:
+            since_best += 1
+        if stop_early and since_best >= config.patience:
+            return step
+    return steps
+
+
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
          started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
@@ -167,41 +205,25 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
     z_obj = (z_obj_init.to(dtype).expand(S, k).clone() if z_obj_init is not None
              else torch.zeros(S, k, dtype=dtype, device=device))
-    z = torch.cat([q_to_z_art(q0), z_obj], dim=-1).requires_grad_(True)
-    optimiser = torch.optim.Adam([z], lr=config.lr)
+    z = torch.cat([q_to_z_art(q0), z_obj], dim=-1)
     generator = torch.Generator(device="cpu").manual_seed(config.seed)
     n = rays.rgb.shape[0]
-    best = torch.full((S,), math.inf, dtype=dtype)
-    since_best = torch.zeros(S, dtype=torch.long)
-    smoothed = None
-    active = torch.ones(S, dtype=torch.bool)
-    step = 0
-    for step in range(1, config.max_steps + 1):
-        index = torch.randint(n, (config.rays_per_step,), generator=generator).to(device)
-        batch_rays, target = rays.take(index, S)
-        rgb = model.render(z, batch_rays).rgb
-        per_code = ((rgb - target) ** 2).mean(dim=(-1, -2))  # (S,)
-        loss = per_code.sum() + config.latent_weight * S * latent_loss(z[:, 2:])
-        optimiser.zero_grad()
-        loss.backward()
-        z.grad[~active] = 0.0  # stopped starts keep their code
-        optimiser.step()
+    eval_index = torch.randperm(n, generator=generator)[:config.eval_rays].to(device)
+
+    def eval_losses(codes: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
-            value = per_code.detach().cpu()
-            smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
-            improved = smoothed < best * (1.0 - config.min_improvement)
-            best = torch.where(improved, smoothed, best)
-            since_best = torch.where(improved, torch.zeros_like(since_best), since_best + 1)
-            if step >= config.min_steps_fraction * config.max_steps:
-                active &= since_best < config.patience
-        if not active.any():
-            break
-    with torch.no_grad():
-        eval_index = torch.randperm(n, generator=generator)[:config.eval_rays].to(device)
-        eval_rays, eval_target = rays.take(eval_index, S)
-        final = _per_code_mse(model, z.detach(), eval_rays, eval_target).cpu()
-    winner = int(torch.argmin(final))
+            eval_rays, eval_target = rays.take(eval_index, codes.shape[0])
+            return _per_code_mse(model, codes.detach(), eval_rays, eval_target).cpu()
+
+    steps = _adam(model, z, rays, config, generator, config.explore_steps, stop_early=False)
+    start_losses = eval_losses(z)
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
-    return FitOutcome(z=z.detach()[winner].clone(), q=float(start_q[winner]),
-                      image_loss=float(final[winner]), start_losses=final.numpy(),
-                      start_q=start_q, steps=step, seconds=time.perf_counter() - started)
+    winner = int(torch.argmin(start_losses))
+    z_best = z.detach()[winner:winner + 1].clone()
+    steps += _adam(model, z_best, rays, config, generator, config.max_steps - steps,
+                   stop_early=True)
+    z_best = z_best.detach()[0]
+    return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
+                      image_loss=float(eval_losses(z_best[None])[0]),
+                      start_losses=start_losses.numpy(), start_q=start_q, steps=steps,
+                      seconds=time.perf_counter() - started)

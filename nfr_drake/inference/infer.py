@@ -86,7 +86,7 @@ def infer_command(
     handle_plot: Path | None = None,
     category: str | None = None,
     restarts: int = 4,
-    max_steps: int = 600,
+    max_steps: int = 400,
     trajectory_points: int = 21,
     threads: int = 2,
 ) -> None:
@@ -111,7 +111,7 @@ def infer_command(
     fitted.check_capture(cap, category)
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
-    result, outcome = infer(fitted, cap, FitConfig(restarts=restarts, max_steps=max_steps),
+    result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps),
                             np.linspace(0.0, 1.0, trajectory_points))
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)

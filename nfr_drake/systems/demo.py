@@ -8,7 +8,7 @@ from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 
 def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: int = 0,
-                 views: int = 10, image_size: int = 96, max_steps: int = 600,
+                 views: int = 10, image_size: int = 96, max_steps: int = 400,
                  replay: Path = Path("out/demo/open_closet.html")) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation.

@@ -70,7 +70,7 @@ class Scenario:
     fov_y_deg: float = 50.0
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     restarts: int = 4
-    max_steps: int = 600
+    max_steps: int = 400
     replay: str = ""
 
     def __post_init__(self):
@@ -143,8 +143,8 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
     camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
                                     math.radians(scenario.fov_y_deg))
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
-                                  X_WCs, camera, FitConfig(restarts=scenario.restarts,
-                                                           max_steps=scenario.max_steps))
+                                  X_WCs, camera, FitConfig.budget(scenario.restarts,
+                                                                  scenario.max_steps))
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
