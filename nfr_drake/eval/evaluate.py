@@ -134,14 +134,15 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
         if new_file:
             writer.writeheader()
         for set_name, root in sets.items():
-            dirs = capture_dirs(root)[:limit]
-            for method_name, method in methods.items():
-                for d in tqdm(dirs, desc=f"{set_name} / {method_name}", unit="capture"):
-                    if (d.name, set_name, method_name) in done:
-                        continue
-                    capture = read_capture_set(d)
-                    grid = np.asarray(capture.gt["trajectory"]["q"])
-                    prediction = method(capture, grid)
+            # Capture-major, so that methods sharing work on a capture (one fit) run back to back.
+            for d in tqdm(capture_dirs(root)[:limit], desc=set_name, unit="capture"):
+                todo = [m for m in methods if (d.name, set_name, m) not in done]
+                if not todo:
+                    continue
+                capture = read_capture_set(d)
+                grid = np.asarray(capture.gt["trajectory"]["q"])
+                for method_name in todo:
+                    prediction = methods[method_name](capture, grid)
                     if on_prediction is not None:
                         on_prediction(set_name, capture, method_name, prediction)
                     metrics = score(capture, prediction, set_name, method_name)

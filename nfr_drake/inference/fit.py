@@ -187,7 +187,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-        value = float(image)
+        value = float(image.detach())
         smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
         if smoothed < best * (1.0 - config.min_improvement):
             best, since_best = smoothed, 0

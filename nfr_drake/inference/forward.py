@@ -81,3 +81,68 @@ def semantic_point_cloud(model: NFRModel, z: torch.Tensor, q: float,
         points.append(view.points[mask])
         classes.append(view.labels[mask])
     return np.concatenate(points), np.concatenate(classes)
+
+
+def handle_path_from_segmentation(model: NFRModel, z: torch.Tensor, q_grid: np.ndarray,
+                                  views: list[tuple[PinholeCamera, np.ndarray]],
+                                  handle_class: int = 3, size: int = 48) -> np.ndarray:
+    """Handle positions (N, 3) in O read from the field's own geometry along q_grid (N,).
+
+    At each q the object is rendered from `views` (camera, X_OC), downscaled to `size` pixels
+    high; the handle is the centroid of the surface points labelled `handle_class`. Where no view
+    sees the handle, the position is interpolated over q from the nearest ones that do; NaN when
+    no q sees it at all.
+    """
+    small = [(cam.scaled(max(1, round(cam.width * size / cam.height)), size), X) for cam, X in views]
+    path = np.full((len(q_grid), 3), np.nan)
+    for i, q in enumerate(q_grid):
+        points, classes = semantic_point_cloud(model, z, float(q), small)
+        handle = points[classes == handle_class]
+        if len(handle):
+            path[i] = handle.mean(0)
+    seen = ~np.isnan(path[:, 0])
+    if seen.any() and not seen.all():
+        for j in range(3):
+            path[~seen, j] = np.interp(np.asarray(q_grid)[~seen], np.asarray(q_grid)[seen],
+                                       path[seen, j])
+    return path
+
+
+def rotation_axis_from_path(path: np.ndarray) -> np.ndarray:
+    """Centre (x, y) of the circle that best fits a path's horizontal positions (N, 3), in the
+    least-squares sense (Kasa fit): a vertical hinge axis from a handle's arc. Shape (2,)."""
+    x, y = path[:, 0], path[:, 1]
+    A = np.column_stack([2 * x, 2 * y, np.ones_like(x)])
+    (cx, cy, _), *_ = np.linalg.lstsq(A, x**2 + y**2, rcond=None)
+    return np.array([cx, cy])
+
+
+def geometric_keypoints(model: NFRModel, z: torch.Tensor, q: float, q_grid: np.ndarray,
+                        names: tuple[str, ...], views: list[tuple[PinholeCamera, np.ndarray]],
+                        max_views: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Keypoints read from the fitted field's geometry where it shows them, the head elsewhere.
+
+    The handle comes from the rendered segmentation (`handle_path_from_segmentation`) at q and
+    along q_grid; for a door (keypoints `hinge_top`, `hinge_bottom`) the hinge axis is the centre
+    of the simulated handle arc, at the heights the keypoint head predicts. Other keypoints
+    (`goal`) are the head's. Returns keypoints at q (K, 3) and along q_grid (N, K, 3).
+    """
+    head_now = keypoint_trajectory(model, z, np.array([q]))[0]
+    head_path = keypoint_trajectory(model, z, q_grid)
+    picks = np.unique(np.linspace(0, len(views) - 1, min(max_views, len(views))).round().astype(int))
+    chosen = [views[i] for i in picks]
+    h = names.index("handle")
+    now, path = head_now.copy(), head_path.copy()
+    handle_now = handle_path_from_segmentation(model, z, np.array([q]), chosen)[0]
+    handle_path = handle_path_from_segmentation(model, z, q_grid, chosen)
+    if not np.isnan(handle_now).any():
+        now[h] = handle_now
+    if not np.isnan(handle_path).any():
+        path[:, h] = handle_path
+        if {"hinge_top", "hinge_bottom"} <= set(names):
+            axis = rotation_axis_from_path(handle_path)
+            for name in ("hinge_top", "hinge_bottom"):
+                k = names.index(name)
+                now[k, :2] = axis
+                path[:, k, :2] = axis
+    return now, path

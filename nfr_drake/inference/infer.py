@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import cv2
 import numpy as np
@@ -15,7 +15,12 @@ from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import FitConfig, FitOutcome, fit_latent, observed_rays
-from nfr_drake.inference.forward import keypoint_trajectory, render_view, semantic_point_cloud
+from nfr_drake.inference.forward import (
+    geometric_keypoints,
+    keypoint_trajectory,
+    render_view,
+    semantic_point_cloud,
+)
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
@@ -39,8 +44,14 @@ class FittedModel:
                                 f"{self.category} model; use a {claimed} model")
 
 
+KeypointSource = Literal["head", "geometry"]
+"""Where keypoints come from: the keypoint head Gamma(z) (the paper), or the fitted field's
+rendered geometry where it shows them (`forward.geometric_keypoints`)."""
+
+
 def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
-          images: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome]:
+          images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head"
+          ) -> tuple[FitResult, FitOutcome]:
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
@@ -49,8 +60,13 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     rays = observed_rays(capture, images)
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean)
     names = fitted.keypoint_names
-    now = keypoint_trajectory(fitted.model, outcome.z, np.array([outcome.q]))[0]
-    trajectory = keypoint_trajectory(fitted.model, outcome.z, q_grid)
+    if keypoint_source == "geometry":
+        views = [(f.camera, f.X_OC) for f in capture.frames]
+        now, trajectory = geometric_keypoints(fitted.model, outcome.z, outcome.q, q_grid, names,
+                                              views)
+    else:
+        now = keypoint_trajectory(fitted.model, outcome.z, np.array([outcome.q]))[0]
+        trajectory = keypoint_trajectory(fitted.model, outcome.z, q_grid)
     result = FitResult(
         category=fitted.category, q=outcome.q,
         keypoints={n: now[i] for i, n in enumerate(names)},
@@ -59,6 +75,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         image_loss=outcome.image_loss, seconds=time.perf_counter() - started,
         z=outcome.z.double().cpu().numpy(),
         extra={"model": str(fitted.folder), "steps": outcome.steps,
+               "keypoint_source": keypoint_source,
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
     return result, outcome
 
@@ -88,6 +105,7 @@ def infer_command(
     restarts: int = 4,
     max_steps: int = 400,
     trajectory_points: int = 21,
+    keypoints: KeypointSource = "head",
     threads: int = 2,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (DESIGN.md format).
@@ -103,6 +121,8 @@ def infer_command(
         restarts: fits started at evenly spread q; the lowest image loss wins.
         max_steps: optimiser steps at most per fit.
         trajectory_points: points of the forward-simulated q grid over [0, 1].
+        keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
+            axis read from the fitted field's rendered segmentation, the head for the rest).
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
@@ -112,7 +132,7 @@ def infer_command(
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
     result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps),
-                            np.linspace(0.0, 1.0, trajectory_points))
+                            np.linspace(0.0, 1.0, trajectory_points), keypoint_source=keypoints)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
@@ -134,8 +154,8 @@ def infer_command(
         from nfr_drake.eval.plots import plot_handle_paths
 
         grid = np.asarray(cap.gt["trajectory"]["q"])
-        predicted = keypoint_trajectory(fitted.model, outcome.z, grid)[
-            :, fitted.keypoint_names.index("handle")]
+        predicted = np.array([np.interp(grid, result.trajectory_q, result.trajectory["handle"][:, j])
+                              for j in range(3)]).T
         plot_handle_paths(grid, np.asarray(cap.gt["trajectory"]["keypoints"]["handle"]),
                           {"neural field": predicted}, handle_plot,
                           f"{cap.root.name}: true q = {cap.gt['q']:.2f}, fitted q = {result.q:.2f}")
