@@ -140,3 +140,28 @@ def test_cli_errors_exit_2_without_traceback(model_folder, capture, tmp_path):
     for result, message in cases:
         assert result.returncode == 2, result.stderr
         assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_rotation_axis_of_a_noisy_arc():
+    from nfr_drake.inference.forward import rotation_axis_from_path
+
+    t = np.linspace(0.0, np.pi / 2, 15)
+    arc = np.stack([0.3 + 0.45 * np.sin(t), -0.2 + 0.45 * np.cos(t), np.full_like(t, 0.5)], 1)
+    arc += np.random.default_rng(0).normal(0.0, 0.002, arc.shape)
+    np.testing.assert_allclose(rotation_axis_from_path(arc), [0.3, -0.2], atol=0.01)
+
+
+def test_geometric_keypoints_keep_the_head_where_the_handle_is_never_seen(model_folder):
+    from nfr_drake.inference.forward import geometric_keypoints
+
+    fitted = FittedModel(model_folder)
+    z = torch.cat([torch.tensor([1.0, 0.0]), fitted.z_obj_mean])
+    camera = PinholeCamera.from_fov(16, 16, 0.9)
+    views = [(camera, look_at(np.array([1.6, 0.2 * i, 1.0]), np.zeros(3))) for i in range(3)]
+    grid = np.linspace(0, 1, 4)
+    now, path = geometric_keypoints(fitted.model, z, 0.3, grid, fitted.keypoint_names, views)
+    head = keypoint_trajectory(fitted.model, z, grid)
+    assert now.shape == (4, 3) and path.shape == (4, 4, 3)
+    goal = fitted.keypoint_names.index("goal")
+    np.testing.assert_allclose(path[:, goal], head[:, goal], atol=1e-6)  # goal always from the head
+    assert np.isfinite(path).all()
