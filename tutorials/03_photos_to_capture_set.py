@@ -55,7 +55,8 @@ write_photo_folder(photos, scene, orbit_poses(8, np.array([0.4, 0.0, 0.35])),
                    distortion=(-0.12, 0.03, 5e-4, -3e-4))
 truth = json.loads((photos / "truth.json").read_text())
 names = sorted(truth["X_OC"])
-thumbs = [cv2.cvtColor(cv2.imread(str(photos / n)), cv2.COLOR_BGR2RGB)[::2, ::2] for n in names]
+thumbs = [cv2.resize(cv2.cvtColor(cv2.imread(str(photos / n)), cv2.COLOR_BGR2RGB), (240, 180),
+                     interpolation=cv2.INTER_AREA) for n in names]
 sheet = image_grid([thumbs[:4], thumbs[4:]])
 cv2.imwrite(str(out_dir / "tutorial_03_photos.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
 print("wrote", out_dir / "tutorial_03_photos.png")
@@ -86,9 +87,11 @@ for u, v in uv - 0.5:  # OpenCV's pixel convention for drawing
     cv2.drawMarker(bgr, (round(u), round(v)), (0, 0, 255), cv2.MARKER_CROSS, 7, 1)
 (x0, y0), (x1, y1) = (uv.min(axis=0) - 60).astype(int), (uv.max(axis=0) + 60).astype(int)
 crop = bgr[max(y0, 0):y1, max(x0, 0):x1]
-zoom = cv2.resize(crop, (round(crop.shape[1] * bgr.shape[0] / crop.shape[0]), bgr.shape[0]),
-                  interpolation=cv2.INTER_NEAREST)
-cv2.imwrite(str(out_dir / "tutorial_03_board.png"), np.hstack([bgr, zoom]))
+height = bgr.shape[0] // 2
+small = cv2.resize(bgr, (bgr.shape[1] // 2, height), interpolation=cv2.INTER_AREA)
+zoom = cv2.resize(crop, (round(crop.shape[1] * height / crop.shape[0]), height),
+                  interpolation=cv2.INTER_AREA)
+cv2.imwrite(str(out_dir / "tutorial_03_board.png"), np.hstack([small, zoom]))
 print("wrote", out_dir / "tutorial_03_board.png")
 
 # %% [markdown]

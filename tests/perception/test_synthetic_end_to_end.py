@@ -106,10 +106,11 @@ def closet_model():
 def test_infer_on_estimated_poses_matches_true_poses(closet_model, known, scene, photos, tmp_path):
     """`nfr-drake infer` with the estimated poses finds nearly the q and keypoints it finds with
     the true ones. Both capture sets hold the same object-only renders (the model was trained
-    without a room around the object), so only the poses differ."""
+    without a room around the object), so only the poses differ. A short fit (2 starts, 300
+    steps) with the same seeds in both keeps this affordable on 2 CPU cores."""
     capture, report = known
     truth = photos[1]
-    camera = scene.camera.scaled(256, 192)
+    camera = scene.camera.scaled(128, 96)
     renderer = ObjectRenderer(scene.obj, camera)
     names = [report.frames[f"images/{f.image_path.name}"] for f in capture.frames]
     X_true = [np.array(truth["X_OC"][n]) for n in names]
@@ -119,7 +120,7 @@ def test_infer_on_estimated_poses_matches_true_poses(closet_model, known, scene,
         write_capture_set(tmp_path / label, images, poses, camera)
         out = tmp_path / f"{label}.json"
         assert main(["infer", str(tmp_path / label), "--model", str(closet_model), "--out", str(out),
-                     "--category", "closet"]) == 0
+                     "--category", "closet", "--restarts", "2", "--max-steps", "300"]) == 0
         results[label] = json.loads(out.read_text())
     assert abs(results["true"]["q"] - results["estimated"]["q"]) < 0.05
     for name, p_true in results["true"]["keypoints"].items():
