@@ -130,19 +130,19 @@ class PhotoCamera:
     @classmethod
     def from_json(cls, d: dict, source: str = "intrinsics") -> PhotoCamera:
         """From a dict with the keys of `from_json_file`; `source` names it in errors."""
-        path = source
         if not isinstance(d, dict):
-            raise ConfigError(f"{path}: expected a JSON object of intrinsics")
-        missing = [k for k in ("fl_x", "fl_y", "cx", "cy", "w", "h") if k not in d]
+            raise ConfigError(f"{source}: expected a JSON object of intrinsics")
+        required = ("fl_x", "fl_y", "cx", "cy", "w", "h")
+        missing = [k for k in required if k not in d]
         if missing:
-            raise ConfigError(f"{path}: intrinsics need keys {', '.join(missing)}")
-        values = [d[k] for k in ("fl_x", "fl_y", "cx", "cy", "w", "h")]
-        values += [d.get(k, 0.0) for k in DISTORTION_KEYS]
+            raise ConfigError(f"{source}: intrinsics need keys {', '.join(missing)}")
+        values = [d[k] for k in required] + [d.get(k, 0.0) for k in DISTORTION_KEYS]
         if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
-            raise ConfigError(f"{path}: intrinsics must be finite numbers")
-        last = max((i + 1 for i, k in enumerate(DISTORTION_KEYS) if d.get(k, 0.0) != 0.0), default=0)
-        return cls(float(d["fl_x"]), float(d["fl_y"]), float(d["cx"]), float(d["cy"]),
-                   int(d["w"]), int(d["h"]), tuple(float(d.get(k, 0.0)) for k in DISTORTION_KEYS[:last]))
+            raise ConfigError(f"{source}: intrinsics must be finite numbers")
+        fx, fy, cx, cy, w, h, *distortion = values
+        used = max((i + 1 for i, k in enumerate(distortion) if k != 0.0), default=0)
+        return cls(float(fx), float(fy), float(cx), float(cy), int(w), int(h),
+                   tuple(float(k) for k in distortion[:used]))
 
     def to_json(self) -> dict:
         """nerfstudio-style keys (with k3..k6 when used); `from_json_file` reads them back."""
