@@ -1,0 +1,1 @@
+"""Drake systems and diagram builders: the robot, keypoint sources, simulation, replays, perception."""
