@@ -37,7 +37,8 @@ class FitConfig:
         restarts: codes explored in parallel; start i has q = (i + 0.5) / restarts.
         explore_steps: Adam steps of the exploration phase (all starts).
         max_steps: Adam steps at most, exploration included.
-        rays_per_step: random pixels (over all views) per step, shared by all starts.
+        explore_rays: random pixels (over all views) per exploration step, shared by the starts.
+        rays_per_step: random pixels per refinement step.
         lr: Adam learning rate of z.
         latent_weight: weight of the Gaussian prior on z_obj (training's value keeps codes where the
             networks have seen them).
@@ -50,6 +51,7 @@ class FitConfig:
     restarts: int = 4
     explore_steps: int = 120
     max_steps: int = 400
+    explore_rays: int = 128
     rays_per_step: int = 256
     lr: float = 1e-2
     latent_weight: float = 1e-3
@@ -65,7 +67,8 @@ class FitConfig:
                    explore_steps=min(cls.explore_steps, max_steps))
 
     def __post_init__(self):
-        for name in ("restarts", "max_steps", "rays_per_step", "patience", "eval_rays"):
+        for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
+                     "eval_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
         if not 0 <= self.explore_steps <= self.max_steps:
@@ -168,8 +171,9 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
 
 
 def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
-          generator: torch.Generator, steps: int, stop_early: bool) -> int:
-    """Up to `steps` Adam steps on the codes z (S, D), in place; returns the steps run.
+          generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool) -> int:
+    """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
+    each; returns the steps run.
 
     With `stop_early`, stops when the smoothed summed loss has not improved by
     `min_improvement` (relative) for `patience` steps.
@@ -179,7 +183,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     n, S = rays.rgb.shape[0], z.shape[0]
     best, smoothed, since_best = math.inf, None, 0
     for step in range(1, steps + 1):
-        index = torch.randint(n, (config.rays_per_step,), generator=generator).to(rays.rgb.device)
+        index = torch.randint(n, (rays_per_step,), generator=generator).to(rays.rgb.device)
         batch_rays, target = rays.take(index, S)
         rgb = model.render(z, batch_rays).rgb
         image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
@@ -215,13 +219,14 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
             eval_rays, eval_target = rays.take(eval_index, codes.shape[0])
             return _per_code_mse(model, codes.detach(), eval_rays, eval_target).cpu()
 
-    steps = _adam(model, z, rays, config, generator, config.explore_steps, stop_early=False)
+    steps = _adam(model, z, rays, config, generator, config.explore_steps, config.explore_rays,
+                  stop_early=False)
     start_losses = eval_losses(z)
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
     winner = int(torch.argmin(start_losses))
     z_best = z.detach()[winner:winner + 1].clone()
     steps += _adam(model, z_best, rays, config, generator, config.max_steps - steps,
-                   stop_early=True)
+                   config.rays_per_step, stop_early=True)
     z_best = z_best.detach()[0]
     return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
                       image_loss=float(eval_losses(z_best[None])[0]),

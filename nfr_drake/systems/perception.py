@@ -38,7 +38,7 @@ from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, PinholeCamera
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.infer import FittedModel, KeypointSource, infer
 from nfr_drake.inference.result import FitResult
 from nfr_drake.planning.keypoints import KeypointTrajectory
 
@@ -66,13 +66,16 @@ class NfrPerceptionSystem(LeafSystem):
     fit_result: abstract `FitResult` (positions in O).
 
     The fit runs in an initialisation event and whenever `refit` is called; outputs read the stored
-    result. `fit_count` counts fits.
+    result. `fit_count` counts fits. `keypoint_source` picks the keypoint head or the fitted
+    geometry (see `nfr_drake.inference.infer.KeypointSource`).
     """
 
     def __init__(self, model: FittedModel, cameras: list[PinholeCamera],
                  X_WCs: list[RigidTransform], X_WO: RigidTransform,
-                 fit_config: FitConfig = FitConfig(), trajectory_points: int = 21):
+                 fit_config: FitConfig = FitConfig(), trajectory_points: int = 21,
+                 keypoint_source: KeypointSource = "geometry"):
         super().__init__()
+        self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
             raise ValueError("need one camera per pose, and at least one")
         self._model, self._fit_config = model, fit_config
@@ -120,7 +123,8 @@ class NfrPerceptionSystem(LeafSystem):
         frames = [CaptureFrame(Path(f"camera_{i}"), X_OC, camera)
                   for i, (X_OC, camera) in enumerate(zip(self._X_OCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
-        result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images)
+        result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
+                          self._keypoint_source)
         self.fit_count += 1
         return result
 
@@ -163,8 +167,8 @@ def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInsta
 def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph: SceneGraph,
                      model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform,
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
-                     fit_config: FitConfig = FitConfig(),
-                     lighting: Lighting | None = None) -> NfrPerceptionSystem:
+                     fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
+                     keypoint_source: KeypointSource = "geometry") -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene; render engines then see the
@@ -177,7 +181,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     core = RenderCameraCore(PERCEPTION_RENDERER, drake_camera_info(camera),
                             ClippingRange(0.05, 20.0), RigidTransform())
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
-        FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config))
+        FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
+        keypoint_source=keypoint_source))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

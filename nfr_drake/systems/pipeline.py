@@ -5,10 +5,9 @@ around it; initialising the simulator runs the fit once, giving the keypoint tra
 Phase 2 (action): the planner uses that trajectory alone; the arm is simulated on the true object
 and an HTML replay shows the predicted (planned-with) and the true keypoint paths.
 
-A `Scenario` is a dataclass loaded from YAML with `yaml_load_typed` (see `systems/*.yaml`).
+A `Scenario` is a dataclass loaded from YAML with `yaml_load_typed` (see `systems/*.yaml`); this
+module keeps real (not postponed) annotations, which `yaml_load_typed` needs to read field types.
 """
-
-from __future__ import annotations
 
 import math
 import time
@@ -54,6 +53,8 @@ class Scenario:
         distance_m: their distance range to the object centre, m.
         restarts: fit starts.
         max_steps: fit steps at most.
+        keypoints: "geometry" (handle and hinge axis from the fitted field's segmentation) or
+            "head" (the keypoint head alone, as in the paper).
         replay: HTML replay to write ("" for none).
     """
 
@@ -71,6 +72,7 @@ class Scenario:
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     restarts: int = 4
     max_steps: int = 400
+    keypoints: str = "geometry"
     replay: str = ""
 
     def __post_init__(self):
@@ -79,11 +81,13 @@ class Scenario:
         for name in ("q_start", "q_target"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{name} must lie in [0, 1]")
+        if self.keypoints not in ("geometry", "head"):
+            raise ConfigError(f"keypoints must be geometry or head, got {self.keypoints!r}")
         if self.views < 1 or self.image_size < 8:
             raise ConfigError("views must be >= 1 and image_size >= 8")
 
     @classmethod
-    def load(cls, path: Path) -> Scenario:
+    def load(cls, path: Path) -> "Scenario":
         return yaml_load_typed(schema=cls, filename=str(path))
 
     @property
@@ -143,8 +147,9 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
     camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
                                     math.radians(scenario.fov_y_deg))
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
-                                  X_WCs, camera, FitConfig.budget(scenario.restarts,
-                                                                  scenario.max_steps))
+                                  X_WCs, camera,
+                                  FitConfig.budget(scenario.restarts, scenario.max_steps),
+                                  keypoint_source=scenario.keypoints)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),

@@ -70,7 +70,7 @@ def test_fit_moves_z_and_reports_every_start(model_folder, capture):
     rays = observed_rays(capture)
     assert rays.rgb.shape == (3 * 24 * 24, 3)
     outcome = fit_latent(fitted.model, rays, FitConfig(restarts=3, explore_steps=10, max_steps=20,
-                                                       rays_per_step=64, eval_rays=256),
+                                                       explore_rays=32, rays_per_step=64, eval_rays=256),
                          fitted.z_obj_mean)
     assert outcome.z.shape == (2 + 8,) and 0.0 <= outcome.q <= 1.0
     assert outcome.start_losses.shape == (3,) and outcome.steps == 20
@@ -82,7 +82,7 @@ def test_fit_moves_z_and_reports_every_start(model_folder, capture):
 def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
     fitted = FittedModel(model_folder)
     config = FitConfig(restarts=2, explore_steps=5, max_steps=500, patience=5, min_improvement=0.5,
-                       rays_per_step=32, eval_rays=64)
+                       explore_rays=32, rays_per_step=32, eval_rays=64)
     outcome = fit_latent(fitted.model, observed_rays(capture), config, fitted.z_obj_mean)
     assert outcome.steps < 500
 
@@ -90,7 +90,7 @@ def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
 def test_infer_writes_the_design_result_format(model_folder, capture, tmp_path):
     fitted = FittedModel(model_folder)
     result, outcome = infer(fitted, capture, FitConfig(restarts=2, explore_steps=2, max_steps=5,
-                                                       rays_per_step=32, eval_rays=64),
+                                                       explore_rays=32, rays_per_step=32, eval_rays=64),
                             np.linspace(0, 1, 5))
     result.write(tmp_path / "r.json")
     doc = json.loads((tmp_path / "r.json").read_text())

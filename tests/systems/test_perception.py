@@ -26,7 +26,7 @@ from nfr_drake.systems.perception import AddNfrPerception
 SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
                        pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
                        keypoint_hidden=16)
-FAST = FitConfig(restarts=2, explore_steps=2, max_steps=5, rays_per_step=32, eval_rays=64)
+FAST = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32, eval_rays=64)
 
 
 @pytest.fixture(scope="module")
