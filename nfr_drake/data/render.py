@@ -8,6 +8,7 @@ and no diagram is rebuilt. The object's carcass is welded at the world origin, s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +23,7 @@ from pydrake.geometry import (
     RenderEngineVtkParams,
 )
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
@@ -102,11 +103,14 @@ class ObjectRenderer:
         camera: intrinsics of every view (no distortion).
         lighting: lights of this renderer; default `Lighting()`.
         background_rgb: clear colour, each channel in [0, 1].
+        add_scenery: called with the plant before it is finalised, to add more geometry (a
+            textured room, say); it must not add degrees of freedom.
     """
 
     def __init__(self, obj: ArticulatedObject, camera: PinholeCamera,
                  lighting: Lighting | None = None,
-                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB):
+                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
+                 add_scenery: Callable[[MultibodyPlant], None] | None = None):
         self.obj = obj
         self.camera = camera
         builder = DiagramBuilder()
@@ -115,6 +119,8 @@ class ObjectRenderer:
                                        lights=(lighting or Lighting()).drake_lights())
         scene_graph.AddRenderer(RENDERER_NAME, MakeRenderEngineVtk(params))
         self._model = add_articulated_object(plant, obj)
+        if add_scenery is not None:
+            add_scenery(plant)
         rig_model = plant.AddModelInstance("camera_rig")
         rig = plant.AddRigidBody("camera_rig", rig_model, SpatialInertia.SolidSphereWithMass(0.1, 0.05))
         plant.Finalize()

@@ -20,37 +20,23 @@ from pathlib import Path
 import cv2
 import numpy as np
 from pydrake.geometry import (
-    ClippingRange,
-    ColorRenderCamera,
-    DepthRange,
-    DepthRenderCamera,
     GeometryInstance,
     IllustrationProperties,
-    MakeRenderEngineVtk,
     Mesh,
     PerceptionProperties,
-    RenderCameraCore,
-    RenderEngineVtkParams,
     RenderLabel,
     Rgba,
 )
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-from pydrake.multibody.tree import SpatialInertia
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.sensors import RgbdSensor
 
 from nfr_drake.data.cameras import look_at
 from nfr_drake.data.capture import PinholeCamera, write_image
-from nfr_drake.data.render import Lighting, drake_camera_info
+from nfr_drake.data.render import Lighting, ObjectRenderer
 from nfr_drake.objects import ArticulatedObject
-from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels
 from nfr_drake.perception.charuco import CharucoBoardSpec
 from nfr_drake.perception.intrinsics import PhotoCamera
 
 TRUTH_FILE = "truth.json"
-_RENDERER = "synthetic_vtk"
-_CLIP_NEAR_M, _CLIP_FAR_M = 0.05, 30.0
 _PX_PER_SQUARE = 200
 
 
@@ -134,33 +120,18 @@ class SyntheticPhotoScene:
         assets = Path(self._assets.name)
         rng = np.random.default_rng(seed)
 
-        builder = DiagramBuilder()
-        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-        params = RenderEngineVtkParams(default_clear_color=[0.8, 0.8, 0.8],
-                                       lights=Lighting().drake_lights())
-        scene_graph.AddRenderer(_RENDERER, MakeRenderEngineVtk(params))
-        model = add_articulated_object(plant, obj)
+        surfaces = []
         for name, X_OQ, size, texture in self._surfaces(rng):
             write_image(assets / f"{name}.png", texture)
             _write_quad_obj(assets / f"{name}.obj", *size)
-            self._add_textured_quad(plant, assets / f"{name}.obj", assets / f"{name}.png", X_OQ,
-                                    name)
-        rig = plant.AddRigidBody("camera_rig", plant.AddModelInstance("camera_rig"),
-                                 SpatialInertia.SolidSphereWithMass(0.1, 0.05))
-        plant.Finalize()
-        apply_semantic_labels(plant, scene_graph, model)
-        core = RenderCameraCore(_RENDERER, drake_camera_info(camera),
-                                ClippingRange(_CLIP_NEAR_M, _CLIP_FAR_M), RigidTransform())
-        sensor = builder.AddSystem(RgbdSensor(
-            parent_id=plant.GetBodyFrameIdOrThrow(rig.index()), X_PB=RigidTransform(),
-            color_camera=ColorRenderCamera(core, show_window=False),
-            depth_camera=DepthRenderCamera(core, DepthRange(_CLIP_NEAR_M, _CLIP_FAR_M))))
-        builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
-        self._diagram = builder.Build()
-        self._context = self._diagram.CreateDefaultContext()
-        self._plant, self._rig, self._sensor = plant, rig, sensor
-        self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
-        plant.SetPositions(self._plant_context, model, np.array([obj.joint_value(q)]))
+            surfaces.append((assets / f"{name}.obj", assets / f"{name}.png", X_OQ, name))
+
+        def add_room(plant):
+            for surface in surfaces:
+                self._add_textured_quad(plant, *surface)
+
+        self._renderer = ObjectRenderer(obj, camera, Lighting(), background_rgb=(0.8, 0.8, 0.8),
+                                        add_scenery=add_room)
 
     def _surfaces(self, rng: np.random.Generator):
         """(name, X_OQ, (size_x, size_y), texture) of each textured rectangle Q, seen from -z_Q."""
@@ -192,9 +163,7 @@ class SyntheticPhotoScene:
 
     def render(self, X_OC: np.ndarray) -> np.ndarray:
         """The photo from camera pose X_OC (4x4, OpenCV axes): uint8 RGB (H, W, 3)."""
-        self._plant.SetFreeBodyPose(self._plant_context, self._rig, RigidTransform(X_OC))
-        ctx = self._sensor.GetMyContextFromRoot(self._context)
-        return self._sensor.color_image_output_port().Eval(ctx).data[..., :3].copy()
+        return self._renderer.render_rgb(self.q, X_OC)
 
 
 def orbit_poses(n: int, target_O: np.ndarray, distance_m: float = 2.0,
