@@ -25,6 +25,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
               "fit a model to a capture set and forward-simulate the object's motion"),
     "eval": ("nfr_drake.eval.command:eval_command",
              "evaluate the neural field and the baseline on held-out capture sets"),
+    "eval-pipeline": ("nfr_drake.eval.pipeline_eval:eval_pipeline_command",
+                      "success rate of perception + planning + simulation on unseen objects"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
     "poses": ("nfr_drake.perception.poses:poses_command",

@@ -1,0 +1,98 @@
+"""Success rate of the whole pipeline (neural-field keypoints -> plan -> simulation), resumable.
+
+`nfr-drake eval-pipeline` runs `run_scenario` on unseen objects `index = 0 .. n-1` of a capture
+seed and appends one CSV row per object: perception errors, planning outcome, simulated outcome.
+Rows already in the CSV are kept, so a killed evaluation continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from tqdm import tqdm
+
+from nfr_drake.systems.pipeline import Scenario, run_scenario
+
+
+@dataclass
+class PipelineRow:
+    """One object's run; errors in cm (keypoints) and deg or cm (articulation, `unit`)."""
+
+    category: str
+    index: int
+    q_true: float
+    q_estimate: float
+    keypoint_rmse_cm: float
+    handle_path_rmse_cm: float
+    planned: bool
+    grasped: bool
+    success: bool
+    final_error: float
+    unit: str
+    max_drift_cm: float
+    fit_seconds: float
+    planning_seconds: float
+    failure: str
+
+
+def _row(scenario: Scenario) -> PipelineRow:
+    outcome = run_scenario(scenario)
+    task, sim = outcome.task, outcome.task.simulation
+    revolute = scenario.category == "closet"
+    scale = np.degrees(1.0) if revolute else 100.0
+    failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
+    return PipelineRow(
+        category=scenario.category, index=scenario.index, q_true=outcome.q_true,
+        q_estimate=outcome.q_estimate, keypoint_rmse_cm=outcome.keypoint_rmse_cm,
+        handle_path_rmse_cm=outcome.handle_path_rmse_cm, planned=task.plan is not None,
+        grasped=bool(sim and sim.grasped), success=task.success,
+        final_error=float(sim.joint_error * scale) if sim else float("nan"),
+        unit="deg" if revolute else "cm",
+        max_drift_cm=float(100 * sim.max_drift) if sim else float("nan"),
+        fit_seconds=outcome.perception_seconds,
+        planning_seconds=task.planning_seconds, failure=failure.replace("\n", " "))
+
+
+def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
+                          n: int = 50, seed: int = 200, q_start: float = 0.0,
+                          q_target: float = 1.0, keypoints: Literal["geometry", "head"] = "geometry",
+                          max_steps: int = 400) -> None:
+    """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
+
+    Args:
+        category: object category.
+        model: neural-field model folder of that category.
+        csv_path: results CSV (appended; existing rows are kept and skipped).
+        n: number of objects (indices 0 .. n-1 of the capture seed).
+        seed: capture seed of the objects.
+        q_start: articulation when photographed.
+        q_target: articulation to reach.
+        keypoints: keypoint source ("geometry" or "head").
+        max_steps: fit steps at most.
+    """
+    base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
+                    q_target=q_target, keypoints=keypoints, max_steps=max_steps)
+    done = set()
+    if csv_path.exists():
+        with open(csv_path) as f:
+            done = {(r["category"], int(r["index"])) for r in csv.DictReader(f)}
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    new_file = not csv_path.exists()
+    with open(csv_path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(PipelineRow.__dataclass_fields__))
+        if new_file:
+            writer.writeheader()
+        for i in tqdm(range(n), desc=f"{category} pipeline", unit="object"):
+            if (category, i) in done:
+                continue
+            writer.writerow(asdict(_row(replace(base, index=i))))
+            f.flush()
+    with open(csv_path) as f:
+        rows = [r for r in csv.DictReader(f) if r["category"] == category]
+    wins = sum(r["success"] == "True" for r in rows)
+    print(f"{category}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
+          f"({100 * wins / max(len(rows), 1):.0f}%)")
