@@ -59,7 +59,7 @@ def _row(scenario: Scenario) -> PipelineRow:
 
 def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
-                          q_target: float = 1.0, keypoints: Literal["geometry", "head"] = "geometry",
+                          q_target: float | None = None, keypoints: Literal["geometry", "head"] = "geometry",
                           max_steps: int = 400) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
@@ -70,10 +70,13 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         n: number of objects (indices 0 .. n-1 of the capture seed).
         seed: capture seed of the objects.
         q_start: articulation when photographed.
-        q_target: articulation to reach.
+        q_target: articulation to reach (default: 0.6 for closets, as in the ground-truth
+            planning evaluation, 1.0 for drawers).
         keypoints: keypoint source ("geometry" or "head").
         max_steps: fit steps at most.
     """
+    if q_target is None:
+        q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, max_steps=max_steps)
     done = set()

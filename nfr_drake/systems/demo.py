@@ -8,7 +8,7 @@ from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 
 def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: int = 0,
-                 views: int = 10, image_size: int = 96, max_steps: int = 400,
+                 q_target: float = 0.6, views: int = 10, image_size: int = 64, max_steps: int = 400,
                  replay: Path = Path("out/demo/open_closet.html")) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation.
@@ -20,12 +20,15 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
         model: closet model folder.
         seed: capture seed of the unseen closet.
         index: object index within the seed.
+        q_target: articulation to open to (0.6 = 54 degrees, which a fixed-base Panda reaches for
+            every closet size; see docs/EVALUATION.md).
         views: perception cameras.
         image_size: their square image size, pixels.
         max_steps: fit steps at most.
         replay: HTML replay to write.
     """
-    scenario = Scenario(category="closet", model=str(model), seed=seed, index=index, views=views,
+    scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
+                        q_target=q_target, views=views,
                         image_size=image_size, max_steps=max_steps, replay=str(replay))
     outcome = run_scenario(scenario)
     print(outcome.report())
