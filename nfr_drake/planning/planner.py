@@ -36,9 +36,9 @@ _IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on th
 _ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # Panda datasheet, rad/s^2
 _Z = np.array([0.0, 0.0, 1.0])
 _SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
-_WRIST_REACH = 0.80  # farthest shoulder-to-wrist-centre distance used, m (elbow nearly straight)
+_WRIST_REACH = 0.90  # farthest shoulder-to-(nominal) wrist-centre distance kept, m; the cones give slack
 _PREFERRED_DISTANCE = 0.62  # base to handle-path centroid, m (most chained IKs succeed there)
-_BASE_CLEARANCE = 0.3  # base axis to the moving part's sweep, m
+_BASE_CLEARANCE = 0.25  # base axis to the moving part's sweep, m
 _WRIST_OFFSET = 0.21  # tool point to the wrist centre, back along the approach, m
 _MIN_WRIST_RADIUS = 0.2  # wrist centres closer to the base axis than this cramp the arm, m
 
