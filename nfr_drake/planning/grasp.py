@@ -119,3 +119,53 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
     centre = (front - depth / 2) * n + centre_lat * lateral + height / 2 * _Z
     R = RotationMatrix(np.column_stack([n, lateral, _Z]))
     return ObstacleBox("carcass", size, RigidTransform(R, centre))
+
+
+@dataclass(frozen=True)
+class DoorProxy:
+    """A slab standing in for a door leaf, from keypoints.
+
+    It hangs on a revolute joint of its own (about the hinge axis, J's z) in the planning plant, set
+    at each waypoint to follow the handle, so the arm's clearance to the door is checked along the
+    motion. (Drawers need none: their front moves away from the carcass along the approach.)
+
+    Attributes:
+        X_WJ: the joint frame in W: origin on the hinge axis at `hinge_bottom`, z up the axis, x
+            towards the handle at the first waypoint.
+        size: slab extents, m, shape (3,).
+        p_JS: slab centre in the proxy body frame (= J at angle 0), m, shape (3,).
+        values: joint angle at each waypoint, rad, shape (T,); 0 at the first.
+    """
+
+    X_WJ: RigidTransform
+    size: np.ndarray
+    p_JS: np.ndarray
+    values: np.ndarray
+
+
+PROXY_SETBACK = 0.05
+"""Distance from the handle back to the door proxy's mid-plane along the outward normal, m."""
+_PROXY_THICKNESS = 0.02
+_PROXY_OVERHANG = 0.04  # the leaf extends this far past the handle, m
+
+
+def door_proxy(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> DoorProxy:
+    """A leaf from the hinge axis to just past the handle, 5 cm behind it, posed at each waypoint."""
+    first = waypoints[0]
+    bottom, top = kt.point("hinge_bottom", first.q), kt.point("hinge_top", first.q)
+    a = _unit(top - bottom, "the hinge axis")
+    a = a if a @ _Z >= 0 else -a
+
+    def radial(p):
+        r = p - bottom
+        return r - (r @ a) * a
+
+    r0 = radial(first.p_WH)
+    x = _unit(r0, "the handle's distance from the hinge")
+    R_WJ = RotationMatrix(np.column_stack([x, np.cross(a, x), a]))
+    y_outward = (R_WJ.inverse() @ -first.approach_W)[1]
+    radius = float(np.linalg.norm(r0)) + _PROXY_OVERHANG
+    height = float((top - bottom) @ a)
+    values = np.array([np.arctan2(np.cross(r0, radial(w.p_WH)) @ a, r0 @ radial(w.p_WH)) for w in waypoints])
+    return DoorProxy(RigidTransform(R_WJ, bottom), np.array([radius, _PROXY_THICKNESS, height]),
+                     np.array([radius / 2, -PROXY_SETBACK * np.sign(y_outward), height / 2]), values)
