@@ -26,12 +26,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.grasp import (
-    HandleWaypoint,
-    carcass_box,
-    door_proxy,
-    handle_waypoints,
-)
+from nfr_drake.planning.grasp import HandleWaypoint, carcass_box, handle_waypoints
 from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
@@ -39,7 +34,6 @@ from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
 _SPEED_MARGIN = 1.5  # peak over mean joint speed allowed for in the knot timing
 _IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on the rest
 _ACCEL_LIMITS = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # Panda datasheet, rad/s^2
-_FREE_RATE = 100.0  # velocity / acceleration bound of the coordinates the plan does not drive
 _Z = np.array([0.0, 0.0, 1.0])
 _SHOULDER_HEIGHT = 0.333  # joint 2 above the base, m
 _WRIST_REACH = 0.90  # farthest shoulder-to-(nominal) wrist-centre distance kept, m; the cones give slack
@@ -174,9 +168,9 @@ class _Stage:
     """One IK target: the point `p_GQ` of the tool frame G at `p_WQ`, and the tool's orientation."""
 
     def __init__(self, name: str, p_WQ: np.ndarray, p_GQ: np.ndarray, wp: HandleWaypoint, cone_deg: float,
-                 flip: bool, proxy_value: float):
+                 flip: bool):
         self.name, self.p_WQ, self.p_GQ, self.wp = name, p_WQ, p_GQ, wp
-        self.cone, self.flip, self.proxy_value = np.radians(cone_deg), flip, proxy_value
+        self.cone, self.flip = np.radians(cone_deg), flip
 
     def bar_W(self) -> np.ndarray:
         return -self.wp.bar_W if self.flip else self.wp.bar_W
@@ -196,26 +190,16 @@ def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
     ]
 
 
-def _stages(waypoints: list[HandleWaypoint], proxy_values: np.ndarray, cfg: PlannerConfig, flip: bool
-            ) -> list[_Stage]:
+def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
     """Pre-grasp (the point `pregrasp_distance` ahead of the tool along its z on the handle), grasp,
-    then the handle waypoints, each with the door proxy's angle (`proxy_values`, (T,))."""
+    then the handle waypoints."""
     first, origin = waypoints[0], np.zeros(3)
     ahead = np.array([0.0, 0.0, cfg.pregrasp_distance])
-    v = proxy_values
-    stages = [_Stage("pre-grasp", first.p_WH, ahead, first, cfg.grasp_cone_deg, flip, v[0]),
-              _Stage("grasp", first.p_WH, origin, first, cfg.grasp_cone_deg, flip, v[0])]
-    stages += [_Stage(f"handle waypoint {i} (q={w.q:.2f})", w.p_WH, origin, w, cfg.follow_cone_deg, flip,
-                      v[i]) for i, w in enumerate(waypoints[1:], start=1)]
+    stages = [_Stage("pre-grasp", first.p_WH, ahead, first, cfg.grasp_cone_deg, flip),
+              _Stage("grasp", first.p_WH, origin, first, cfg.grasp_cone_deg, flip)]
+    stages += [_Stage(f"handle waypoint {i} (q={w.q:.2f})", w.p_WH, origin, w, cfg.follow_cone_deg, flip)
+               for i, w in enumerate(waypoints[1:], start=1)]
     return stages
-
-
-def _fixed_values(scene: PlanningScene, q: np.ndarray, proxy_value: float) -> dict[int, float]:
-    """Position index -> value of the coordinates a stage does not choose: fingers (as in q), proxy."""
-    fixed = {int(i): float(q[i]) for i in scene.robot_indices[NUM_ARM_JOINTS:]}
-    if scene.proxy_index is not None:
-        fixed[scene.proxy_index] = float(proxy_value)
-    return fixed
 
 
 def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray, cfg: PlannerConfig
@@ -236,11 +220,8 @@ def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray,
         for _, c in _constraints(scene, stage, cfg):
             ik.prog().AddConstraint(c, q)
         ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance, 0.05)
-        fixed = _fixed_values(scene, q_prev, stage.proxy_value)
-        for index, value in fixed.items():
-            ik.prog().AddBoundingBoxConstraint(value, value, q[index])
-        q_seed = q_seed.copy()
-        q_seed[list(fixed)] = list(fixed.values())
+        ik.prog().AddBoundingBoxConstraint(q_prev[NUM_ARM_JOINTS:], q_prev[NUM_ARM_JOINTS:],
+                                           q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
         result = solver.Solve(ik.prog(), q_seed, ik_options)
         if not result.is_success():
@@ -265,12 +246,12 @@ def _knot_times(stages: list[_Stage], q_knots: np.ndarray, vmax: np.ndarray, cfg
                 ) -> tuple[np.ndarray, float]:
     """Normalised times of the knots (start, then each stage), shape (len(stages) + 1,), and the duration.
 
-    q_knots: arm joints at the knots, shape (len(stages) + 1, 7); vmax: their speed limits, (7,).
     Each segment takes the longest of: its joints' displacement at `vmax / _SPEED_MARGIN` (a cubic
     B-spline's peak speed exceeds its mean), the approach at `approach_speed`, the handle's move at
     `handle_speed`.
     """
-    tau = np.max(np.abs(np.diff(q_knots, axis=0)) / vmax, axis=1) * _SPEED_MARGIN
+    dq = np.abs(np.diff(q_knots, axis=0))[:, :NUM_ARM_JOINTS]
+    tau = np.max(dq / vmax[:NUM_ARM_JOINTS], axis=1) * _SPEED_MARGIN
     tau[1] = max(tau[1], cfg.pregrasp_distance / cfg.approach_speed)
     handle_steps = np.linalg.norm(np.diff([st.p_WQ for st in stages[1:]], axis=0), axis=1)
     tau[2:] = np.maximum(tau[2:], handle_steps / cfg.handle_speed)
@@ -288,19 +269,16 @@ def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarr
 
     Returns the trajectory (None on failure), the grasp's normalised time, the failed constraints.
     """
-    q0 = scene.full_q(q_start, stages[0].proxy_value)
+    q0 = scene.full_q(q_start)
     q_knots = np.stack([q0, *ik_sols])
-    arm = scene.robot_indices[:NUM_ARM_JOINTS]
-    vmax = cfg.velocity_scale * scene.plant.GetVelocityUpperLimits()[arm]
-    s_knots, duration = _knot_times(stages, q_knots[:, arm], vmax, cfg)
+    vmax = cfg.velocity_scale * scene.plant.GetVelocityUpperLimits()
+    s_knots, duration = _knot_times(stages, q_knots, vmax, cfg)
     failed = []
     for scale in (1.0, 1.6):
         T = min(scale * duration, cfg.max_duration)
         traj, failed = _optimise_at(scene, stages, s_knots, q_knots, T, cfg)
         if traj is not None:
             break
-    if traj is not None:  # keep the robot's coordinates only
-        traj = BsplineTrajectory(traj.basis(), [cp[scene.robot_indices] for cp in traj.control_points()])
     return traj, float(s_knots[2]), failed
 
 
@@ -312,19 +290,12 @@ def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray
     prog = trajopt.get_mutable_prog()
     trajopt.AddPathEnergyCost(1.0)
     q0 = q_knots[0]
-    arm = scene.robot_indices[:NUM_ARM_JOINTS]
     lower, upper = plant.GetPositionLowerLimits().copy(), plant.GetPositionUpperLimits().copy()
-    for index, value in _fixed_values(scene, q0, 0.0).items():
-        lower[index], upper[index] = value, value
-    if scene.proxy_index is not None:
-        values = [st.proxy_value for st in stages]
-        lower[scene.proxy_index], upper[scene.proxy_index] = min(values) - 0.01, max(values) + 0.01
+    lower[NUM_ARM_JOINTS:] = upper[NUM_ARM_JOINTS:] = q0[NUM_ARM_JOINTS:]
     trajopt.AddPositionBounds(lower, upper)
-    vmax = np.full(nq, _FREE_RATE)
-    vmax[arm] = cfg.velocity_scale * plant.GetVelocityUpperLimits()[arm]
+    vmax = cfg.velocity_scale * plant.GetVelocityUpperLimits()
     trajopt.AddVelocityBounds(-vmax, vmax)
-    amax = np.full(nq, _FREE_RATE)
-    amax[arm] = cfg.acceleration_scale * _ACCEL_LIMITS
+    amax = np.r_[cfg.acceleration_scale * _ACCEL_LIMITS, np.ones(nq - NUM_ARM_JOINTS)]
     trajopt.AddAccelerationBounds(-amax, amax)
     trajopt.AddDurationConstraint(duration, duration)
 
@@ -337,10 +308,6 @@ def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray
     for stage, s in zip(stages, s_knots[1:], strict=True):
         for name, c in _constraints(scene, stage, cfg):
             described.append((name, trajopt.AddPathPositionConstraint(c, s)))
-        if scene.proxy_index is not None:
-            lb, ub = np.full(nq, -np.inf), np.full(nq, np.inf)
-            lb[scene.proxy_index] = ub[scene.proxy_index] = stage.proxy_value
-            described.append((f"{stage.name} door angle", trajopt.AddPathPositionConstraint(lb, ub, s)))
     collision = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, scene.plant_context,
                                                     None, 0.05)
     for s in np.linspace(0.0, 1.0, cfg.collision_samples + 1)[1:]:
@@ -373,13 +340,11 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
     q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
     waypoints = handle_waypoints(kt, q_values)
     obstacles = [carcass_box(kt)]
-    proxy = door_proxy(kt, waypoints) if kt.category == "closet" else None
-    proxy_values = proxy.values if proxy is not None else np.zeros(len(waypoints))
     failures = []
     for X_WB in _base_candidates(kt, waypoints, config.max_base_candidates):
-        scene = build_planning_scene(X_WB, obstacles, proxy)
+        scene = build_planning_scene(X_WB, obstacles)
         for flip in (True, False):
-            stages = _stages(waypoints, proxy_values, config, flip)
+            stages = _stages(waypoints, config, flip)
             sols, failed = _chained_ik(scene, stages, q_start, config)
             if sols is None:
                 failures.append(f"IK of {failed}")
