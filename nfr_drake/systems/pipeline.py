@@ -67,7 +67,7 @@ class Scenario:
     object_xyz: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     object_yaw_deg: float = 0.0
     views: int = 10
-    image_size: int = 96
+    image_size: int = 64
     fov_y_deg: float = 50.0
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     restarts: int = 4
