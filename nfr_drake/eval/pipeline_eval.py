@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from nfr_drake.systems.pipeline import Scenario, run_scenario
@@ -74,7 +75,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
             planning evaluation, 1.0 for drawers).
         keypoints: keypoint source ("geometry" or "head").
         max_steps: fit steps at most.
+        threads: torch CPU threads (more threads than free cores slows the fit many times over).
     """
+    torch.set_num_threads(threads)
     if q_target is None:
         q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
