@@ -61,7 +61,7 @@ def _row(scenario: Scenario) -> PipelineRow:
 def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
-                          keypoints: Literal["geometry", "head"] = "geometry",
+                          keypoints: Literal["geometry", "head"] = "head",
                           max_steps: int = 400, threads: int = 1) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 

@@ -73,7 +73,7 @@ class NfrPerceptionSystem(LeafSystem):
     def __init__(self, model: FittedModel, cameras: list[PinholeCamera],
                  X_WCs: list[RigidTransform], X_WO: RigidTransform,
                  fit_config: FitConfig = FitConfig(), trajectory_points: int = 21,
-                 keypoint_source: KeypointSource = "geometry"):
+                 keypoint_source: KeypointSource = "head"):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -168,7 +168,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform,
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
                      fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
-                     keypoint_source: KeypointSource = "geometry") -> NfrPerceptionSystem:
+                     keypoint_source: KeypointSource = "head") -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene; render engines then see the

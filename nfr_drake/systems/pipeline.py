@@ -53,8 +53,9 @@ class Scenario:
         distance_m: their distance range to the object centre, m.
         restarts: fit starts.
         max_steps: fit steps at most.
-        keypoints: "geometry" (handle and hinge axis from the fitted field's segmentation) or
-            "head" (the keypoint head alone, as in the paper).
+        keypoints: "head" (the keypoint head, as in the paper; the better of the two on unseen
+            objects, docs/EVALUATION.md) or "geometry" (handle and hinge axis read from the
+            fitted field's segmentation).
         replay: HTML replay to write ("" for none).
     """
 
@@ -72,7 +73,7 @@ class Scenario:
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     restarts: int = 4
     max_steps: int = 400
-    keypoints: str = "geometry"
+    keypoints: str = "head"
     replay: str = ""
 
     def __post_init__(self):
