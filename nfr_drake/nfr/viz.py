@@ -12,9 +12,11 @@ import matplotlib.image as mpimg  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-CLASS_COLORS = np.array([[0.15, 0.15, 0.15], [0.25, 0.45, 0.85], [0.30, 0.75, 0.35],
-                         [0.90, 0.20, 0.20]], np.float32)
-"""Display colours of classes 0 background, 1 carcass, 2 door/drawer, 3 handle."""
+from nfr_drake.data.visualize import SEMANTIC_PALETTE  # noqa: E402
+
+CLASS_COLORS = SEMANTIC_PALETTE.astype(np.float32) / 255.0
+"""Display colours of classes 0 background, 1 carcass, 2 door/drawer, 3 handle: the project's
+one palette (`nfr_drake.data.visualize.SEMANTIC_PALETTE`), as floats."""
 
 
 def colorize_labels(labels: np.ndarray) -> np.ndarray:
