@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from nfr_drake.errors import CaptureSetError
+from nfr_drake.jsonio import read_json
 
 TRANSFORMS_FILE = "transforms.json"
 GT_FILE = "gt.json"
@@ -138,12 +139,7 @@ def _fail(path: Path, problem: str) -> CaptureSetError:
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise _fail(path, "file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise _fail(path, f"malformed JSON ({err})") from None
+    data = read_json(path, CaptureSetError)
     if not isinstance(data, dict):
         raise _fail(path, "expected a JSON object at the top level")
     return data

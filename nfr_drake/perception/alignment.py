@@ -11,7 +11,6 @@ Both return residuals per image. `parse_object_pose` reads X_WO, which takes fra
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.jsonio import read_json
 
 MIN_ANCHORS = 3
 COLLINEARITY_RATIO = 0.02
@@ -167,12 +167,7 @@ def align_to_camera_poses(X_RCs: dict[str, np.ndarray], X_WCs: dict[str, np.ndar
 
 def read_anchors(path: Path) -> dict[str, np.ndarray]:
     """Read `{"image_name.jpg": [x, y, z], ...}` (camera centres in W, metres)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise AlignmentError(f"{path}: anchors file not found") from None
-    except json.JSONDecodeError as err:
-        raise AlignmentError(f"{path}: malformed JSON ({err})") from None
+    data = read_json(path, AlignmentError, "anchors file")
     if not isinstance(data, dict) or not data:
         raise AlignmentError(f"{path}: expected an object {{image name: [x, y, z]}}")
     anchors = {}
@@ -207,12 +202,7 @@ def parse_object_pose(value: str) -> np.ndarray:
                                  "(metres, radians) or a JSON file")
         return pose_from_xyz_rpy(floats[:3], floats[3:])
     path = Path(value)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise AlignmentError(f"{path}: object pose file not found") from None
-    except json.JSONDecodeError as err:
-        raise AlignmentError(f"{path}: malformed JSON ({err})") from None
+    data = read_json(path, AlignmentError, "object pose file")
     if isinstance(data, dict) and {"xyz", "rpy"} <= data.keys():
         X = pose_from_xyz_rpy(data["xyz"], data["rpy"])
     else:

@@ -8,7 +8,6 @@ coefficients); the capture set that `nfr-drake poses` writes holds undistorted i
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 
 from nfr_drake.data.capture import PinholeCamera
 from nfr_drake.errors import ConfigError
+from nfr_drake.jsonio import read_json
 
 # OpenCV's order of distortion coefficients; COLMAP's OPENCV model takes the first four and its
 # FULL_OPENCV model all eight.
@@ -119,12 +119,7 @@ class PhotoCamera:
         and optionally `k1`, `k2`, `p1`, `p2`, `k3`, `k4`, `k5`, `k6`. A transforms.json works too.
         """
         path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: intrinsics file not found") from None
-        except json.JSONDecodeError as err:
-            raise ConfigError(f"{path}: malformed JSON ({err})") from None
+        d = read_json(path, ConfigError, "intrinsics file")
         return cls.from_json(d, str(path))
 
     @classmethod
