@@ -2,10 +2,12 @@
 
 A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm's joints are PD
 controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
-compensation as feed-forward. The grasp is a ball constraint between the tool frame's origin and the
-true handle point (optionally two along the bar: a hinge about it). It is inactive until the hand
-rests on the handle and is switched on through the context only if the tool origin is then within
-`capture_radius` of the true handle.
+compensation as feed-forward. The grasp is a ball constraint between the tool frame's origin and a
+grip point of the true handle (optionally two along the bar: a hinge about it). Fingers can close
+anywhere on a bar's free stretch (`SceneObject.grip_half_length`), so grip points are laid along it
+every `grip_spacing`; a knob has one. All are inactive until the hand rests on the handle; then
+the grip point nearest the tool origin is switched on through the context, only if the tool
+origin is within `capture_radius` of it.
 """
 
 from dataclasses import dataclass, field
@@ -52,7 +54,9 @@ class SimulationConfig:
     settle: float = 0.5
     """Time after the plan ends before the outcome is measured, s."""
     capture_radius: float = 0.02
-    """The grasp holds only if the tool origin is this close to the true handle, m."""
+    """The grasp holds only if the tool origin is this close to a grip point of the true handle, m."""
+    grip_spacing: float = 0.005
+    """Spacing of the candidate grip points along a bar, m."""
     grasp_half_span: float = 0.0
     """0: one ball constraint at the grasp point (a point grasp, rotations free). > 0: two, this far
     either side of it along the bar (a hinge about the bar), m."""
@@ -75,10 +79,11 @@ class SimulationResult:
         joint_type: "revolute" (errors in rad) or "prismatic" (m).
         q_target, q_final: articulations in [0, 1].
         joint_error: |final - target| joint value, rad or m.
-        max_drift: largest distance between the tool origin and the true handle while grasped, m.
+        max_drift: largest distance between the tool origin and the held grip point while grasped, m.
         max_constraint_force: largest force the hand (and any contact) exerts on the moving part
             while grasped, from its bodies' momentum balance, N.
-        times: sample times, s, shape (M,); q_object: articulation, (M,); p_W_tool, p_W_handle: (M, 3).
+        times: sample times, s, shape (M,); q_object: articulation, (M,); p_W_tool, p_W_handle: (M, 3),
+            p_W_handle being the grip point (nearest the tool until the grasp, then the held one).
     """
 
     success: bool
@@ -146,11 +151,13 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     handle_body = plant.GetBodyByName(obj.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
     bar_B = obj.bar_B / np.linalg.norm(obj.bar_B)
+    grips_B = grip_points(obj.p_BH, bar_B, obj.grip_half_length, config.grip_spacing)
     span_points = (1.0, -1.0) if config.grasp_half_span > 0.0 else (0.0,)
-    constraint_ids = [
-        plant.AddBallConstraint(hand, X_HT @ np.array([sign * config.grasp_half_span, 0.0, 0.0]),
-                                handle_body, obj.p_BH + sign * config.grasp_half_span * bar_B)
-        for sign in span_points]
+    constraint_ids = [  # constraint_ids[k]: the constraints of grip point k
+        [plant.AddBallConstraint(hand, X_HT @ np.array([sign * config.grasp_half_span, 0.0, 0.0]),
+                                 handle_body, p_BG + sign * config.grasp_half_span * bar_B)
+         for sign in span_points]
+        for p_BG in grips_B]
     plant.Finalize()
 
     # The grasp is the constraints: the gripper does not touch the object's moving bodies.
@@ -186,8 +193,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     span = joint.position_upper_limits()[0] - lower
     set_joint_value(plant, plant_context, joint, lower + obj.ground_truth.q_current * span)
     plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
-    for cid in constraint_ids:
-        plant.SetConstraintActiveStatus(plant_context, cid, False)
+    for ids in constraint_ids:
+        for cid in ids:
+            plant.SetConstraintActiveStatus(plant_context, cid, False)
     if meshcat is not None:
         meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=False)
     simulator.Initialize()
@@ -201,10 +209,12 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         simulator.AdvanceTo(t)
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
-        p_WH = X_WHb @ obj.p_BH
+        if not grasped:  # until the grasp: the grip point nearest the tool
+            grip = int(np.argmin(np.linalg.norm(grips_B - X_WHb.inverse() @ X_WT.translation(), axis=1)))
+        p_WH = X_WHb @ grips_B[grip]
         if not grasped and t >= t_activate:
             if np.linalg.norm(X_WT.translation() - p_WH) <= config.capture_radius:
-                for cid in constraint_ids:
+                for cid in constraint_ids[grip]:
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
                 grasped = True
         times.append(t)
@@ -228,6 +238,13 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
                             float(q_obj[-1]), float(joint_error), max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
+
+
+def grip_points(p_BH: np.ndarray, bar_B: np.ndarray, half_length: float, spacing: float) -> np.ndarray:
+    """Candidate grip points (n, 3) in the handle body's frame: p_BH, and for a bar (half_length
+    > 0) points every `spacing` or less along unit bar_B within half_length of it, m."""
+    n = 2 * int(np.ceil(half_length / spacing)) + 1 if half_length > 0.0 else 1
+    return p_BH + np.linspace(-half_length, half_length, n)[:, None] * bar_B
 
 
 def _force_on_moving_part(plant: MultibodyPlant, plant_context, bodies, joint) -> float:

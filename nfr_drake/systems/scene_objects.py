@@ -34,6 +34,16 @@ def set_joint_value(plant: MultibodyPlant, plant_context, joint, value: float) -
     plant.SetPositions(plant_context, q)
 
 
+GRIP_END_MARGIN = 0.02
+"""Free bar kept at each end of a grip (half a finger pad plus a drawer handle's post), m."""
+
+
+def grip_half_length(obj: ArticulatedObject) -> float:
+    """Half the stretch of a sampled object's bar handle where fingers fit, m (0 for a knob)."""
+    length = float(obj.params.get("handle_length", 0.0))
+    return max(0.0, length / 2.0 - GRIP_END_MARGIN)
+
+
 @dataclass(frozen=True)
 class SceneObject:
     """An articulated object placed in the world.
@@ -45,6 +55,8 @@ class SceneObject:
         p_BH: handle grip centre in the handle body's frame B, m, shape (3,).
         bar_B: unit axis of the grip in B, shape (3,).
         ground_truth: the true keypoint trajectory, in W.
+        grip_half_length: half the stretch of the grip, along bar_B about p_BH, where a hand can
+            close on it, m; 0 for a point grip (a knob, or a loaded model).
     """
 
     category: str
@@ -54,6 +66,7 @@ class SceneObject:
     p_BH: np.ndarray
     bar_B: np.ndarray
     ground_truth: KeypointTrajectory
+    grip_half_length: float = 0.0
 
     @staticmethod
     def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> SceneObject:
@@ -66,7 +79,8 @@ class SceneObject:
             handle_body_name=obj.moving_link_name,
             p_BH=np.asarray(obj.moving_keypoints["handle"], dtype=float),
             bar_B=axis_M,
-            ground_truth=KeypointTrajectory.from_articulated_object(obj, X_WO, q))
+            ground_truth=KeypointTrajectory.from_articulated_object(obj, X_WO, q),
+            grip_half_length=grip_half_length(obj))
 
     @staticmethod
     def from_model_file(path: Path, joint_name: str, handle_body_name: str, X_WO: RigidTransform,

@@ -6,6 +6,7 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.task import read_keypoints, run_task
+from nfr_drake.systems.articulation import grip_points
 from nfr_drake.systems.scene_objects import SceneObject
 
 
@@ -27,6 +28,27 @@ def test_shifted_keypoints_fail(drawer_object):
     assert outcome.plan is not None
     assert not outcome.success
     assert outcome.simulation.max_drift > 0.02
+
+
+def test_shift_along_the_bar_is_still_a_grasp(drawer_object):
+    """Fingers closing on the bar away from its centre hold it there; the drawer still opens."""
+    along = 0.7 * drawer_object.grip_half_length
+    assert along > 0.02  # the fixture's bar has room for this test
+    bar_W = drawer_object.bar_B  # the drawer stands at the identity pose, closed
+    outcome = run_task(drawer_object, 1.0, keypoints=read_keypoints(drawer_object).shifted(along * bar_W))
+    sim = outcome.simulation
+    assert outcome.success, sim.summary()
+    held = sim.p_W_handle[-1] - drawer_object.ground_truth.point("handle", sim.q_object[-1])
+    assert np.linalg.norm(held) == pytest.approx(along, abs=0.005)
+
+
+def test_grip_points_lie_on_the_bar():
+    p, bar = np.array([0.1, 0.2, 0.3]), np.array([0.0, 1.0, 0.0])
+    points = grip_points(p, bar, 0.04, 0.005)
+    assert len(points) == 17
+    np.testing.assert_allclose(points[[0, 8, -1]], [p - 0.04 * bar, p, p + 0.04 * bar])
+    assert np.max(np.diff(points[:, 1])) <= 0.005 + 1e-12
+    np.testing.assert_allclose(grip_points(p, bar, 0.0, 0.005), [p])  # a knob: one point
 
 
 def test_closet_opens_and_closes():
