@@ -18,6 +18,7 @@ from tqdm import tqdm
 from nfr_drake.data.cameras import CameraDistribution
 from nfr_drake.data.capture import PinholeCamera, write_capture_set
 from nfr_drake.data.render import ObjectRenderer, sample_lighting
+from nfr_drake.errors import ConfigError
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
     ArticulatedObject,
@@ -74,6 +75,7 @@ def captures_command(
     azimuth_deg: tuple[float, float] = (-60.0, 60.0),
     elevation_deg: tuple[float, float] = (5.0, 40.0),
     seed: int = 0,
+    q: float | None = None,
 ) -> None:
     """Render `n` capture sets of unseen objects into OUT/<category>_<i>, each at a random q.
 
@@ -88,7 +90,11 @@ def captures_command(
         azimuth_deg: camera azimuth range around the front, degrees.
         elevation_deg: camera elevation range, degrees.
         seed: capture seed (objects are disjoint from training data for every seed).
+        q: articulation of every capture set, in [0, 1] (default: uniform at random per set);
+            objects and cameras are those of the same seed without it.
     """
+    if q is not None and not 0.0 <= q <= 1.0:
+        raise ConfigError(f"--q must lie in [0, 1], got {q}")
     cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m)
     camera = PinholeCamera.from_fov(size, size, math.radians(fov_y_deg))
     out.mkdir(parents=True, exist_ok=True)
@@ -98,7 +104,7 @@ def captures_command(
             continue
         rng = object_rng(SEED_DOMAIN_CAPTURE, seed, i)
         obj = sample_object(category, rng, name=f"{category}_capture_{i:03d}")
-        q = float(rng.uniform(0.0, 1.0))
+        q_random = float(rng.uniform(0.0, 1.0))
         X_OCs = cameras.sample(rng, views, obj.look_at_target())
-        render_capture(obj, q, X_OCs, camera, rng, target)
+        render_capture(obj, q_random if q is None else q, X_OCs, camera, rng, target)
     print(f"{n} capture sets in {out}")
