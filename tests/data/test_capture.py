@@ -119,3 +119,18 @@ def test_cli_accepts_a_valid_capture(capture):
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "3 frames" in result.stdout
+
+
+def test_captures_at_a_fixed_articulation_keep_objects_and_cameras(tmp_path):
+    from nfr_drake.data.captures import captures_command
+    from nfr_drake.errors import ConfigError
+
+    captures_command("drawer", n=1, out=tmp_path / "random", views=2, size=16, seed=5)
+    captures_command("drawer", n=1, out=tmp_path / "closed", views=2, size=16, seed=5, q=0.0)
+    random, closed = (read_capture_set(tmp_path / name / "drawer_000") for name in ("random", "closed"))
+    assert closed.gt["q"] == 0.0 and random.gt["q"] > 0.0
+    assert closed.gt["object"] == random.gt["object"]
+    for a, b in zip(random.frames, closed.frames, strict=True):
+        np.testing.assert_array_equal(a.X_OC, b.X_OC)
+    with pytest.raises(ConfigError):
+        captures_command("drawer", n=1, out=tmp_path / "bad", q=1.5)
