@@ -6,8 +6,8 @@ compensation as feed-forward. The grasp is a ball constraint between the tool fr
 grip point of the true handle (optionally two along the bar: a hinge about it). Fingers can close
 anywhere on a bar's free stretch (`SceneObject.grip_half_length`), so grip points are laid along it
 every `grip_spacing`; a knob has one. All are inactive until the hand rests on the handle; then
-the grip point nearest the tool origin is switched on through the context, only if the tool
-origin is within `capture_radius` of it.
+the grip point nearest the tool origin is switched on through the context, only if it lies inside
+the open gripper (`capture_half_extents`, in the tool frame).
 """
 
 from dataclasses import dataclass, field
@@ -53,8 +53,11 @@ class SimulationConfig:
     """Time the hand rests on the handle while the fingers close, s; the grasp starts half-way."""
     settle: float = 0.5
     """Time after the plan ends before the outcome is measured, s."""
-    capture_radius: float = 0.02
-    """The grasp holds only if the tool origin is this close to a grip point of the true handle, m."""
+    capture_half_extents: tuple[float, float, float] = (0.02, 0.03, 0.02)
+    """The grasp holds only if the grip point lies in this box about the tool origin, m, along the
+    tool frame's x (the bar axis), y (the fingers' closing axis) and z (the approach). Closing
+    fingers 4 cm either side of the tool (`FINGER_OPEN`) centre a bar of radius <= 1.2 cm found
+    up to 3 cm to either side; along the approach and the bar the finger pads span about 2 cm."""
     grip_spacing: float = 0.005
     """Spacing of the candidate grip points along a bar, m."""
     grasp_half_span: float = 0.0
@@ -213,7 +216,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             grip = int(np.argmin(np.linalg.norm(grips_B - X_WHb.inverse() @ X_WT.translation(), axis=1)))
         p_WH = X_WHb @ grips_B[grip]
         if not grasped and t >= t_activate:
-            if np.linalg.norm(X_WT.translation() - p_WH) <= config.capture_radius:
+            if np.all(np.abs(X_WT.inverse() @ p_WH) <= config.capture_half_extents):
                 for cid in constraint_ids[grip]:
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
                 grasped = True

@@ -42,6 +42,15 @@ def test_shift_along_the_bar_is_still_a_grasp(drawer_object):
     assert np.linalg.norm(held) == pytest.approx(along, abs=0.005)
 
 
+@pytest.mark.parametrize(("offset_W", "grasped"), [
+    ([0.0, 0.0, 0.025], True),   # the drawer's bar is horizontal: vertical is the closing axis
+    ([0.03, 0.0, 0.0], False),   # along the approach: beyond the finger pads
+])
+def test_capture_region_is_the_open_gripper(drawer_object, offset_W, grasped):
+    outcome = run_task(drawer_object, 1.0, keypoints=read_keypoints(drawer_object).shifted(offset_W))
+    assert outcome.simulation.grasped == grasped, outcome.simulation.summary()
+
+
 def test_grip_points_lie_on_the_bar():
     p, bar = np.array([0.1, 0.2, 0.3]), np.array([0.0, 1.0, 0.0])
     points = grip_points(p, bar, 0.04, 0.005)
