@@ -21,7 +21,12 @@ from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 @dataclass
 class PipelineRow:
-    """One object's run; errors in cm (keypoints) and deg or cm (articulation, `unit`)."""
+    """One object's run; errors in cm (keypoints) and deg or cm (articulation, `unit`).
+
+    handle_error_cm: predicted against true handle at the observed state. hinge_side_correct
+    (closets; empty for drawers): whether the predicted hinge lies on the true hinge's side of the
+    handle (the horizontal handle-to-hinge vectors point the same way).
+    """
 
     category: str
     index: int
@@ -29,6 +34,8 @@ class PipelineRow:
     q_estimate: float
     keypoint_rmse_cm: float
     handle_path_rmse_cm: float
+    handle_error_cm: float
+    hinge_side_correct: bool | None
     planned: bool
     grasped: bool
     success: bool
@@ -46,10 +53,18 @@ def _row(scenario: Scenario) -> PipelineRow:
     revolute = scenario.category == "closet"
     scale = np.degrees(1.0) if revolute else 100.0
     failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
+    handle = [kt.point("handle", kt.q_current) for kt in (outcome.predicted, outcome.truth)]
+    hinge_side = None
+    if revolute:
+        to_hinge = [(kt.point("hinge_bottom", kt.q_current) - h)[:2]
+                    for kt, h in zip((outcome.predicted, outcome.truth), handle, strict=True)]
+        hinge_side = bool(to_hinge[0] @ to_hinge[1] > 0.0)
     return PipelineRow(
         category=scenario.category, index=scenario.index, q_true=outcome.q_true,
         q_estimate=outcome.q_estimate, keypoint_rmse_cm=outcome.keypoint_rmse_cm,
-        handle_path_rmse_cm=outcome.handle_path_rmse_cm, planned=task.plan is not None,
+        handle_path_rmse_cm=outcome.handle_path_rmse_cm,
+        handle_error_cm=float(100 * np.linalg.norm(handle[0] - handle[1])),
+        hinge_side_correct=hinge_side, planned=task.plan is not None,
         grasped=bool(sim and sim.grasped), success=task.success,
         final_error=float(sim.joint_error * scale) if sim else float("nan"),
         unit="deg" if revolute else "cm",
