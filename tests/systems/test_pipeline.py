@@ -3,6 +3,7 @@
 Skipped with a reason when a model folder is missing (a checkout without models/).
 """
 
+import csv
 import math
 import subprocess
 import sys
@@ -53,3 +54,17 @@ def test_demo_runs_in_reduced_form(tmp_path):
     assert "SUCCESS" in out or "FAILURE" in out
     if "planning time" in out:
         assert replay.is_file() and f"replay: {replay}" in out
+
+
+def test_pipeline_evaluation_writes_one_row_per_object_and_resumes(tmp_path, capsys):
+    from nfr_drake.eval.pipeline_eval import eval_pipeline_command
+
+    model, csv_path = _needs("drawer"), tmp_path / "pipeline.csv"
+    for _ in range(2):  # the second call finds the row and runs nothing
+        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, max_steps=120)
+    rows = list(csv.DictReader(open(csv_path)))
+    assert len(rows) == 1 and rows[0]["index"] == "0" and rows[0]["planned"] == "True"
+    assert 0.0 <= float(rows[0]["handle_error_cm"]) < 50.0
+    assert rows[0]["hinge_side_correct"] == ""  # drawers have no hinge
+    assert capsys.readouterr().out.strip().endswith("with head keypoints (" +
+                                                    ("100%)" if rows[0]["success"] == "True" else "0%)"))
