@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -24,6 +25,7 @@ from torch import nn
 
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.field import encoding_dim
 from nfr_drake.nfr.model import NFRAutoDecoder, NFRModel
 
 MODEL_FORMAT = "nfr-drake-model"
@@ -204,3 +206,55 @@ def read_checkpoint(folder: Path, module: NFRAutoDecoder,
     except (KeyError, ValueError) as err:
         raise CheckpointError(f"{folder}: optimizer state does not match ({err})") from None
     return trainer
+
+
+def _widen_first_layer(state: dict[str, torch.Tensor], old_frequencies: int,
+                       new_frequencies: int) -> dict[str, torch.Tensor]:
+    """Remap the field's first generated layer from `old_frequencies` to `new_frequencies`
+    octaves of `positional_encoding`: the old inputs keep their weights, the new octaves get zero
+    weights in the base weight and in the hypernetwork's output, so the function is unchanged."""
+    old_in, new_in = encoding_dim(old_frequencies), encoding_dim(new_frequencies)
+    # Input index map: [x (3), sin (3 F), cos (3 F)] in both encodings.
+    old_to_new = torch.cat([torch.arange(3), 3 + torch.arange(3 * old_frequencies),
+                            3 + 3 * new_frequencies + torch.arange(3 * old_frequencies)])
+    prefix = "model.hyper.layers.0."
+    state = dict(state)
+    base = state[prefix + "base_weight"]  # (out, old_in)
+    out_features = base.shape[0]
+    widened = base.new_zeros(out_features, new_in)
+    widened[:, old_to_new] = base
+    state[prefix + "base_weight"] = widened
+    # Hypernetwork output: out * in weight entries (row-major), then out biases.
+    rows = (torch.arange(out_features)[:, None] * new_in + old_to_new[None, :]).flatten()
+    rows = torch.cat([rows, out_features * new_in + torch.arange(out_features)])
+    for name in ("net.2.weight", "net.2.bias"):
+        old = state[prefix + name]
+        new = old.new_zeros((out_features * new_in + out_features, *old.shape[1:]))
+        new[rows] = old
+        state[prefix + name] = new
+    return state
+
+
+def init_from_model_folder(folder: Path, module: NFRAutoDecoder) -> dict:
+    """Start a training module from a model folder's weights and codes (fine-tuning).
+
+    The architectures must match, except that `module` may use more positional-encoding octaves:
+    the new octaves start with zero weights (see `_widen_first_layer`). Returns config.json.
+    """
+    folder = Path(folder)
+    config = read_model_config(folder)
+    try:
+        arch = NFRModelConfig.from_json(config["architecture"])
+    except (KeyError, TypeError, ConfigError) as err:
+        raise CheckpointError(f"{folder / CONFIG_FILE}: bad architecture ({err})") from None
+    target = module.model.config
+    if replace(arch, pe_frequencies=target.pe_frequencies) != target \
+            or arch.pe_frequencies > target.pe_frequencies:
+        raise CheckpointError(f"{folder}: cannot start from this model: its architecture differs "
+                              "from the run's in more than added positional-encoding octaves")
+    state = _read_tensors(folder / WEIGHTS_FILE)
+    state = {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
+    if arch.pe_frequencies < target.pe_frequencies:
+        state = _widen_first_layer(state, arch.pe_frequencies, target.pe_frequencies)
+    _load_strict(module, state, folder / WEIGHTS_FILE)
+    return config

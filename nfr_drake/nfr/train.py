@@ -39,6 +39,7 @@ from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import (
     CheckpointError,
+    init_from_model_folder,
     read_checkpoint,
     write_checkpoint,
     write_model_folder,
@@ -199,8 +200,12 @@ class _StopFlag:
 
 
 def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
-          command: str = "") -> Path:
-    """Train a neural field on a rendered dataset; returns RUN/best (the best model folder)."""
+          command: str = "", init_from: Path | None = None) -> Path:
+    """Train a neural field on a rendered dataset; returns RUN/best (the best model folder).
+
+    `init_from`: a model folder trained on the same dataset to start from (fine-tuning); ignored
+    when resuming a run that already has checkpoints.
+    """
     data_dir, run = Path(data_dir), Path(out)
     dist = init_distributed(config.device)
     device = select_device(config.device, dist)
@@ -220,7 +225,15 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
             raise ConfigError(f"{run}: --resume with another architecture than the run's "
                               "(see train_config.json)")
     torch.manual_seed(config.seed)
-    module = NFRAutoDecoder(config.model, data.num_objects, config.code_init_std).to(device)
+    module = NFRAutoDecoder(config.model, data.num_objects, config.code_init_std)
+    if init_from is not None and ckpt is None:
+        start = init_from_model_folder(init_from, module)
+        if start.get("num_objects") != data.num_objects \
+                or start.get("training", {}).get("dataset_spec") \
+                != json.loads(json.dumps(data.spec.to_json())):
+            raise ConfigError(f"--init-from {init_from}: that model was trained on other data "
+                              f"than {data_dir}; its object codes would not match")
+    module = module.to(device)
     net_params = [p for n, p in module.named_parameters() if not n.startswith("codes.")]
     optimizer = torch.optim.Adam([
         {"params": net_params, "lr": config.optim.lr_networks, "name": "networks"},
@@ -231,6 +244,7 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
             "image_size": data.spec.size,
             "training": {"data": str(data_dir), "dataset_spec": data.spec.to_json(),
                          "objects": data.num_objects, "command": command,
+                         "init_from": None if init_from is None else str(init_from),
                          "train_config": config.to_json()}}
     step, seconds, best_psnr = 0, 0.0, -math.inf
     if ckpt is not None:
@@ -353,7 +367,7 @@ _DEFAULT_CONFIG = TrainConfig()
 
 def train_command(data: Path, out: Path,
                   config: Annotated[TrainConfig, tyro.conf.arg(name="")] = _DEFAULT_CONFIG,
-                  resume: bool = False) -> int:
+                  resume: bool = False, init_from: Path | None = None) -> int:
     """Train the neural field (auto-decoder) on a dataset written by `nfr-drake generate`.
 
     Args:
@@ -361,9 +375,11 @@ def train_command(data: Path, out: Path,
         out: run folder (checkpoints, logs, validation images, best model).
         config: training configuration; every field can be set, e.g. --optim.steps 20000.
         resume: continue the run in `out` from its newest checkpoint.
+        init_from: start from this model folder (same dataset; the architecture may add
+            positional-encoding octaves) instead of a fresh initialisation.
     """
     command = " ".join(["nfr-drake", "train"] + [shlex.quote(a) for a in sys.argv[2:]])
-    best = train(data, out, config, resume=resume, command=command)
+    best = train(data, out, config, resume=resume, command=command, init_from=init_from)
     if int(os.environ.get("RANK", "0")) == 0:
         print(f"best model: {best}")
     return 0

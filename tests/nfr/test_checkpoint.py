@@ -8,6 +8,7 @@ import torch
 
 from nfr_drake.nfr.checkpoint import (
     CheckpointError,
+    init_from_model_folder,
     load_model,
     read_checkpoint,
     write_checkpoint,
@@ -105,3 +106,37 @@ def test_bad_config_json(tmp_path, tiny_config):
     (tmp_path / "m" / "config.json").write_text(json.dumps({"format": "something-else"}))
     with pytest.raises(CheckpointError, match="format"):
         load_model(tmp_path / "m")
+
+
+def test_init_from_adds_octaves_without_changing_the_field(tmp_path, tiny_config):
+    """Fine-tuning with more positional-encoding octaves starts from the same function, and the
+    new octaves' weights are free parameters (they receive gradients)."""
+    from dataclasses import replace
+
+    torch.manual_seed(0)
+    old = NFRAutoDecoder(tiny_config, num_objects=3).eval()
+    with torch.no_grad():  # make the hypernetwork's z-dependence non-trivial
+        for p in old.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    write_model_folder(tmp_path / "m", old, INFO)
+    new = NFRAutoDecoder(replace(tiny_config, pe_frequencies=3), num_objects=3).eval()
+    init_from_model_folder(tmp_path / "m", new)
+    z = old.code(torch.tensor([0, 2]), torch.tensor([0.2, 0.8])).detach()
+    rays = _rays()
+    a, b = old.model.render(z, rays), new.model.render(z, rays)
+    for x, y in zip(a, b, strict=True):
+        torch.testing.assert_close(x, y, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(new.codes.weight, old.codes.weight, rtol=0, atol=0)
+    b.rgb.sum().backward()
+    grad = new.model.hyper.layers[0].base_weight.grad  # (out, 3 + 6 * 3)
+    highest_octave = [3 + 3 * 2, 3 + 9 + 3 * 2]  # sin and cos of octave 2, x component
+    assert grad[:, highest_octave].abs().sum() > 0
+
+
+def test_init_from_refuses_other_architectures(tmp_path, tiny_config):
+    from dataclasses import replace
+
+    write_model_folder(tmp_path / "m", NFRAutoDecoder(tiny_config, 2), INFO)
+    for other in (replace(tiny_config, field_width=12), replace(tiny_config, pe_frequencies=0)):
+        with pytest.raises(CheckpointError, match="cannot start from this model"):
+            init_from_model_folder(tmp_path / "m", NFRAutoDecoder(other, 2))
