@@ -11,7 +11,13 @@ from nfr_drake.data.cameras import look_at
 from nfr_drake.data.capture import CaptureFrame, PinholeCamera, read_capture_set
 from nfr_drake.data.captures import captures_command
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.inference.fit import FitConfig, fit_latent, frame_ray_directions, observed_rays
+from nfr_drake.inference.fit import (
+    FitConfig,
+    fit_latent,
+    frame_ray_directions,
+    image_detail,
+    observed_rays,
+)
 from nfr_drake.inference.forward import keypoint_trajectory, render_view
 from nfr_drake.inference.infer import FittedModel, infer
 from nfr_drake.inference.result import FitResult
@@ -77,6 +83,29 @@ def test_fit_moves_z_and_reports_every_start(model_folder, capture):
     # Refining the best start does not make its loss worse (beyond sampling noise).
     assert outcome.image_loss <= 1.05 * outcome.start_losses.min()
     assert all(p.requires_grad for p in fitted.model.parameters())  # restored after the fit
+
+
+def test_image_detail_marks_edges_and_thin_parts():
+    image = np.full((32, 32, 3), 120, np.uint8)
+    image[8:24, 8:24] = (40, 60, 200)  # a panel
+    image[10:20, 15] = (250, 250, 250)  # a one-pixel bar on it
+    detail = image_detail(image)
+    assert detail.shape == (32, 32)
+    assert detail[0:5, 0:5].max() == 0.0 and detail[12:20, 10:12].max() == 0.0  # flat regions
+    assert detail[16, 15] > detail[16, 8] > 0  # the bar stands out more than the panel edge
+
+
+def test_detail_sampling_draws_edge_pixels(capture):
+    rays = observed_rays(capture)
+    gen = torch.Generator().manual_seed(0)
+    edge = rays.detail > 0.1 * rays.detail.max()
+    uniform = edge[rays.sample(4000, 0.0, gen)].float().mean()
+    weighted = edge[rays.sample(4000, 0.5, gen)].float().mean()
+    assert abs(uniform - edge.float().mean()) < 0.03  # uniform draws hit edges at their share
+    assert weighted > 0.5 * uniform + 0.5 * 0.9  # the weighted half lands on edges
+    flat = observed_rays(capture)
+    flat.detail.zero_()  # a blank photo: no edges, all draws uniform, no error
+    assert flat.sample(100, 0.5, gen).shape == (100,)
 
 
 def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
