@@ -14,7 +14,7 @@ from nfr_drake.eval.evaluate import Method, Prediction, capture_dirs, evaluate, 
 from nfr_drake.eval.plots import plot_error_distributions, plot_handle_paths
 
 
-def neural_field_methods(model_dir: Path, restarts: int, max_steps: int, code_modes: int = 1,
+def neural_field_methods(model_dir: Path, restarts: int, max_steps: int,
                          detail_fraction: float = 0.0) -> dict[str, Method]:
     """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
     geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
@@ -24,7 +24,7 @@ def neural_field_methods(model_dir: Path, restarts: int, max_steps: int, code_mo
     from nfr_drake.inference.infer import FittedModel, infer
 
     fitted = FittedModel(model_dir)
-    config = FitConfig.budget(restarts, max_steps, code_modes, detail_fraction)
+    config = FitConfig.budget(restarts, max_steps, detail_fraction)
     names = fitted.keypoint_names
     last: dict[str, tuple] = {}  # capture root -> (prediction with head keypoints, fitted z)
 
@@ -82,7 +82,6 @@ def eval_command(
     limit: int | None = None,
     restarts: int = 4,
     max_steps: int = 400,
-    code_modes: int = 1,
     detail_fraction: float = 0.0,
     example_plots: int = 2,
     threads: int = 2,
@@ -101,7 +100,6 @@ def eval_command(
         limit: use only the first n captures of each set.
         restarts: neural-field fit starts.
         max_steps: neural-field fit steps at most.
-        code_modes: start codes of the fit (groups of training objects that move alike).
         detail_fraction: share of the fit's rays drawn where the photos have edges.
         example_plots: handle-path plots per set.
         threads: torch CPU threads.
@@ -109,8 +107,7 @@ def eval_command(
     torch.set_num_threads(threads)
     methods: dict[str, Method] = {}
     if model is not None:
-        methods.update(neural_field_methods(model, restarts, max_steps, code_modes,
-                                              detail_fraction))
+        methods.update(neural_field_methods(model, restarts, max_steps, detail_fraction))
     if baseline is not None:
         methods["baseline"] = baseline_method(baseline)
     if not methods:

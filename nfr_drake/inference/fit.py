@@ -34,7 +34,7 @@ class FitConfig:
     """Options of the auto-decoding fit.
 
     Attributes:
-        restarts: start articulations per start code; start i has q = (i + 0.5) / restarts.
+        restarts: codes explored in parallel; start i has q = (i + 0.5) / restarts.
         explore_steps: Adam steps of the exploration phase (all starts).
         max_steps: Adam steps at most, exploration included.
         explore_rays: random pixels (over all views) per exploration step, shared by the starts.
@@ -45,10 +45,6 @@ class FitConfig:
         patience: refinement steps without an improvement of `min_improvement` that end the fit.
         min_improvement: relative improvement of the smoothed loss that counts as progress.
         eval_rays: fixed rays on which the starts are compared and the final loss is measured.
-        code_modes: object codes the fit starts from, each with every start articulation: 1 is
-            the mean training code; more are the mean codes of groups of training objects with
-            alike motion (`code_modes`), so that a discrete choice such as a door's hinge side
-            is explored rather than decided by the first gradient steps.
         detail_fraction: share of each step's rays drawn in proportion to the observed image's
             gradient magnitude (edges: a door's outline, a handle a few pixels wide), the rest
             uniformly; the small parts that decide q and the hinge side weigh more in the loss.
@@ -65,22 +61,20 @@ class FitConfig:
     patience: int = 60
     min_improvement: float = 0.01
     eval_rays: int = 4096
-    code_modes: int = 1
     detail_fraction: float = 0.0
     seed: int = 0
 
     @classmethod
-    def budget(cls, restarts: int = 4, max_steps: int = 400, code_modes: int = 1,
+    def budget(cls, restarts: int = 4, max_steps: int = 400,
                detail_fraction: float = 0.0) -> FitConfig:
-        """Defaults with another number of starts and steps (exploration capped by max_steps),
-        code modes and share of edge-weighted rays."""
+        """Defaults with another number of starts and steps (exploration capped by max_steps)
+        and another share of edge-weighted rays."""
         return cls(restarts=restarts, max_steps=max_steps,
-                   explore_steps=min(cls.explore_steps, max_steps), code_modes=code_modes,
-                   detail_fraction=detail_fraction)
+                   explore_steps=min(cls.explore_steps, max_steps), detail_fraction=detail_fraction)
 
     def __post_init__(self):
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
-                     "eval_rays", "code_modes"):
+                     "eval_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
         if not 0 <= self.explore_steps <= self.max_steps:
@@ -196,39 +190,9 @@ def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Te
     return torch.stack(losses).sum(0) / (3 * R)
 
 
-@torch.no_grad()
-def code_modes(model: NFRModel, codes: torch.Tensor, modes: int,
-               q_values: tuple[float, ...] = (0.0, 0.5, 1.0), iterations: int = 50) -> torch.Tensor:
-    """Start codes (modes, k) from the training codes (N, k): the mean code of each group of
-    training objects whose keypoints (the keypoint head at `q_values`, in O, m) move alike, found
-    by k-means from farthest-point seeds (deterministic). modes = 1 gives the mean code."""
-    if modes == 1:
-        return codes.mean(0, keepdim=True)
-    if modes > len(codes):
-        raise ConfigError(f"{modes} code modes from {len(codes)} training codes")
-    qs = torch.tensor(q_values, dtype=codes.dtype, device=codes.device)
-    z = torch.cat([q_to_z_art(qs).repeat(len(codes), 1), codes.repeat_interleave(len(qs), 0)], -1)
-    motion = model.keypoints(z).reshape(len(codes), -1)  # (N, Q K 3)
-    centres = [motion[torch.argmin((motion - motion.mean(0)).norm(dim=1))]]
-    for _ in range(modes - 1):
-        distance = torch.cdist(motion, torch.stack(centres)).min(dim=1).values
-        centres.append(motion[torch.argmax(distance)])
-    centres = torch.stack(centres)
-    for _ in range(iterations):
-        group = torch.cdist(motion, centres).argmin(dim=1)
-        centres = torch.stack([motion[group == j].mean(0) if (group == j).any() else centres[j]
-                               for j in range(modes)])
-    group = torch.cdist(motion, centres).argmin(dim=1)
-    return torch.stack([codes[group == j].mean(0) for j in range(modes) if (group == j).any()])
-
-
 def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfig(),
                z_obj_init: torch.Tensor | None = None) -> FitOutcome:
-    """Fit z to the observed rays with the networks frozen (see module docstring).
-
-    z_obj_init: object codes to start from, (k,) or (M, k); each is started at every one of the
-    `restarts` articulations (M x restarts starts). None: zeros.
-    """
+    """Fit z to the observed rays with the networks frozen (see module docstring)."""
     started = time.perf_counter()
     model.eval()
     flags = [p.requires_grad for p in model.parameters()]
@@ -275,13 +239,12 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
 
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
          started: float) -> FitOutcome:
-    R, k = config.restarts, model.config.latent_obj_dim
+    S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
-    inits = (torch.zeros(1, k) if z_obj_init is None else z_obj_init.reshape(-1, k))
-    inits = inits.to(dtype=dtype, device=device)
-    q0 = (torch.arange(R, dtype=dtype, device=device) + 0.5) / R
-    z = torch.cat([q_to_z_art(q0).repeat(len(inits), 1), inits.repeat_interleave(R, dim=0)],
-                  dim=-1)
+    q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
+    z_obj = (z_obj_init.to(dtype).expand(S, k).clone() if z_obj_init is not None
+             else torch.zeros(S, k, dtype=dtype, device=device))
+    z = torch.cat([q_to_z_art(q0), z_obj], dim=-1)
     generator = torch.Generator(device="cpu").manual_seed(config.seed)
     eval_index = torch.randperm(rays.rgb.shape[0], generator=generator)[:config.eval_rays]
     # Starts are compared on the loss they minimise (edge-weighted when detail_fraction > 0);

@@ -14,7 +14,7 @@ import tyro
 from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.inference.fit import FitConfig, FitOutcome, code_modes, fit_latent, observed_rays
+from nfr_drake.inference.fit import FitConfig, FitOutcome, fit_latent, observed_rays
 from nfr_drake.inference.forward import (
     geometric_keypoints,
     keypoint_trajectory,
@@ -27,21 +27,14 @@ from nfr_drake.nfr.model import NFRModel
 
 
 class FittedModel:
-    """A loaded model folder: networks, training codes (fit starts) and its metadata."""
+    """A loaded model folder: networks, the mean training code (fit start) and its metadata."""
 
     def __init__(self, folder: Path, device: str = "cpu"):
         self.folder = Path(folder)
-        self.model, self.codes, self.config = load_model(self.folder, device)
-        self.z_obj_mean = self.codes.mean(0)
-        self._start_codes: dict[int, torch.Tensor] = {}
+        self.model, codes, self.config = load_model(self.folder, device)
+        self.z_obj_mean = codes.mean(0)
         self.category: str = self.config["category"]
         self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
-
-    def start_codes(self, modes: int) -> torch.Tensor:
-        """The fit's start codes (M, k) for `FitConfig.code_modes` = modes (computed once)."""
-        if modes not in self._start_codes:
-            self._start_codes[modes] = code_modes(self.model, self.codes, modes)
-        return self._start_codes[modes]
 
     def check_capture(self, capture: CaptureSet, category: str | None = None) -> None:
         """NfrDrakeError when the capture (its gt.json, or `category`) is of another category."""
@@ -65,7 +58,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     """
     started = time.perf_counter()
     rays = observed_rays(capture, images)
-    outcome = fit_latent(fitted.model, rays, fit_config, fitted.start_codes(fit_config.code_modes))
+    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]

@@ -10,10 +10,9 @@ import torch
 from nfr_drake.data.cameras import look_at
 from nfr_drake.data.capture import CaptureFrame, PinholeCamera, read_capture_set
 from nfr_drake.data.captures import captures_command
-from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import (
     FitConfig,
-    code_modes,
     fit_latent,
     frame_ray_directions,
     image_detail,
@@ -84,41 +83,6 @@ def test_fit_moves_z_and_reports_every_start(model_folder, capture):
     # Refining the best start does not make its loss worse (beyond sampling noise).
     assert outcome.image_loss <= 1.05 * outcome.start_losses.min()
     assert all(p.requires_grad for p in fitted.model.parameters())  # restored after the fit
-
-
-class _TwoSidedHead:
-    """Stand-in for a model whose keypoints swing to +y or -y with the sign of code[2] (z_obj[0]),
-    as a door's handle does with its hinge side."""
-
-    @staticmethod
-    def keypoints(z):
-        side = torch.sign(z[:, 2:3])
-        handle = torch.cat([0.3 + 0.1 * z[:, :1], 0.2 * side, 0.4 + 0.0 * side], dim=-1)
-        return handle[:, None, :]  # (B, 1, 3)
-
-
-def test_code_modes_group_training_objects_by_their_motion():
-    gen = torch.Generator().manual_seed(0)
-    codes = torch.randn(40, 6, generator=gen) * 0.1
-    codes[:25, 0] += 1.0  # 25 objects with one hinge side, 15 with the other
-    codes[25:, 0] -= 1.0
-    modes = code_modes(_TwoSidedHead(), codes, 2)
-    assert modes.shape == (2, 6)
-    assert sorted(modes[:, 0].sign().tolist()) == [-1.0, 1.0]
-    torch.testing.assert_close(modes[modes[:, 0] > 0][0], codes[:25].mean(0))
-    torch.testing.assert_close(code_modes(_TwoSidedHead(), codes, 1), codes.mean(0, keepdim=True))
-    with pytest.raises(ConfigError, match="code modes"):
-        code_modes(_TwoSidedHead(), codes[:3], 4)
-
-
-def test_every_start_code_is_started_at_every_articulation(model_folder, capture):
-    fitted = FittedModel(model_folder)
-    config = FitConfig(restarts=3, explore_steps=5, max_steps=8, explore_rays=32,
-                       rays_per_step=32, eval_rays=128, code_modes=2, detail_fraction=0.5)
-    outcome = fit_latent(fitted.model, observed_rays(capture), config,
-                         fitted.start_codes(config.code_modes))
-    assert outcome.start_losses.shape == (6,) and outcome.start_q.shape == (6,)
-    assert fitted.start_codes(2).shape == (2, 8)
 
 
 def test_image_detail_marks_edges_and_thin_parts():
