@@ -239,7 +239,9 @@ def init_from_model_folder(folder: Path, module: NFRAutoDecoder) -> dict:
     """Start a training module from a model folder's weights and codes (fine-tuning).
 
     The architectures must match, except that `module` may use more positional-encoding octaves:
-    the new octaves start with zero weights (see `_widen_first_layer`). Returns config.json.
+    the new octaves start with zero weights (see `_widen_first_layer`). `module` may have more
+    objects than the model (a grown dataset whose first objects are the model's): their codes
+    start at the model's mean code plus `module`'s initial noise. Returns config.json.
     """
     folder = Path(folder)
     config = read_model_config(folder)
@@ -254,6 +256,14 @@ def init_from_model_folder(folder: Path, module: NFRAutoDecoder) -> dict:
                               "from the run's in more than added positional-encoding octaves")
     state = _read_tensors(folder / WEIGHTS_FILE)
     state = {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
+    codes, n_new = state[CODES_KEY], module.codes.num_objects
+    if len(codes) > n_new:
+        raise CheckpointError(f"{folder}: {len(codes)} object codes, the run has only {n_new} "
+                              "objects")
+    with torch.no_grad():
+        grown = module.codes.weight.detach().clone() + codes.mean(0)
+    grown[:len(codes)] = codes
+    state[CODES_KEY] = grown
     if arch.pe_frequencies < target.pe_frequencies:
         state = _widen_first_layer(state, arch.pe_frequencies, target.pe_frequencies)
     _load_strict(module, state, folder / WEIGHTS_FILE)

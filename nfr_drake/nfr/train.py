@@ -203,8 +203,8 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
           command: str = "", init_from: Path | None = None) -> Path:
     """Train a neural field on a rendered dataset; returns RUN/best (the best model folder).
 
-    `init_from`: a model folder trained on the same dataset to start from (fine-tuning); ignored
-    when resuming a run that already has checkpoints.
+    `init_from`: a model folder to start from (fine-tuning), trained on this dataset or on its
+    first objects (same spec, fewer objects); ignored when resuming a run that has checkpoints.
     """
     data_dir, run = Path(data_dir), Path(out)
     dist = init_distributed(config.device)
@@ -228,11 +228,12 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
     module = NFRAutoDecoder(config.model, data.num_objects, config.code_init_std)
     if init_from is not None and ckpt is None:
         start = init_from_model_folder(init_from, module)
-        if start.get("num_objects") != data.num_objects \
-                or start.get("training", {}).get("dataset_spec") \
-                != json.loads(json.dumps(data.spec.to_json())):
+        spec = json.loads(json.dumps(data.spec.to_json()))
+        start_spec = dict(start.get("training", {}).get("dataset_spec", {}))
+        if {**start_spec, "objects": spec["objects"]} != spec:
             raise ConfigError(f"--init-from {init_from}: that model was trained on other data "
-                              f"than {data_dir}; its object codes would not match")
+                              f"than {data_dir} (only the number of objects may grow); its object "
+                              "codes would not match")
     module = module.to(device)
     net_params = [p for n, p in module.named_parameters() if not n.startswith("codes.")]
     optimizer = torch.optim.Adam([
@@ -375,8 +376,9 @@ def train_command(data: Path, out: Path,
         out: run folder (checkpoints, logs, validation images, best model).
         config: training configuration; every field can be set, e.g. --optim.steps 20000.
         resume: continue the run in `out` from its newest checkpoint.
-        init_from: start from this model folder (same dataset; the architecture may add
-            positional-encoding octaves) instead of a fresh initialisation.
+        init_from: start from this model folder (trained on this dataset or on its first
+            objects; the architecture may add positional-encoding octaves) instead of a fresh
+            initialisation.
     """
     command = " ".join(["nfr-drake", "train"] + [shlex.quote(a) for a in sys.argv[2:]])
     best = train(data, out, config, resume=resume, command=command, init_from=init_from)

@@ -140,3 +140,18 @@ def test_init_from_refuses_other_architectures(tmp_path, tiny_config):
     for other in (replace(tiny_config, field_width=12), replace(tiny_config, pe_frequencies=0)):
         with pytest.raises(CheckpointError, match="cannot start from this model"):
             init_from_model_folder(tmp_path / "m", NFRAutoDecoder(other, 2))
+
+
+def test_init_from_grows_the_object_codes(tmp_path, tiny_config):
+    """A grown dataset keeps the model's codes for its first objects; new objects start near the
+    mean code; fewer objects than the model's are refused."""
+    torch.manual_seed(0)
+    old = NFRAutoDecoder(tiny_config, num_objects=3, code_init_std=0.5)
+    write_model_folder(tmp_path / "m", old, INFO)
+    grown = NFRAutoDecoder(tiny_config, num_objects=5, code_init_std=0.0)
+    init_from_model_folder(tmp_path / "m", grown)
+    torch.testing.assert_close(grown.codes.weight[:3], old.codes.weight, rtol=0, atol=0)
+    mean = old.codes.weight.detach().mean(0)
+    torch.testing.assert_close(grown.codes.weight[3:], mean.expand(2, -1), rtol=0, atol=1e-7)
+    with pytest.raises(CheckpointError, match="the run has only 2 objects"):
+        init_from_model_folder(tmp_path / "m", NFRAutoDecoder(tiny_config, num_objects=2))
