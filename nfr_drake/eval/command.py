@@ -12,14 +12,14 @@ from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.evaluate import Method, Prediction, capture_dirs, evaluate, summary_table
 from nfr_drake.eval.plots import plot_error_distributions, plot_handle_paths
+from nfr_drake.inference.fit import FitConfig
 
 
 def neural_field_methods(model_dir: Path, restarts: int, max_steps: int,
-                         detail_fraction: float = 0.0) -> dict[str, Method]:
+                         detail_fraction: float = FitConfig.detail_fraction) -> dict[str, Method]:
     """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
     geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
     observed views give PSNR and mIoU."""
-    from nfr_drake.inference.fit import FitConfig
     from nfr_drake.inference.forward import geometric_keypoints, render_view
     from nfr_drake.inference.infer import FittedModel, infer
 
@@ -82,7 +82,7 @@ def eval_command(
     limit: int | None = None,
     restarts: int = 4,
     max_steps: int = 400,
-    detail_fraction: float = 0.0,
+    detail_fraction: float = FitConfig.detail_fraction,
     example_plots: int = 2,
     threads: int = 2,
 ) -> None:

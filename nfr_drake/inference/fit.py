@@ -61,12 +61,12 @@ class FitConfig:
     patience: int = 60
     min_improvement: float = 0.01
     eval_rays: int = 4096
-    detail_fraction: float = 0.0
+    detail_fraction: float = 0.5
     seed: int = 0
 
     @classmethod
     def budget(cls, restarts: int = 4, max_steps: int = 400,
-               detail_fraction: float = 0.0) -> FitConfig:
+               detail_fraction: float = detail_fraction) -> FitConfig:
         """Defaults with another number of starts and steps (exploration capped by max_steps)
         and another share of edge-weighted rays."""
         return cls(restarts=restarts, max_steps=max_steps,
