@@ -53,13 +53,18 @@ Method = Callable[[CaptureSet, np.ndarray], Prediction]
 
 @dataclass
 class CaptureMetrics:
-    """Errors of one method on one capture set (NaN where a method has no such output)."""
+    """Errors of one method on one capture set (NaN where a method has no such output).
+
+    handle_error_cm: distance of the predicted handle from the true one at the observed state,
+    what a grasp must absorb.
+    """
 
     capture: str
     set_name: str
     method: str
     articulation_error: float
     keypoint_rmse_cm: float
+    handle_error_cm: float
     handle_trajectory_rmse_cm: float
     psnr_db: float
     miou: float
@@ -75,6 +80,7 @@ def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: st
     names = list(gt["keypoints"])
     kp_true = np.array([gt["keypoints"][n] for n in names])
     kp_pred = np.array([prediction.keypoints[n] for n in names])
+    handle = names.index("handle")
     traj_true = np.asarray(gt["trajectory"]["keypoints"]["handle"])
     traj_pred = np.asarray(prediction.trajectory["handle"])
     obj = gt["object"]
@@ -93,6 +99,7 @@ def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: st
         articulation_error=articulation_error(prediction.q, gt["q"], obj["joint_type"],
                                               obj["joint_upper"]),
         keypoint_rmse_cm=keypoint_rmse_cm(kp_pred, kp_true),
+        handle_error_cm=keypoint_rmse_cm(kp_pred[[handle]], kp_true[[handle]]),
         handle_trajectory_rmse_cm=trajectory_rmse_cm(traj_pred, traj_true),
         psnr_db=psnr_db, miou=miou, seconds=prediction.seconds,
         image_loss=prediction.image_loss)
@@ -120,9 +127,14 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
     called for each new prediction (to keep trajectories for plots, say).
     """
     done: dict[tuple[str, str, str], CaptureMetrics] = {}
+    fields = list(CaptureMetrics.__dataclass_fields__)
     if csv_path.exists():
         with open(csv_path) as f:
-            for row in csv.DictReader(f):
+            reader = csv.DictReader(f)
+            if reader.fieldnames is not None and reader.fieldnames != fields:
+                raise NfrDrakeError(f"{csv_path}: written by another version (columns "
+                                    f"{reader.fieldnames}); choose another --out")
+            for row in reader:
                 m = CaptureMetrics(**{k: (v if k in ("capture", "set_name", "method")
                                           else float(v)) for k, v in row.items()})
                 done[(m.capture, m.set_name, m.method)] = m
@@ -130,7 +142,7 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     results = list(done.values())
     with open(csv_path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(CaptureMetrics.__dataclass_fields__))
+        writer = csv.DictWriter(f, fieldnames=fields)
         if new_file:
             writer.writeheader()
         for set_name, root in sets.items():
@@ -154,6 +166,7 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
 
 COLUMNS = (("articulation_error", "articulation error ({unit})"),
             ("keypoint_rmse_cm", "keypoint RMSE (cm)"),
+            ("handle_error_cm", "handle error (cm)"),
             ("handle_trajectory_rmse_cm", "handle trajectory RMSE (cm)"),
             ("psnr_db", "PSNR (dB)"), ("miou", "mIoU"), ("seconds", "time (s)"))
 

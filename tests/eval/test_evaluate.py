@@ -8,6 +8,7 @@ import pytest
 
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.captures import captures_command
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.evaluate import Prediction, evaluate, score, summary_table
 
 
@@ -33,7 +34,7 @@ def _oracle(shift=(0.0, 0.0, 0.0)):
 def test_perfect_prediction_scores_zero(captures):
     capture = read_capture_set(captures / "closet_000")
     m = score(capture, _oracle()(capture, None), "s", "oracle")
-    assert m.articulation_error == 0 and m.keypoint_rmse_cm == 0
+    assert m.articulation_error == 0 and m.keypoint_rmse_cm == 0 and m.handle_error_cm == 0
     assert m.handle_trajectory_rmse_cm == 0 and m.miou == 1.0 and m.psnr_db == math.inf
 
 
@@ -45,7 +46,15 @@ def test_shift_shows_in_keypoint_errors_and_evaluation_resumes(captures, tmp_pat
     for r in results:
         assert r.keypoint_rmse_cm == pytest.approx(5.0)
         assert r.handle_trajectory_rmse_cm == pytest.approx(5.0)
+        assert r.handle_error_cm == pytest.approx(5.0)
     again = evaluate({"shifted": _oracle(shift)}, {"closets": captures}, csv_path)
     assert len(again) == 2 and len(csv_path.read_text().splitlines()) == 3
     table = summary_table(again, "deg")
     assert "| closets | shifted | 2 |" in table and "5.00" in table
+
+
+def test_results_of_another_version_are_refused(captures, tmp_path):
+    csv_path = tmp_path / "r.csv"
+    csv_path.write_text("capture,set_name,method,keypoint_rmse_cm\nx,closets,shifted,1.0\n")
+    with pytest.raises(NfrDrakeError, match="another version"):
+        evaluate({"shifted": _oracle()}, {"closets": captures}, csv_path)
