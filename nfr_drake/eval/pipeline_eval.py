@@ -115,6 +115,26 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
             f.flush()
     with open(csv_path) as f:
         rows = [r for r in csv.DictReader(f) if r["category"] == category]
+    print(SUMMARY_HEADER)
+    print(summary_row(rows))
     wins = sum(r["success"] == "True" for r in rows)
     print(f"{category}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
           f"({100 * wins / max(len(rows), 1):.0f}%)")
+
+
+SUMMARY_HEADER = ("| category | objects | planned | grasped | success | handle error at the "
+                  "observed state, median (p10-p90) | hinge on the right side | fit s (median) |\n"
+                  "|---|---|---|---|---|---|---|---|")
+
+
+def summary_row(rows: list[dict]) -> str:
+    """A markdown row (columns of `SUMMARY_HEADER`) summarising the CSV rows of one category."""
+    count = lambda key: sum(r[key] == "True" for r in rows)  # noqa: E731
+    handle = np.array([float(r["handle_error_cm"]) for r in rows])
+    p10, p50, p90 = np.percentile(handle, [10, 50, 90])
+    sides = [r["hinge_side_correct"] for r in rows if r["hinge_side_correct"] != ""]
+    side = f"{sum(s == 'True' for s in sides)} / {len(sides)}" if sides else "n/a"
+    fit = np.median([float(r["fit_seconds"]) for r in rows])
+    return (f"| {rows[0]['category']} | {len(rows)} | {count('planned')} | {count('grasped')} | "
+            f"**{100 * count('success') / len(rows):.0f}%** | {p50:.1f} cm ({p10:.1f}-{p90:.1f}) | "
+            f"{side} | {fit:.1f} |")

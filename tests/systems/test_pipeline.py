@@ -66,5 +66,8 @@ def test_pipeline_evaluation_writes_one_row_per_object_and_resumes(tmp_path, cap
     assert len(rows) == 1 and rows[0]["index"] == "0" and rows[0]["planned"] == "True"
     assert 0.0 <= float(rows[0]["handle_error_cm"]) < 50.0
     assert rows[0]["hinge_side_correct"] == ""  # drawers have no hinge
-    assert capsys.readouterr().out.strip().endswith("with head keypoints (" +
-                                                    ("100%)" if rows[0]["success"] == "True" else "0%)"))
+    out = capsys.readouterr().out.strip()
+    assert out.endswith("with head keypoints (" +
+                        ("100%)" if rows[0]["success"] == "True" else "0%)"))
+    summary = next(line for line in out.splitlines() if line.startswith("| drawer |"))
+    assert summary.startswith("| drawer | 1 | 1 |") and "| n/a |" in summary
