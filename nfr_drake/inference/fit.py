@@ -97,15 +97,21 @@ class ObservedRays:
     frame: torch.Tensor
     detail: torch.Tensor
 
+    def __post_init__(self):
+        # Cumulative detail, computed once: each step then draws in O(log N) per ray.
+        self._detail_cdf = torch.cumsum(self.detail.double().cpu(), dim=0)
+
     def sample(self, count: int, detail_fraction: float, generator: torch.Generator
                ) -> torch.Tensor:
         """`count` pixel indices: a `detail_fraction` share drawn with probability proportional
         to `detail` (with replacement), the rest uniformly."""
-        n_detail = round(detail_fraction * count) if float(self.detail.sum()) > 0 else 0
+        total = float(self._detail_cdf[-1])
+        n_detail = round(detail_fraction * count) if total > 0 else 0
         index = torch.randint(self.rgb.shape[0], (count - n_detail,), generator=generator)
         if n_detail:
-            index = torch.cat([index, torch.multinomial(self.detail, n_detail, replacement=True,
-                                                        generator=generator)])
+            u = torch.rand(n_detail, generator=generator, dtype=torch.float64) * total
+            drawn = torch.searchsorted(self._detail_cdf, u, right=True)
+            index = torch.cat([index, drawn.clamp_max(len(self._detail_cdf) - 1)])
         return index.to(self.rgb.device)
 
     def take(self, index: torch.Tensor, batch: int) -> tuple[Rays, torch.Tensor]:

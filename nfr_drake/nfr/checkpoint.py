@@ -96,6 +96,15 @@ def read_model_config(folder: Path) -> dict:
     return config
 
 
+def read_model_architecture(folder: Path) -> tuple[dict, NFRModelConfig]:
+    """config.json of a model folder and the architecture it declares."""
+    config = read_model_config(folder)
+    try:
+        return config, NFRModelConfig.from_json(config["architecture"])
+    except (KeyError, TypeError, ConfigError) as err:
+        raise CheckpointError(f"{Path(folder) / CONFIG_FILE}: bad architecture ({err})") from None
+
+
 def _read_tensors(path: Path) -> dict[str, torch.Tensor]:
     if not path.is_file():
         raise CheckpointError(f"{path}: missing")
@@ -129,11 +138,7 @@ def load_model(folder: Path, device: torch.device | str = "cpu"
                ) -> tuple[NFRModel, torch.Tensor, dict]:
     """Read a model folder: (networks in eval mode, training codes z_obj (N, k), config.json)."""
     folder = Path(folder)
-    config = read_model_config(folder)
-    try:
-        arch = NFRModelConfig.from_json(config["architecture"])
-    except (KeyError, TypeError, ConfigError) as err:
-        raise CheckpointError(f"{folder / CONFIG_FILE}: bad architecture ({err})") from None
+    config, arch = read_model_architecture(folder)
     state = _read_tensors(folder / WEIGHTS_FILE)
     codes = state.pop(CODES_KEY, None)
     if codes is None:
@@ -143,12 +148,18 @@ def load_model(folder: Path, device: torch.device | str = "cpu"
     return model.to(device).eval(), codes.to(device), config
 
 
+def _auto_decoder_state(folder: Path) -> dict[str, torch.Tensor]:
+    """A model folder's tensors named as in `NFRAutoDecoder` (networks under `model.`)."""
+    state = _read_tensors(Path(folder) / WEIGHTS_FILE)
+    if CODES_KEY not in state:
+        raise CheckpointError(f"{Path(folder) / WEIGHTS_FILE}: no {CODES_KEY}")
+    return {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
+
+
 def load_auto_decoder(folder: Path, module: NFRAutoDecoder) -> dict:
     """Load a model folder's weights and codes into an existing training module (strict)."""
     config = read_model_config(folder)
-    state = _read_tensors(Path(folder) / WEIGHTS_FILE)
-    state = {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
-    _load_strict(module, state, Path(folder) / WEIGHTS_FILE)
+    _load_strict(module, _auto_decoder_state(folder), Path(folder) / WEIGHTS_FILE)
     return config
 
 
@@ -244,18 +255,13 @@ def init_from_model_folder(folder: Path, module: NFRAutoDecoder) -> dict:
     start at the model's mean code plus `module`'s initial noise. Returns config.json.
     """
     folder = Path(folder)
-    config = read_model_config(folder)
-    try:
-        arch = NFRModelConfig.from_json(config["architecture"])
-    except (KeyError, TypeError, ConfigError) as err:
-        raise CheckpointError(f"{folder / CONFIG_FILE}: bad architecture ({err})") from None
+    config, arch = read_model_architecture(folder)
     target = module.model.config
     if replace(arch, pe_frequencies=target.pe_frequencies) != target \
             or arch.pe_frequencies > target.pe_frequencies:
         raise CheckpointError(f"{folder}: cannot start from this model: its architecture differs "
                               "from the run's in more than added positional-encoding octaves")
-    state = _read_tensors(folder / WEIGHTS_FILE)
-    state = {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
+    state = _auto_decoder_state(folder)
     codes, n_new = state[CODES_KEY], module.codes.num_objects
     if len(codes) > n_new:
         raise CheckpointError(f"{folder}: {len(codes)} object codes, the run has only {n_new} "
