@@ -112,7 +112,8 @@ def generate_dataset(spec: DatasetSpec, out: Path, workers: int = 2, shard: str 
     pending = [i for i in mine if i not in done]
     per_object = spec.articulations * spec.views
     bar = tqdm(total=len(pending) * per_object, unit="img", disable=not progress,
-               desc=f"{spec.category} {len(done & set(mine))}/{len(mine)} objects done")
+               desc=f"{spec.category}: {len(pending)} objects to render "
+                    f"({len(done & set(mine))} already on disk)")
     jobs = [(spec, str(out), i) for i in pending]
     rendered = []
     if workers <= 1 or len(jobs) <= 1:

@@ -4,14 +4,15 @@ optimisation.
 The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (the tool frame
 `pregrasp_distance` back from the handle along its own z axis), grasp (at rest, tool frame on the
 handle), then the handle keypoints from the current q to the target q (the paper's T waypoints,
-evenly spaced in q), ending at rest. The normalised times of these knots and the duration
-come from the chained IK: each segment gets the time its joints need at the velocity limits, the
-approach at least `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the
-keypoint trajectory is used; obstacles are the floor and the keypoint-derived carcass box.
+evenly spaced in q; then `end_stop_overshoot` past an end of travel), ending at rest. The
+normalised times of these knots and the duration come from the chained IK: each segment gets the
+time its joints need at the velocity limits, the approach at least
+`pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the keypoint
+trajectory is used; obstacles are the floor and the keypoint-derived carcass box.
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.math import BsplineBasis, RigidTransform, RollPitchYaw
@@ -26,7 +27,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.grasp import HandleWaypoint, carcass_box, handle_waypoints
+from nfr_drake.planning.grasp import HandleWaypoint, carcass_box, handle_tangent, handle_waypoints
 from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
@@ -79,12 +80,19 @@ class PlannerConfig:
     min_duration: float = 2.0
     max_duration: float = 15.0
     max_base_candidates: int = 12
+    end_stop_overshoot: float = 0.03
+    """When the target is an end of travel (q = 0 or 1), the handle path goes on this far past the
+    predicted end along its tangent, m, so that the object's own stop ends the motion: a predicted
+    travel a few cm short of the true one still reaches it. The arm must then be compliant, as it is
+    in simulation once grasped (`SimulationConfig.grasped_stiffness`). 0 stops at the prediction."""
 
     def __post_init__(self) -> None:
         if min(self.approach_speed, self.handle_speed, self.velocity_scale) <= 0.0:
             raise NfrDrakeError("planner: speeds and velocity_scale must be positive")
         if self.num_waypoints < 2:
             raise NfrDrakeError("planner: num_waypoints must be at least 2")
+        if self.end_stop_overshoot < 0.0:
+            raise NfrDrakeError("planner: end_stop_overshoot must not be negative")
 
 
 @dataclass
@@ -96,7 +104,7 @@ class PlanResult:
             [0, duration], s.
         X_WB: the chosen robot base pose.
         s_grasp: normalised time of the grasp; the grasp happens at t = s_grasp * duration.
-        waypoints: the handle waypoints (current q to target q).
+        waypoints: the handle waypoints (current q to target q, then any end-stop overshoot).
         flip: whether the hand is turned 180 degrees about the approach (grasp frame convention).
         seconds: wall time: "placement" (base candidates, their chained IK and any failed
             optimisations), "trajopt" (the successful optimisation), "total"; "cpu" is the
@@ -339,6 +347,10 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")
     q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
     waypoints = handle_waypoints(kt, q_values)
+    if q_target in (0.0, 1.0) and q_target != kt.q_current and config.end_stop_overshoot > 0.0:
+        end = waypoints[-1]
+        onward = np.sign(q_target - kt.q_current) * handle_tangent(kt, q_target)
+        waypoints.append(replace(end, p_WH=end.p_WH + config.end_stop_overshoot * onward))
     obstacles = [carcass_box(kt)]
     failures = []
     for X_WB in _base_candidates(kt, waypoints, config.max_base_candidates):

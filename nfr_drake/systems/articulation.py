@@ -2,7 +2,9 @@
 
 A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm's joints are PD
 controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
-compensation as feed-forward. The grasp is a ball constraint between the tool frame's origin and a
+compensation as feed-forward. Once the hand holds the handle the arm turns compliant
+(`SimulationConfig.grasped_stiffness`, `CompliantCommand`): the true joint of the object, not the
+predicted path, then decides where the handle goes, as with an impedance-controlled arm. The grasp is a ball constraint between the tool frame's origin and a
 grip point of the true handle (optionally two along the bar: a hinge about it). Fingers can close
 anywhere on a bar's free stretch (`SceneObject.grip_half_length`), so grip points are laid along it
 every `grip_spacing`; a knob has one. All are inactive until the hand rests on the handle; then
@@ -22,10 +24,11 @@ from pydrake.multibody.plant import (
 from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.planning.planner import PlanResult
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.robot import (
@@ -50,7 +53,8 @@ class SimulationConfig:
 
     time_step: float = 0.002
     dwell: float = 0.5
-    """Time the hand rests on the handle while the fingers close, s; the grasp starts half-way."""
+    """Time the hand rests on the handle while the fingers close, s. Half-way the fingers close once:
+    the grasp holds if the grip point is then inside `capture_half_extents`, else it never does."""
     settle: float = 0.5
     """Time after the plan ends before the outcome is measured, s."""
     capture_half_extents: tuple[float, float, float] = (0.02, 0.03, 0.02)
@@ -70,6 +74,14 @@ class SimulationConfig:
     revolute_tolerance: float = float(np.radians(5.0))
     prismatic_tolerance: float = 0.02
     drift_tolerance: float = 0.02
+    grasped_stiffness: float = 0.1
+    """Fraction of the arm's PD gains kept from the grasp on (1 = as stiff as during the approach).
+    A stiff arm drags the held handle along the planned path, which is off the true one by the
+    keypoint error; a compliant one lets the object's joint guide the hand."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.grasped_stiffness <= 1.0:
+            raise NfrDrakeError("simulation: grasped_stiffness must lie in (0, 1]")
 
 
 @dataclass
@@ -82,9 +94,14 @@ class SimulationResult:
         joint_type: "revolute" (errors in rad) or "prismatic" (m).
         q_target, q_final: articulations in [0, 1].
         joint_error: |final - target| joint value, rad or m.
-        max_drift: largest distance between the tool origin and the held grip point while grasped, m.
+        grasp_offset: distance from the tool origin to the grip point when the fingers closed, m
+            (inside the capture region when grasped; the closing fingers take it up).
+        max_drift: largest distance between the tool origin and the held grip point from the end
+            of the grasp (fingers closed) on: the hand slipping on or dragging the handle, m. When
+            not grasped, the distance at the end.
         max_constraint_force: largest force the hand (and any contact) exerts on the moving part
-            while grasped, from its bodies' momentum balance, N.
+            from the end of the grasp on (the end stop's impact included), from its bodies'
+            momentum balance, N.
         times: sample times, s, shape (M,); q_object: articulation, (M,); p_W_tool, p_W_handle: (M, 3),
             p_W_handle being the grip point (nearest the tool until the grasp, then the held one).
     """
@@ -95,6 +112,7 @@ class SimulationResult:
     q_target: float
     q_final: float
     joint_error: float
+    grasp_offset: float
     max_drift: float
     max_constraint_force: float
     times: np.ndarray = field(repr=False)
@@ -106,8 +124,41 @@ class SimulationResult:
         unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
         verdict = "SUCCESS" if self.success else "FAILURE"
         return (f"{verdict}: articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
-                f"{self.joint_error * scale:.1f} {unit}), grasped {self.grasped}, hand-to-handle drift "
+                f"{self.joint_error * scale:.1f} {unit}), grasped {self.grasped} (offset "
+                f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
                 f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N")
+
+
+class CompliantCommand(LeafSystem):
+    """Scales the arm's implicit PD gains from time `t_soft` on, by rewriting its desired state.
+
+    The plant's PD actuators apply tau = Kp (q_d - q) + Kd (v_d - v). Commanding
+    q_c = q + a (q_d - q) and v_c = v + a (v_d - v), with the measured state (q, v), gives
+    a Kp (q_d - q) + a Kd (v_d - v) towards the plan; the measured part is taken at the start of the
+    step, so the implicit solve adds only damping, kept stable at any a in (0, 1].
+
+    Input ports: "desired_state" [q_d; v_d] and "measured_state" [q; v] of the robot, each
+    2 * num_positions values (arm joints first, then fingers). Output port "command": [q_c; v_c].
+    Only the first `num_scaled` joints (the arm) are scaled; the fingers keep their gains.
+    """
+
+    def __init__(self, num_positions: int, num_scaled: int, t_soft: float, stiffness: float):
+        super().__init__()
+        self._n, self._t_soft = num_positions, t_soft
+        self._scale = np.ones(num_positions)
+        self._scale[:num_scaled] = stiffness
+        self.DeclareVectorInputPort("desired_state", 2 * num_positions)
+        self.DeclareVectorInputPort("measured_state", 2 * num_positions)
+        self.DeclareVectorOutputPort("command", 2 * num_positions, self._calc_command)
+
+    def _calc_command(self, context, output: BasicVector) -> None:
+        desired = self.get_input_port(0).Eval(context)
+        if context.get_time() < self._t_soft:
+            output.SetFromVector(desired)
+            return
+        measured = self.get_input_port(1).Eval(context)
+        a = np.r_[self._scale, self._scale]
+        output.SetFromVector(measured + a * (desired - measured))
 
 
 def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig) -> PiecewisePolynomial:
@@ -183,7 +234,12 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
     builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
     desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, config)))
-    builder.Connect(desired.get_output_port(), plant.get_desired_state_input_port(robot))
+    t_activate = plan.t_grasp + 0.5 * config.dwell
+    command = builder.AddNamedSystem("compliance", CompliantCommand(
+        plant.num_positions(robot), NUM_ARM_JOINTS, t_activate, config.grasped_stiffness))
+    builder.Connect(desired.get_output_port(), command.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
+    builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
     AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth)
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
@@ -204,18 +260,20 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     simulator.Initialize()
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
-    t_activate = plan.t_grasp + 0.5 * config.dwell
     end = plan.duration + config.dwell + config.settle
-    grasped = False
+    t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
+    grasped, grasp_offset = False, float("nan")
     times, q_obj, p_tool, p_handle, forces = [], [], [], [], []
-    for t in np.r_[np.arange(0.0, end, config.sample_period), end]:
+    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, end])
+    for t in samples:
         simulator.AdvanceTo(t)
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
         if not grasped:  # until the grasp: the grip point nearest the tool
             grip = int(np.argmin(np.linalg.norm(grips_B - X_WHb.inverse() @ X_WT.translation(), axis=1)))
         p_WH = X_WHb @ grips_B[grip]
-        if not grasped and t >= t_activate:
+        if t == t_activate:  # the fingers close once: they hold the handle or miss it
+            grasp_offset = float(np.linalg.norm(X_WT.translation() - p_WH))
             if np.all(np.abs(X_WT.inverse() @ p_WH) <= config.capture_half_extents):
                 for cid in constraint_ids[grip]:
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
@@ -224,7 +282,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         q_obj.append((joint.GetOnePosition(plant_context) - lower) / span)
         p_tool.append(X_WT.translation())
         p_handle.append(p_WH)
-        if grasped:
+        if grasped and t >= t_pull:
             forces.append(_force_on_moving_part(plant, plant_context, moving_bodies, joint))
     if meshcat is not None:
         meshcat.StopRecording()
@@ -233,13 +291,13 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     p_tool, p_handle = np.array(p_tool), np.array(p_handle)
     times = np.array(times)
     drift = np.linalg.norm(p_tool - p_handle, axis=1)
-    max_drift = float(drift[times >= t_activate].max()) if grasped else float(drift[-1])
+    max_drift = float(drift[times >= t_pull].max()) if grasped else float(drift[-1])
     revolute = joint.type_name() == "revolute"
     joint_error = abs(q_obj[-1] - q_target) * span
     tolerance = config.revolute_tolerance if revolute else config.prismatic_tolerance
     success = grasped and joint_error <= tolerance and max_drift <= config.drift_tolerance
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
-                            float(q_obj[-1]), float(joint_error), max_drift,
+                            float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
 
 

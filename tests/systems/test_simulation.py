@@ -5,8 +5,10 @@ import pytest
 from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.planning.task import read_keypoints, run_task
-from nfr_drake.systems.articulation import grip_points
+from nfr_drake.systems.articulation import CompliantCommand, grip_points
 from nfr_drake.systems.scene_objects import SceneObject
 
 
@@ -45,7 +47,8 @@ def test_shift_along_the_bar_is_still_a_grasp(drawer_object):
 @pytest.mark.parametrize(("offset_W", "grasped"), [
     ([0.0, 0.0, 0.025], True),   # the drawer's bar is horizontal: vertical is the closing axis
     ([0.03, 0.0, 0.0], False),   # along the approach: beyond the finger pads
-])
+    ([-0.03, 0.0, 0.0], False),  # deeper: the pull sweeps the gripper over the bar, but the
+])                               # fingers closed (on nothing) before it
 def test_capture_region_is_the_open_gripper(drawer_object, offset_W, grasped):
     outcome = run_task(drawer_object, 1.0, keypoints=read_keypoints(drawer_object).shifted(offset_W))
     assert outcome.simulation.grasped == grasped, outcome.simulation.summary()
@@ -68,3 +71,30 @@ def test_closet_opens_and_closes():
     closed = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.6), 0.0)
     assert closed.success, closed.simulation.summary() if closed.simulation else closed.planning_error
     assert closed.simulation.q_final < 0.06
+
+
+def test_compliant_command_scales_the_arm_gains_after_the_switch():
+    command = CompliantCommand(num_positions=3, num_scaled=2, t_soft=1.0, stiffness=0.25)
+    context = command.CreateDefaultContext()
+    desired, measured = np.arange(1.0, 7.0), np.zeros(6)
+    command.get_input_port(0).FixValue(context, desired)
+    command.get_input_port(1).FixValue(context, measured)
+    context.SetTime(0.5)  # before the switch: the plan itself
+    np.testing.assert_allclose(command.get_output_port().Eval(context), desired)
+    context.SetTime(1.0)  # after: a quarter of the way from the measured state for the arm only
+    np.testing.assert_allclose(command.get_output_port().Eval(context), [0.25, 0.5, 3.0, 1.0, 1.25, 6.0])
+
+
+def test_pull_past_a_short_prediction_reaches_the_stop(drawer_object):
+    """Keypoints whose travel is 2.5 cm short: pulled past the predicted end on a compliant arm, the
+    drawer still opens fully; stopping at the prediction leaves it short of the 2 cm tolerance."""
+    truth = read_keypoints(drawer_object)
+    travel = np.linalg.norm(truth.point("handle", 1.0) - truth.point("handle", 0.0))
+    shrink = (travel - 0.025) / travel
+    short = KeypointTrajectory(truth.category, truth.q_grid, truth.names, truth.at(truth.q_grid * shrink),
+                               truth.q_current)
+    reached = run_task(drawer_object, 1.0, keypoints=short)
+    assert reached.success, reached.simulation.summary()
+    stopped = run_task(drawer_object, 1.0, keypoints=short, planner_config=PlannerConfig(end_stop_overshoot=0.0))
+    assert stopped.simulation.grasped and not stopped.success
+    assert stopped.simulation.joint_error > 0.02
