@@ -224,7 +224,7 @@ def _widen_first_layer(state: dict[str, torch.Tensor], old_frequencies: int,
     """Remap the field's first generated layer from `old_frequencies` to `new_frequencies`
     octaves of `positional_encoding`: the old inputs keep their weights, the new octaves get zero
     weights in the base weight and in the hypernetwork's output, so the function is unchanged."""
-    old_in, new_in = encoding_dim(old_frequencies), encoding_dim(new_frequencies)
+    new_in = encoding_dim(new_frequencies)
     # Input index map: [x (3), sin (3 F), cos (3 F)] in both encodings.
     old_to_new = torch.cat([torch.arange(3), 3 + torch.arange(3 * old_frequencies),
                             3 + 3 * new_frequencies + torch.arange(3 * old_frequencies)])

@@ -26,6 +26,13 @@ _Z = np.array([0.0, 0.0, 1.0])
 CARCASS_SETBACK = 0.05
 """Distance from the handle (at q = 0) back to the front face of the keypoint-derived carcass box, m.
 Handles of both categories stand 4.5-7 cm in front of the carcass."""
+PANEL_SETBACK = 0.03
+"""Distance from the handle back to the front face of an open door's obstacle box, m: less than any
+handle's standoff from its door (4.5-7 cm from the carcass, less the door's thickness), more than
+the fingertips reach past the grasp point (1 cm) plus the planner's clearance."""
+_PANEL_THICKNESS = 0.02
+_PANEL_EDGE_MARGIN = 0.05  # door beyond the handle, away from the hinge, m
+_PANEL_MIN_ANGLE_DEG = 10.0  # below this opening the carcass box already covers the door
 _DRAWER_HALF_WIDTH = 0.4
 _DRAWER_DEPTH = 0.5
 _DRAWER_HEIGHT = 0.42
@@ -119,3 +126,36 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
     centre = (front - depth / 2) * n + centre_lat * lateral + height / 2 * _Z
     R = RotationMatrix(np.column_stack([n, lateral, _Z]))
     return ObstacleBox("carcass", size, RigidTransform(R, centre))
+
+
+def door_panel_box(kt: KeypointTrajectory) -> ObstacleBox | None:
+    """A thin box standing for an open door at kt.q_current, from the keypoints alone; None for a
+    drawer or a door opened less than `_PANEL_MIN_ANGLE_DEG` (the carcass box covers it).
+
+    It reaches from the hinge axis to `_PANEL_EDGE_MARGIN` past the handle and from `hinge_bottom`
+    to `hinge_top`; its front face lies `PANEL_SETBACK` behind the handle across the door's outward
+    normal (the handle tangent). It only holds for the approach: the door moves once grasped.
+    """
+    if kt.category != "closet":
+        return None
+    q = kt.q_current
+    a, b = kt.point("hinge_bottom", q), kt.point("hinge_top", q)
+    axis = _unit(b - a, "the hinge axis")
+    axis = axis if axis @ _Z >= 0 else -axis
+
+    def across(q_: float) -> np.ndarray:  # hinge axis to handle, horizontal, at q_
+        r = kt.point("handle", q_) - kt.point("hinge_bottom", q_)
+        return _unit(r - (r @ _Z) * _Z, "the hinge-to-handle direction")
+
+    if np.degrees(np.arccos(np.clip(across(q) @ across(0.0), -1.0, 1.0))) < _PANEL_MIN_ANGLE_DEG:
+        return None
+    n = handle_tangent(kt, q)
+    n = _unit(n - (n @ axis) * axis, "the door's normal")
+    u = np.cross(axis, n)  # across the door; (n, u, axis) is right-handed
+    h = kt.point("handle", q) - a
+    width = abs(h @ u) + _PANEL_EDGE_MARGIN
+    height = abs((b - a) @ axis)
+    depth_centre = h @ n - PANEL_SETBACK - _PANEL_THICKNESS / 2
+    centre = (a + b) / 2 + depth_centre * n + np.sign(h @ u) * (width / 2) * u
+    R = RotationMatrix(np.column_stack([n, u, axis]))
+    return ObstacleBox("open_door", np.array([_PANEL_THICKNESS, width, height]), RigidTransform(R, centre))

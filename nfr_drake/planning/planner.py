@@ -4,11 +4,12 @@ optimisation.
 The motion over normalised time s in [0, 1]: start at rest (s = 0), pre-grasp (the tool frame
 `pregrasp_distance` back from the handle along its own z axis), grasp (at rest, tool frame on the
 handle), then the handle keypoints from the current q to the target q (the paper's T waypoints,
-evenly spaced in q; then `end_stop_overshoot` past an end of travel), ending at rest. The
+evenly spaced in q; then `end_stop_overshoot` past full opening), ending at rest. The
 normalised times of these knots and the duration come from the chained IK: each segment gets the
 time its joints need at the velocity limits, the approach at least
 `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the keypoint
-trajectory is used; obstacles are the floor and the keypoint-derived carcass box.
+trajectory is used; obstacles are the floor and the keypoint-derived carcass box, and until the
+grasp an open door's panel.
 """
 
 import time
@@ -27,7 +28,13 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.grasp import HandleWaypoint, carcass_box, handle_tangent, handle_waypoints
+from nfr_drake.planning.grasp import (
+    HandleWaypoint,
+    carcass_box,
+    door_panel_box,
+    handle_tangent,
+    handle_waypoints,
+)
 from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
@@ -81,10 +88,12 @@ class PlannerConfig:
     max_duration: float = 15.0
     max_base_candidates: int = 12
     end_stop_overshoot: float = 0.03
-    """When the target is an end of travel (q = 0 or 1), the handle path goes on this far past the
-    predicted end along its tangent, m, so that the object's own stop ends the motion: a predicted
-    travel a few cm short of the true one still reaches it. The arm must then be compliant, as it is
-    in simulation once grasped (`SimulationConfig.grasped_stiffness`). 0 stops at the prediction."""
+    """When the target is full opening (q = 1), the handle path goes on this far past the predicted
+    end along its tangent, m, so that the object's own stop ends the motion: a predicted travel a few
+    cm short of the true one still reaches it. The arm must then be compliant, as it is in
+    simulation once grasped (`SimulationConfig.grasped_stiffness`). Closing (q = 0) has no
+    overshoot: past the shut position the hand would run into the carcass. 0 stops at the
+    prediction."""
 
     def __post_init__(self) -> None:
         if min(self.approach_speed, self.handle_speed, self.velocity_scale) <= 0.0:
@@ -172,6 +181,15 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
     return [X for _, X in scored[:max_count]]
 
 
+@dataclass
+class _Scenes:
+    """The planning scenes of one base pose: `approach` (up to the grasp: also an open door's
+    panel, `grasp.door_panel_box`) and `follow` (once grasped: the door moves with the hand)."""
+
+    approach: PlanningScene
+    follow: PlanningScene
+
+
 class _Stage:
     """One IK target: the point `p_GQ` of the tool frame G at `p_WQ`, and the tool's orientation."""
 
@@ -210,10 +228,11 @@ def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> 
     return stages
 
 
-def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray, cfg: PlannerConfig
+def _chained_ik(scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray, cfg: PlannerConfig
                 ) -> tuple[list[np.ndarray] | None, str]:
-    """Solve the stages in order, each seeded by and kept close to the last; (solutions, failed stage)."""
-    plant = scene.plant
+    """Solve the stages in order, each seeded by and kept close to the last; (solutions, failed stage).
+    Pre-grasp and grasp keep clear of the approach obstacles too."""
+    scene = scenes.follow
     solver = SnoptSolver()
     q_prev = scene.full_q(q_start)
     # First seed: the home posture turned to face the handle.
@@ -222,10 +241,11 @@ def _chained_ik(scene: PlanningScene, stages: list[_Stage], q_start: np.ndarray,
     ik_options = SolverOptions()
     ik_options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
     sols = []
-    for stage in stages:
-        ik = InverseKinematics(plant, scene.plant_context)
+    for k, stage in enumerate(stages):
+        stage_scene = scenes.approach if k < 2 else scenes.follow
+        ik = InverseKinematics(stage_scene.plant, stage_scene.plant_context)
         q = ik.q()
-        for _, c in _constraints(scene, stage, cfg):
+        for _, c in _constraints(stage_scene, stage, cfg):
             ik.prog().AddConstraint(c, q)
         ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance, 0.05)
         ik.prog().AddBoundingBoxConstraint(q_prev[NUM_ARM_JOINTS:], q_prev[NUM_ARM_JOINTS:],
@@ -270,28 +290,29 @@ def _knot_times(stages: list[_Stage], q_knots: np.ndarray, vmax: np.ndarray, cfg
     return s_knots, duration
 
 
-def _optimise(scene: PlanningScene, stages: list[_Stage], ik_sols: list[np.ndarray], q_start: np.ndarray,
+def _optimise(scenes: _Scenes, stages: list[_Stage], ik_sols: list[np.ndarray], q_start: np.ndarray,
               cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, float, list[str]]:
     """KinematicTrajectoryOptimization at a fixed duration (velocity and acceleration bounds are then
     linear), warm-started from the chained IK; retried once at 1.6 times the duration.
 
     Returns the trajectory (None on failure), the grasp's normalised time, the failed constraints.
     """
-    q0 = scene.full_q(q_start)
+    q0 = scenes.follow.full_q(q_start)
     q_knots = np.stack([q0, *ik_sols])
-    vmax = cfg.velocity_scale * scene.plant.GetVelocityUpperLimits()
+    vmax = cfg.velocity_scale * scenes.follow.plant.GetVelocityUpperLimits()
     s_knots, duration = _knot_times(stages, q_knots, vmax, cfg)
     failed = []
     for scale in (1.0, 1.6):
         T = min(scale * duration, cfg.max_duration)
-        traj, failed = _optimise_at(scene, stages, s_knots, q_knots, T, cfg)
+        traj, failed = _optimise_at(scenes, stages, s_knots, q_knots, T, cfg)
         if traj is not None:
             break
     return traj, float(s_knots[2]), failed
 
 
-def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray, q_knots: np.ndarray,
+def _optimise_at(scenes: _Scenes, stages: list[_Stage], s_knots: np.ndarray, q_knots: np.ndarray,
                  duration: float, cfg: PlannerConfig) -> tuple[BsplineTrajectory | None, list[str]]:
+    scene = scenes.follow
     plant = scene.plant
     nq = plant.num_positions()
     trajopt = KinematicTrajectoryOptimization(nq, cfg.num_control_points, spline_order=4)
@@ -316,10 +337,11 @@ def _optimise_at(scene: PlanningScene, stages: list[_Stage], s_knots: np.ndarray
     for stage, s in zip(stages, s_knots[1:], strict=True):
         for name, c in _constraints(scene, stage, cfg):
             described.append((name, trajopt.AddPathPositionConstraint(c, s)))
-    collision = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, scene.plant_context,
-                                                    None, 0.05)
+    collision = {name: MinimumDistanceLowerBoundConstraint(sc.plant, cfg.min_distance, sc.plant_context,
+                                                           None, 0.05)
+                 for name, sc in (("approach", scenes.approach), ("follow", scene))}
     for s in np.linspace(0.0, 1.0, cfg.collision_samples + 1)[1:]:
-        binding = trajopt.AddPathPositionConstraint(collision, s)
+        binding = trajopt.AddPathPositionConstraint(collision["approach" if s <= s_knots[2] else "follow"], s)
         described.append((f"collision clearance at s={s:.2f}", binding))
     for name, binding in described:
         binding.evaluator().set_description(name)
@@ -347,22 +369,23 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")
     q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
     waypoints = handle_waypoints(kt, q_values)
-    if q_target in (0.0, 1.0) and q_target != kt.q_current and config.end_stop_overshoot > 0.0:
+    if q_target == 1.0 and kt.q_current < 1.0 and config.end_stop_overshoot > 0.0:
         end = waypoints[-1]
-        onward = np.sign(q_target - kt.q_current) * handle_tangent(kt, q_target)
-        waypoints.append(replace(end, p_WH=end.p_WH + config.end_stop_overshoot * onward))
-    obstacles = [carcass_box(kt)]
+        onward = config.end_stop_overshoot * handle_tangent(kt, 1.0)
+        waypoints.append(replace(end, p_WH=end.p_WH + onward))
+    obstacles, door = [carcass_box(kt)], door_panel_box(kt)
     failures = []
     for X_WB in _base_candidates(kt, waypoints, config.max_base_candidates):
-        scene = build_planning_scene(X_WB, obstacles)
+        follow = build_planning_scene(X_WB, obstacles)
+        scenes = _Scenes(build_planning_scene(X_WB, [*obstacles, door]) if door else follow, follow)
         for flip in (True, False):
             stages = _stages(waypoints, config, flip)
-            sols, failed = _chained_ik(scene, stages, q_start, config)
+            sols, failed = _chained_ik(scenes, stages, q_start, config)
             if sols is None:
                 failures.append(f"IK of {failed}")
                 continue
             t1 = time.perf_counter()
-            traj, s_grasp, failed_constraints = _optimise(scene, stages, sols, q_start, config)
+            traj, s_grasp, failed_constraints = _optimise(scenes, stages, sols, q_start, config)
             t2 = time.perf_counter()
             if traj is None:
                 failures.append("trajectory optimisation: " + ", ".join(failed_constraints))

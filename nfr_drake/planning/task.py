@@ -10,7 +10,7 @@ from pydrake.geometry import Meshcat
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
-from nfr_drake.planning.grasp import carcass_box
+from nfr_drake.planning.grasp import carcass_box, door_panel_box
 from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, PlanResult, plan_articulation
 from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
@@ -77,7 +77,9 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         if reference is not None:
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
                                      (reference.q_current, q_target), line_width=2.0)
-        draw_obstacle(meshcat, carcass_box(kt))
+        for box in (carcass_box(kt), door_panel_box(kt)):
+            if box is not None:
+                draw_obstacle(meshcat, box)
         # Look at the handle path and the robot from the side, from above.
         p_handle = kt.point("handle", (kt.q_current + q_target) / 2)
         p_base = plan.X_WB.translation()

@@ -4,12 +4,13 @@ A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm
 controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
 compensation as feed-forward. Once the hand holds the handle the arm turns compliant
 (`SimulationConfig.grasped_stiffness`, `CompliantCommand`): the true joint of the object, not the
-predicted path, then decides where the handle goes, as with an impedance-controlled arm. The grasp is a ball constraint between the tool frame's origin and a
-grip point of the true handle (optionally two along the bar: a hinge about it). Fingers can close
-anywhere on a bar's free stretch (`SceneObject.grip_half_length`), so grip points are laid along it
-every `grip_spacing`; a knob has one. All are inactive until the hand rests on the handle; then
-the grip point nearest the tool origin is switched on through the context, only if it lies inside
-the open gripper (`capture_half_extents`, in the tool frame).
+predicted path, then decides where the handle goes, as with an impedance-controlled arm. The
+grasp is a ball constraint between the tool frame's origin and a grip point of the true handle
+(optionally two along the bar: a hinge about it). Fingers can close anywhere on a bar's free
+stretch (`SceneObject.grip_half_length`), so grip points are laid along it every `grip_spacing`;
+a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
+the tool origin is switched on through the context, only if it lies inside the open gripper
+(`capture_half_extents`, in the tool frame).
 """
 
 from dataclasses import dataclass, field

@@ -6,7 +6,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.grasp import carcass_box, handle_waypoints
+from nfr_drake.planning.grasp import PANEL_SETBACK, carcass_box, door_panel_box, handle_waypoints
 from nfr_drake.planning.keypoints import KeypointTrajectory
 
 X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, 0.4), [0.3, -0.2, 0.0])
@@ -72,3 +72,21 @@ def test_closet_grasp_frame_and_box():
     assert np.any(np.abs(p_BH) > box.size / 2 + 0.04)  # the handle is well outside the box
     p_BG = box.X_WB.inverse() @ obj.keypoints(0.0)["goal"]
     assert np.all(np.abs(p_BG) <= box.size / 2 + 1e-9)  # the carcass centre is inside
+
+
+def test_open_door_panel_box():
+    """An open door's approach obstacle: a thin box facing like the true door, its front face
+    PANEL_SETBACK behind the handle; none for a shut door or a drawer."""
+    obj = _object("closet")
+    assert door_panel_box(KeypointTrajectory.from_articulated_object(obj, X_WO, 0.0)) is None
+    drawer = KeypointTrajectory.from_articulated_object(_object("drawer"), X_WO, 0.8)
+    assert door_panel_box(drawer) is None
+    q = 0.8
+    box = door_panel_box(KeypointTrajectory.from_articulated_object(obj, X_WO, q))
+    n_W = X_WO.rotation() @ obj.X_OM(q)[:3, :3] @ np.array([1.0, 0, 0])  # the door's outward normal
+    assert box.X_WB.rotation().col(0) @ n_W > np.cos(np.radians(20))
+    p_BH = box.X_WB.inverse() @ (X_WO @ obj.keypoints(q)["handle"])
+    assert p_BH[0] == pytest.approx(box.size[0] / 2 + PANEL_SETBACK, abs=1e-9)
+    assert abs(p_BH[1]) < box.size[1] / 2 and abs(p_BH[2]) < box.size[2] / 2
+    p_BA = box.X_WB.inverse() @ (X_WO @ obj.keypoints(q)["hinge_bottom"])
+    assert abs(p_BA[1]) == pytest.approx(box.size[1] / 2, abs=1e-9)  # from the hinge line on

@@ -71,6 +71,9 @@ def test_closet_opens_and_closes():
     closed = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.6), 0.0)
     assert closed.success, closed.simulation.summary() if closed.simulation else closed.planning_error
     assert closed.simulation.q_final < 0.06
+    # The arm reached the open door's handle without pushing the door (grasp.door_panel_box).
+    before = closed.simulation.times < closed.plan.t_grasp
+    np.testing.assert_allclose(closed.simulation.q_object[before], 0.6, atol=0.005)
 
 
 def test_compliant_command_scales_the_arm_gains_after_the_switch():
@@ -95,6 +98,7 @@ def test_pull_past_a_short_prediction_reaches_the_stop(drawer_object):
                                truth.q_current)
     reached = run_task(drawer_object, 1.0, keypoints=short)
     assert reached.success, reached.simulation.summary()
-    stopped = run_task(drawer_object, 1.0, keypoints=short, planner_config=PlannerConfig(end_stop_overshoot=0.0))
+    stopped = run_task(drawer_object, 1.0, keypoints=short,
+                       planner_config=PlannerConfig(end_stop_overshoot=0.0))
     assert stopped.simulation.grasped and not stopped.success
     assert stopped.simulation.joint_error > 0.02
