@@ -77,7 +77,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
-                          max_steps: int = 400, threads: int = 1) -> None:
+                          max_steps: int = 400, image_size: int = 64, threads: int = 1) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
     Args:
@@ -91,13 +91,15 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
             planning evaluation, 1.0 for drawers).
         keypoints: keypoint source ("geometry" or "head").
         max_steps: fit steps at most.
+        image_size: square image size of the ten perception cameras, pixels.
         threads: torch CPU threads (more threads than free cores slows the fit many times over).
     """
     torch.set_num_threads(threads)
     if q_target is None:
         q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
-                    q_target=q_target, keypoints=keypoints, max_steps=max_steps)
+                    q_target=q_target, keypoints=keypoints, max_steps=max_steps,
+                    image_size=image_size)
     done = set()
     if csv_path.exists():
         with open(csv_path) as f:
