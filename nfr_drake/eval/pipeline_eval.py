@@ -77,7 +77,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
-                          max_steps: int = 400, image_size: int = 64, threads: int = 1) -> None:
+                          max_steps: int = 400, image_size: int = Scenario.image_size,
+                          threads: int = 1) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
     Args:

@@ -10,7 +10,8 @@ from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 
 def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: int = 0,
-                 q_target: float = 0.6, views: int = 10, image_size: int = 64, max_steps: int = 400,
+                 q_target: float = 0.6, views: int = 10, image_size: int = Scenario.image_size,
+                 max_steps: int = 400,
                  replay: Path = Path("out/demo/open_closet.html"), threads: int = 1) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation.
