@@ -31,7 +31,6 @@ from nfr_drake.eval.evaluate import capture_dirs
 from nfr_drake.inference.fit import FitConfig, ObservedRays, fit_latent, observed_rays
 from nfr_drake.inference.forward import keypoint_trajectory
 from nfr_drake.inference.infer import FittedModel
-from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.latent import q_to_z_art
 from nfr_drake.nfr.rays import Rays
 
@@ -58,7 +57,7 @@ def full_image_mse(fitted: FittedModel, z: torch.Tensor, rays: ObservedRays,
 
 def side_start_codes(fitted: FittedModel) -> list[torch.Tensor]:
     """Mean training code of each hinge side (sides from the keypoint head at q = 0)."""
-    _, codes, _ = load_model(fitted.folder)
+    codes = fitted.codes
     with torch.no_grad():
         z = torch.cat([q_to_z_art(torch.zeros(len(codes))), codes], -1)
         kp = fitted.model.keypoints(z)

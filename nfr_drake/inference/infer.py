@@ -27,12 +27,13 @@ from nfr_drake.nfr.model import NFRModel
 
 
 class FittedModel:
-    """A loaded model folder: networks, the mean training code (fit start) and its metadata."""
+    """A loaded model folder: networks, the training codes (N, k) and their mean (the fit's
+    start), and its metadata."""
 
     def __init__(self, folder: Path, device: str = "cpu"):
         self.folder = Path(folder)
-        self.model, codes, self.config = load_model(self.folder, device)
-        self.z_obj_mean = codes.mean(0)
+        self.model, self.codes, self.config = load_model(self.folder, device)
+        self.z_obj_mean = self.codes.mean(0)
         self.category: str = self.config["category"]
         self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
 
