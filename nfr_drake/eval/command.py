@@ -15,8 +15,7 @@ from nfr_drake.eval.plots import plot_error_distributions, plot_handle_paths
 from nfr_drake.inference.fit import FitConfig
 
 
-def neural_field_methods(model_dir: Path, restarts: int, max_steps: int,
-                         detail_fraction: float = FitConfig.detail_fraction) -> dict[str, Method]:
+def neural_field_methods(model_dir: Path, config: FitConfig) -> dict[str, Method]:
     """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
     geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
     observed views give PSNR and mIoU."""
@@ -24,7 +23,6 @@ def neural_field_methods(model_dir: Path, restarts: int, max_steps: int,
     from nfr_drake.inference.infer import FittedModel, infer
 
     fitted = FittedModel(model_dir)
-    config = FitConfig.budget(restarts, max_steps, detail_fraction)
     names = fitted.keypoint_names
     last: dict[str, tuple] = {}  # capture root -> (prediction with head keypoints, fitted z)
 
@@ -83,6 +81,7 @@ def eval_command(
     restarts: int = 4,
     max_steps: int = 400,
     detail_fraction: float = FitConfig.detail_fraction,
+    focus_steps: int = FitConfig.focus_steps,
     example_plots: int = 2,
     threads: int = 2,
 ) -> None:
@@ -101,13 +100,15 @@ def eval_command(
         restarts: neural-field fit starts.
         max_steps: neural-field fit steps at most.
         detail_fraction: share of the fit's rays drawn where the photos have edges.
+        focus_steps: steps of the fit's final close look at the handle (0: none).
         example_plots: handle-path plots per set.
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
     methods: dict[str, Method] = {}
     if model is not None:
-        methods.update(neural_field_methods(model, restarts, max_steps, detail_fraction))
+        config = FitConfig.budget(restarts, max_steps, detail_fraction, focus_steps)
+        methods.update(neural_field_methods(model, config))
     if baseline is not None:
         methods["baseline"] = baseline_method(baseline)
     if not methods:

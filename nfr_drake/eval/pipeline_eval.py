@@ -77,8 +77,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
-                          max_steps: int = 400, image_size: int = Scenario.image_size,
-                          threads: int = 1) -> None:
+                          max_steps: int = 400, focus_steps: int = Scenario.focus_steps,
+                          image_size: int = Scenario.image_size, threads: int = 1) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
     Args:
@@ -92,6 +92,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
             planning evaluation, 1.0 for drawers).
         keypoints: keypoint source ("geometry" or "head").
         max_steps: fit steps at most.
+        focus_steps: steps of the fit's final close look at the handle (0: none).
         image_size: square image size of the ten perception cameras, pixels.
         threads: torch CPU threads (more threads than free cores slows the fit many times over).
     """
@@ -100,7 +101,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, max_steps=max_steps,
-                    image_size=image_size)
+                    focus_steps=focus_steps, image_size=image_size)
     done = set()
     if csv_path.exists():
         with open(csv_path) as f:

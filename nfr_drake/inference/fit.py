@@ -7,6 +7,13 @@ codes, their z_art started at evenly spread articulations, are fitted together f
 refined alone until its loss has not improved by `min_improvement` for `patience` steps, or
 `max_steps` steps in all have run.
 
+A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
+steps half of the rays pass within `focus_radius_m` of where the keypoint head puts that part. A
+handle is one or two pixels wide, so it barely weighs in an image loss over the whole object, yet it
+is what a robot grasps. The stage can pull z off the codes the keypoint head was trained on, so its
+result is kept only when the head's part and the part the field renders (the centroid of the
+focused rays' surface points labelled with the part's class) stay within `focus_agreement_m`.
+
 Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
 views works (the paper's claim of robustness to camera parameters never seen in training).
 """
@@ -15,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -49,6 +56,11 @@ class FitConfig:
             gradient magnitude (edges: a door's outline, a handle a few pixels wide), the rest
             uniformly; the small parts that decide q and the hinge side weigh more in the loss.
         seed: seed of ray sampling.
+        focus_steps: Adam steps of the final close look at the focus part (0: none).
+        focus_radius_m: rays passing within this distance of the part take part in it, m.
+        focus_lr: Adam learning rate of the close look (smaller than `lr`: z is near already).
+        focus_agreement_m: the close look is kept only when the keypoint head and the rendered
+            segmentation then place the part within this distance of each other, m.
     """
 
     restarts: int = 4
@@ -63,14 +75,20 @@ class FitConfig:
     eval_rays: int = 4096
     detail_fraction: float = 0.5
     seed: int = 0
+    focus_steps: int = 150
+    focus_radius_m: float = 0.12
+    focus_lr: float = 5e-3
+    focus_agreement_m: float = 0.05
 
     @classmethod
     def budget(cls, restarts: int = 4, max_steps: int = 400,
-               detail_fraction: float = detail_fraction) -> FitConfig:
-        """Defaults with another number of starts and steps (exploration capped by max_steps)
-        and another share of edge-weighted rays."""
+               detail_fraction: float = detail_fraction,
+               focus_steps: int = focus_steps) -> FitConfig:
+        """Defaults with another number of starts and steps (exploration capped by max_steps),
+        another share of edge-weighted rays and another length of the close look."""
         return cls(restarts=restarts, max_steps=max_steps,
-                   explore_steps=min(cls.explore_steps, max_steps), detail_fraction=detail_fraction)
+                   explore_steps=min(cls.explore_steps, max_steps), detail_fraction=detail_fraction,
+                   focus_steps=focus_steps)
 
     def __post_init__(self):
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
@@ -83,6 +101,19 @@ class FitConfig:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
+        if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
+                                       self.focus_agreement_m) <= 0:
+            raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
+                              "focus_agreement_m > 0")
+
+
+@dataclass(frozen=True)
+class FocusTarget:
+    """The part the fit's last stage looks at closely: keypoint index `keypoint` of the keypoint
+    head and semantic class `label` of the segmentation head, both naming the same part."""
+
+    keypoint: int
+    label: int
 
 
 @dataclass
@@ -118,6 +149,16 @@ class ObservedRays:
         """Rays (batch, R, 3) repeated for `batch` codes and their colours (R, 3)."""
         o, d = self.origins[index], self.directions[index]
         return Rays(o.expand(batch, -1, -1), d.expand(batch, -1, -1)), self.rgb[index]
+
+    def near(self, p_O: torch.Tensor, radius: float) -> torch.Tensor:
+        """Boolean mask (N,) of the rays passing within `radius` (m) of the point p_O (3,)."""
+        offset = p_O - self.origins
+        along = (offset * self.directions).sum(-1, keepdim=True).clamp_min(0.0)
+        return (offset - along * self.directions).norm(dim=-1) < radius
+
+    def reweighted(self, detail: torch.Tensor) -> ObservedRays:
+        """The same rays with another sampling weight per ray (N,)."""
+        return ObservedRays(self.origins, self.directions, self.rgb, self.frame, detail)
 
 
 def frame_ray_directions(frame: CaptureFrame) -> np.ndarray:
@@ -173,7 +214,8 @@ class FitOutcome:
     """z (2 + k,) of the refined winning start; q its articulation; image_loss its MSE on the
     evaluation rays; start_losses (S,) (on the selection rays, edge-weighted when
     detail_fraction > 0) and start_q (S,) of every start after exploration; steps
-    run in all; seconds of wall time."""
+    run in all; seconds of wall time; focus what became of the close look ("kept", "off", or
+    why it was discarded)."""
 
     z: torch.Tensor
     q: float
@@ -182,6 +224,7 @@ class FitOutcome:
     start_q: np.ndarray
     steps: int
     seconds: float
+    focus: str = "off"
 
 
 def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Tensor,
@@ -197,15 +240,17 @@ def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Te
 
 
 def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfig(),
-               z_obj_init: torch.Tensor | None = None) -> FitOutcome:
-    """Fit z to the observed rays with the networks frozen (see module docstring)."""
+               z_obj_init: torch.Tensor | None = None, focus: FocusTarget | None = None
+               ) -> FitOutcome:
+    """Fit z to the observed rays with the networks frozen (see module docstring); the close
+    look runs when `focus` names a part and `config.focus_steps` > 0."""
     started = time.perf_counter()
     model.eval()
     flags = [p.requires_grad for p in model.parameters()]
     for p in model.parameters():  # frozen networks: no gradient work for their weights
         p.requires_grad_(False)
     try:
-        return _fit(model, rays, config, z_obj_init, started)
+        return _fit(model, rays, config, z_obj_init, focus, started)
     finally:
         for p, flag in zip(model.parameters(), flags, strict=True):
             p.requires_grad_(flag)
@@ -243,8 +288,43 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     return steps
 
 
+_FOCUS_FLAT_WEIGHT = 0.05
+"""Sampling weight of a flat pixel in the close look, beside its edge strength (colour units per
+pixel, `image_detail`): the part's inside is sampled too, not only its outline."""
+
+
+def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: FocusTarget,
+                generator: torch.Generator, z: torch.Tensor) -> tuple[torch.Tensor, str]:
+    """The last stage (module docstring) from code z (D,): the code to keep and what happened."""
+    with torch.no_grad():
+        part = model.keypoints(z[None])[0, focus.keypoint]
+    near = rays.near(part, config.focus_radius_m)
+    if not bool(near.any()):
+        return z, "discarded: no ray passes near the part"
+    focused = rays.reweighted(near.to(rays.detail.dtype) * (rays.detail + _FOCUS_FLAT_WEIGHT))
+    z_look = z[None].clone()
+    _adam(model, z_look, focused, replace(config, lr=config.focus_lr), generator,
+          config.focus_steps, config.rays_per_step, stop_early=False)
+    z_look = z_look.detach()
+    index = torch.nonzero(near).squeeze(-1)
+    with torch.no_grad():
+        part = model.keypoints(z_look)[0, focus.keypoint]
+        surface = []
+        for s in range(0, len(index), 4096):
+            sub, _ = rays.take(index[s:s + 4096], 1)
+            out = model.render(z_look, sub)
+            surface.append(out.points[0][out.logits[0].argmax(-1) == focus.label])
+        surface = torch.cat(surface)
+    if len(surface) == 0:
+        return z, "discarded: the part is not rendered any more"
+    gap = float((surface.mean(0) - part).norm())
+    if gap > config.focus_agreement_m:
+        return z, f"discarded: keypoint head and rendered part {100 * gap:.1f} cm apart"
+    return z_look[0], "kept"
+
+
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
-         started: float) -> FitOutcome:
+         focus: FocusTarget | None, started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
     q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
@@ -272,7 +352,11 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     steps += _adam(model, z_best, rays, config, generator, config.max_steps - steps,
                    config.rays_per_step, stop_early=True)
     z_best = z_best.detach()[0]
+    look = "off"
+    if focus is not None and config.focus_steps > 0:
+        z_best, look = _close_look(model, rays, config, focus, generator, z_best)
+        steps += config.focus_steps
     return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
                       image_loss=float(eval_losses(z_best[None])[0]),
                       start_losses=start_losses.numpy(), start_q=start_q, steps=steps,
-                      seconds=time.perf_counter() - started)
+                      seconds=time.perf_counter() - started, focus=look)

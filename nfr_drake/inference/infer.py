@@ -14,7 +14,13 @@ import tyro
 from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.inference.fit import FitConfig, FitOutcome, fit_latent, observed_rays
+from nfr_drake.inference.fit import (
+    FitConfig,
+    FitOutcome,
+    FocusTarget,
+    fit_latent,
+    observed_rays,
+)
 from nfr_drake.inference.forward import (
     geometric_keypoints,
     keypoint_trajectory,
@@ -24,6 +30,7 @@ from nfr_drake.inference.forward import (
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
+from nfr_drake.objects import SemanticClass
 
 
 class FittedModel:
@@ -36,6 +43,13 @@ class FittedModel:
         self.z_obj_mean = self.codes.mean(0)
         self.category: str = self.config["category"]
         self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
+
+    @property
+    def focus(self) -> FocusTarget | None:
+        """The part the fit looks at closely: the handle, when the model has a handle keypoint."""
+        if "handle" not in self.keypoint_names:
+            return None
+        return FocusTarget(self.keypoint_names.index("handle"), int(SemanticClass.HANDLE))
 
     def check_capture(self, capture: CaptureSet, category: str | None = None) -> None:
         """NfrDrakeError when the capture (its gt.json, or `category`) is of another category."""
@@ -59,7 +73,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     """
     started = time.perf_counter()
     rays = observed_rays(capture, images)
-    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean)
+    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -75,7 +89,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         trajectory={n: trajectory[:, i] for i, n in enumerate(names)},
         image_loss=outcome.image_loss, seconds=time.perf_counter() - started,
         z=outcome.z.double().cpu().numpy(),
-        extra={"model": str(fitted.folder), "steps": outcome.steps,
+        extra={"model": str(fitted.folder), "steps": outcome.steps, "focus": outcome.focus,
                "keypoint_source": keypoint_source,
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
     return result, outcome
@@ -107,6 +121,7 @@ def infer_command(
     max_steps: int = 400,
     trajectory_points: int = 21,
     keypoints: KeypointSource = "head",
+    focus_steps: int = FitConfig.focus_steps,
     threads: int = 2,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (DESIGN.md format).
@@ -124,6 +139,7 @@ def infer_command(
         trajectory_points: points of the forward-simulated q grid over [0, 1].
         keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
             axis read from the fitted field's rendered segmentation, the head for the rest).
+        focus_steps: steps of the fit's final close look at the handle (0: none).
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
@@ -132,12 +148,14 @@ def infer_command(
     fitted.check_capture(cap, category)
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
-    result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps),
+    result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps,
+                                                          focus_steps=focus_steps),
                             np.linspace(0.0, 1.0, trajectory_points), keypoint_source=keypoints)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
-          f"({outcome.steps} steps x {restarts} starts) -> {out}")
+          f"({outcome.steps} steps, {restarts} starts; close look at the handle: {outcome.focus})"
+          f" -> {out}")
     if report is not None:
         figure = observed_vs_rendered(fitted.model, outcome.z, outcome.q, cap)
         report.parent.mkdir(parents=True, exist_ok=True)

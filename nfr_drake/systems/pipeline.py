@@ -55,6 +55,7 @@ class Scenario:
         distance_m: their distance range to the object centre, m.
         restarts: fit starts.
         max_steps: fit steps at most.
+        focus_steps: steps of the fit's final close look at the handle (0: none).
         keypoints: "head" (the keypoint head, as in the paper; the better of the two on unseen
             objects, docs/EVALUATION.md) or "geometry" (handle and hinge axis read from the
             fitted field's segmentation).
@@ -75,6 +76,7 @@ class Scenario:
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     restarts: int = 4
     max_steps: int = 400
+    focus_steps: int = FitConfig.focus_steps
     keypoints: str = "head"
     replay: str = ""
 
@@ -151,7 +153,8 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
                                     math.radians(scenario.fov_y_deg))
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
                                   X_WCs, camera,
-                                  FitConfig.budget(scenario.restarts, scenario.max_steps),
+                                  FitConfig.budget(scenario.restarts, scenario.max_steps,
+                                                   focus_steps=scenario.focus_steps),
                                   keypoint_source=scenario.keypoints)
     diagram = builder.Build()
     simulator = Simulator(diagram)

@@ -11,9 +11,10 @@ import torch
 from nfr_drake.data.cameras import look_at
 from nfr_drake.data.capture import CaptureFrame, PinholeCamera, read_capture_set
 from nfr_drake.data.captures import captures_command
-from nfr_drake.errors import NfrDrakeError
+from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import (
     FitConfig,
+    FocusTarget,
     fit_latent,
     frame_ray_directions,
     image_detail,
@@ -107,6 +108,49 @@ def test_detail_sampling_draws_edge_pixels(capture):
     flat = replace(rays, detail=torch.zeros_like(rays.detail))  # a blank photo: no edges
     assert not flat.detail.any()  # all draws uniform, no error
     assert flat.sample(100, 0.5, gen).shape == (100,)
+
+
+@pytest.mark.parametrize("bad", [{"restarts": 0}, {"explore_steps": 500}, {"detail_fraction": 1.5},
+                                 {"lr": 0.0}, {"focus_steps": -1}, {"focus_radius_m": 0.0},
+                                 {"focus_agreement_m": -0.01}])
+def test_fit_config_rejects_bad_values(bad):
+    with pytest.raises(ConfigError):
+        FitConfig(**bad)
+
+
+def test_rays_near_a_point_are_those_within_the_radius(capture):
+    rays = observed_rays(capture, dtype=torch.float64)
+    p = torch.tensor([0.25, -0.1, 0.5], dtype=torch.float64)
+    near = rays.near(p, 0.1)
+    o, d = rays.origins.numpy(), rays.directions.numpy()
+    t = np.einsum("ij,ij->i", p.numpy() - o, d)
+    distance = np.linalg.norm(o + t[:, None] * d - p.numpy(), axis=1)  # every point is in front
+    assert (t > 0).all()
+    np.testing.assert_array_equal(near.numpy(), distance < 0.1)
+    assert 0 < near.sum() < len(near)
+
+
+def test_close_look_is_kept_only_when_head_and_render_agree(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    small = FitConfig(restarts=2, explore_steps=3, max_steps=6, explore_rays=32, rays_per_step=32,
+                      eval_rays=64, focus_steps=4, focus_radius_m=0.5)
+    without = fit_latent(fitted.model, rays, replace(small, focus_steps=0), fitted.z_obj_mean)
+    # The class this untrained model renders most near its "handle" stands in for the handle.
+    handle = fitted.model.keypoints(without.z[None])[0, 0].detach()
+    index = torch.nonzero(rays.near(handle, 0.5)).squeeze(-1)
+    with torch.no_grad():
+        labels = fitted.model.render(without.z[None], rays.take(index, 1)[0]).logits[0].argmax(-1)
+    target = FocusTarget(keypoint=0, label=int(torch.mode(labels).values))
+    kept = fit_latent(fitted.model, rays, replace(small, focus_agreement_m=100.0),
+                      fitted.z_obj_mean, target)
+    assert kept.focus == "kept" and kept.steps == without.steps + 4
+    assert not torch.equal(kept.z, without.z)
+    discarded = fit_latent(fitted.model, rays, replace(small, focus_agreement_m=1e-6),
+                           fitted.z_obj_mean, target)
+    assert discarded.focus.startswith("discarded: keypoint head and rendered part")
+    assert torch.equal(discarded.z, without.z)  # the fit before the look, unchanged
+    assert without.focus == "off"
 
 
 def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
