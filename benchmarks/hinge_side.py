@@ -4,7 +4,8 @@ A shut door shows its hinge side only through its handle, and a fit on the wrong
 handle about 30 cm off (docs/EVALUATION.md). This script measures, on capture sets of shut closets,
 the share of fits whose keypoint head puts the hinge on the true side of the handle, for:
 
-- `mean`: the default fit, started from the mean training code;
+- `mean`: the default fit, started from the mean training code (with its close look at the
+  handle; `--focus-steps 0` for the fit without it);
 - `sides`: one fit from the mean code of each hinge side's training codes (the side read from the
   keypoint head at q = 0), the one with the lower image MSE over every pixel of every view kept;
 - `vote`: three default fits with different ray-sampling seeds, majority side;
@@ -73,15 +74,21 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=None, help="first n capture sets only")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--focus-steps", type=int, default=FitConfig.focus_steps,
+                        help="steps of the fit's close look at the handle (0: none)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
     names = list(fitted.keypoint_names)
     starts = side_start_codes(fitted) if "sides" in args.variants else []
-    print(f"{date.today()}, model {args.model}, captures {args.captures}")
+    print(f"{date.today()}, model {args.model}, captures {args.captures}, "
+          f"close look {args.focus_steps} steps")
 
-    def fit(rays: ObservedRays, config: FitConfig = FitConfig(), start=None):
-        out = fit_latent(fitted.model, rays, config, fitted.z_obj_mean if start is None else start)
+    default = FitConfig(focus_steps=args.focus_steps)
+
+    def fit(rays: ObservedRays, config: FitConfig = default, start=None):
+        out = fit_latent(fitted.model, rays, config, fitted.z_obj_mean if start is None else start,
+                         fitted.focus)
         return out, keypoint_trajectory(fitted.model, out.z, np.array([out.q]))[0]
 
     right = {v: 0 for v in args.variants}
@@ -99,11 +106,11 @@ def main() -> None:
             candidates = [fit(rays, start=s) for s in starts]
             fits["sides"] = min(candidates, key=lambda c: full_image_mse(fitted, c[0].z, rays))[1]
         if "vote" in args.variants:
-            votes = [fits["mean"]] + [fit(rays, replace(FitConfig(), seed=s))[1] for s in (1, 2)]
+            votes = [fits["mean"]] + [fit(rays, replace(default, seed=s))[1] for s in (1, 2)]
             majority = np.sign(sum(hinge_side(k, names) for k in votes))
             fits["vote"] = next(k for k in votes if hinge_side(k, names) == majority)
         if "no-prior" in args.variants:
-            fits["no-prior"] = fit(rays, replace(FitConfig(), latent_weight=0.0))[1]
+            fits["no-prior"] = fit(rays, replace(default, latent_weight=0.0))[1]
         cells = []
         for v in args.variants:
             ok = hinge_side(fits[v], names) == true_side

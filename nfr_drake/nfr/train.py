@@ -204,7 +204,8 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
     """Train a neural field on a rendered dataset; returns RUN/best (the best model folder).
 
     `init_from`: a model folder to start from (fine-tuning), trained on this dataset or on its
-    first objects (same spec, fewer objects); ignored when resuming a run that has checkpoints.
+    first objects (same spec, fewer objects, any image size); ignored when resuming a run that
+    has checkpoints.
     """
     data_dir, run = Path(data_dir), Path(out)
     dist = init_distributed(config.device)
@@ -230,10 +231,12 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
         start = init_from_model_folder(init_from, module)
         spec = json.loads(json.dumps(data.spec.to_json()))
         start_spec = dict(start.get("training", {}).get("dataset_spec", {}))
-        if {**start_spec, "objects": spec["objects"]} != spec:
+        # Objects, lighting, articulations and cameras are drawn independently of the image
+        # size, so object i is the same at any size and its code carries over.
+        if {**start_spec, "objects": spec["objects"], "size": spec["size"]} != spec:
             raise ConfigError(f"--init-from {init_from}: that model was trained on other data "
-                              f"than {data_dir} (only the number of objects may grow); its object "
-                              "codes would not match")
+                              f"than {data_dir} (only the number of objects may grow and the image "
+                              "size change); its object codes would not match")
     module = module.to(device)
     net_params = [p for n, p in module.named_parameters() if not n.startswith("codes.")]
     optimizer = torch.optim.Adam([

@@ -106,6 +106,25 @@ def test_cli_train_and_resume(tiny_dataset, tmp_path):
                  "--resume", *other]) == 2
 
 
+def test_init_from_carries_codes_to_another_image_size_but_not_to_other_objects(tiny_dataset,
+                                                                                tmp_path):
+    from nfr_drake.data.generate import generate_command
+
+    small = ["--model.field-width", "16", "--model.feature-dim", "16", "--model.hyper-hidden", "16",
+             "--model.march-steps", "4", "--sampler.images-per-batch", "2",
+             "--sampler.rays-per-image", "32", "--log-every", "5", "--val-every", "5",
+             "--ckpt-every", "5", "--val-images", "2", "--threads", "1", "--optim.steps", "5"]
+    assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "a"), *small]) == 0
+    start = str(tmp_path / "a" / "best")
+    for name, size, seed in (("same_objects_24px", 24, 0), ("other_objects", 32, 1)):
+        generate_command(category="closet", objects=2, out=tmp_path / name, articulations=2,
+                         views=4, size=size, seed=seed, workers=1)
+    assert main(["train", "--data", str(tmp_path / "same_objects_24px"), "--out",
+                 str(tmp_path / "b"), "--init-from", start, *small]) == 0
+    assert main(["train", "--data", str(tmp_path / "other_objects"), "--out",
+                 str(tmp_path / "c"), "--init-from", start, *small]) == 2
+
+
 def test_bad_data_folder_is_a_user_error(tmp_path):
     assert main(["train", "--data", str(tmp_path / "nothing"), "--out", str(tmp_path / "r")]) == 2
 
