@@ -8,7 +8,8 @@ refined alone until its loss has not improved by `min_improvement` for `patience
 `max_steps` steps in all have run.
 
 A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
-steps half of the rays pass within `focus_radius_m` of where the keypoint head puts that part. A
+steps, a `detail_fraction` share of the rays (half by default) is drawn among those passing within
+`focus_radius_m` of where the keypoint head puts that part, the rest over all pixels. A
 handle is one or two pixels wide, so it barely weighs in an image loss over the whole object, yet it
 is what a robot grasps. The stage can pull z off the codes the keypoint head was trained on, so its
 result is kept only when the head's part and the part the field renders (the centroid of the
