@@ -1,7 +1,7 @@
 """Fit time of the neural field per 10-view capture set (issue target: at most 20 s on 2 cores).
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
-       [--n 5] [--threads 2] [--max-steps 400] [--restarts 4]
+       [--n 5] [--threads 2] [--max-steps 400] [--restarts 4] [--focus-steps 150]
 Create the captures with `nfr-drake captures --category closet --n 5 --out DIR --size 64`.
 Prints seconds per capture (fit + forward simulation of 21 keypoint sets), steps run, and the
 articulation error against gt.json, as a markdown table with its median.
@@ -32,12 +32,15 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--max-steps", type=int, default=400)
     parser.add_argument("--restarts", type=int, default=4)
+    parser.add_argument("--focus-steps", type=int, default=FitConfig.focus_steps,
+                        help="steps of the close look at the handle (0: none)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig.budget(args.restarts, args.max_steps)
+    config = FitConfig.budget(args.restarts, args.max_steps, focus_steps=args.focus_steps)
     print(f"{date.today()}, {platform.machine()}, {os.cpu_count()} CPUs, {args.threads} threads, "
-          f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}")
+          f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}, "
+          f"close look {args.focus_steps} steps")
     print("| capture | views | image size | seconds | steps | q error |")
     print("|---|---|---|---|---|---|")
     seconds = []

@@ -295,13 +295,14 @@ pixel, `image_detail`): the part's inside is sampled too, not only its outline."
 
 
 def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: FocusTarget,
-                generator: torch.Generator, z: torch.Tensor) -> tuple[torch.Tensor, str]:
-    """The last stage (module docstring) from code z (D,): the code to keep and what happened."""
+                generator: torch.Generator, z: torch.Tensor) -> tuple[torch.Tensor, str, int]:
+    """The last stage (module docstring) from code z (D,): the code to keep, what happened, and
+    the steps run."""
     with torch.no_grad():
         part = model.keypoints(z[None])[0, focus.keypoint]
     near = rays.near(part, config.focus_radius_m)
     if not bool(near.any()):
-        return z, "discarded: no ray passes near the part"
+        return z, "discarded: no ray passes near the part", 0
     focused = rays.reweighted(near.to(rays.detail.dtype) * (rays.detail + _FOCUS_FLAT_WEIGHT))
     z_look = z[None].clone()
     _adam(model, z_look, focused, replace(config, lr=config.focus_lr), generator,
@@ -317,11 +318,11 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
             surface.append(out.points[0][out.logits[0].argmax(-1) == focus.label])
         surface = torch.cat(surface)
     if len(surface) == 0:
-        return z, "discarded: the part is not rendered any more"
+        return z, "discarded: the part is not rendered any more", config.focus_steps
     gap = float((surface.mean(0) - part).norm())
     if gap > config.focus_agreement_m:
-        return z, f"discarded: keypoint head and rendered part {100 * gap:.1f} cm apart"
-    return z_look[0], "kept"
+        return z, f"discarded: keypoint head and rendered part {100 * gap:.1f} cm apart", config.focus_steps
+    return z_look[0], "kept", config.focus_steps
 
 
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
@@ -355,8 +356,8 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     z_best = z_best.detach()[0]
     look = "off"
     if focus is not None and config.focus_steps > 0:
-        z_best, look = _close_look(model, rays, config, focus, generator, z_best)
-        steps += config.focus_steps
+        z_best, look, look_steps = _close_look(model, rays, config, focus, generator, z_best)
+        steps += look_steps
     return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
                       image_loss=float(eval_losses(z_best[None])[0]),
                       start_losses=start_losses.numpy(), start_q=start_q, steps=steps,

@@ -151,6 +151,10 @@ def test_close_look_is_kept_only_when_head_and_render_agree(model_folder, captur
     assert discarded.focus.startswith("discarded: keypoint head and rendered part")
     assert torch.equal(discarded.z, without.z)  # the fit before the look, unchanged
     assert without.focus == "off"
+    nowhere = fit_latent(fitted.model, rays, replace(small, focus_radius_m=1e-9),
+                         fitted.z_obj_mean, target)  # no ray passes that close: no look runs
+    assert nowhere.focus == "discarded: no ray passes near the part"
+    assert nowhere.steps == without.steps and torch.equal(nowhere.z, without.z)
 
 
 def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
