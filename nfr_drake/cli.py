@@ -29,6 +29,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                       "success rate of perception + planning + simulation on unseen objects"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
+    "train-handle-detector": ("nfr_drake.perception.handle_detector:train_detector_command",
+                              "train the 2D handle detector on rendered datasets"),
     "poses": ("nfr_drake.perception.poses:poses_command",
               "camera poses of a folder of photos (pycolmap SfM, metric alignment) as a capture set"),
     "train": ("nfr_drake.nfr.train:train_command", "train the neural field (auto-decoder) on a dataset"),

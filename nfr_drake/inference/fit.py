@@ -15,6 +15,11 @@ is what a robot grasps. The stage can pull z off the codes the keypoint head was
 result is kept only when the head's part and the part the field renders (the centroid of the
 focused rays' surface points labelled with the part's class) stay within `focus_agreement_m`.
 
+A part seen by other means (`PartSighting`: the handle triangulated from a 2D detector's masks,
+`nfr_drake.perception.handle_triangulation`) adds a robust term w log(1 + d^2 / s^2) on the keypoint
+head's distance d to it, in every stage and in the choice among the starts; it is what fixes the
+hinge side of a shut door, which the image loss alone, with a handle of a few pixels, leaves open.
+
 Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
 views works (the paper's claim of robustness to camera parameters never seen in training).
 """
@@ -62,6 +67,10 @@ class FitConfig:
         focus_lr: Adam learning rate of the close look (smaller than `lr`: z is near already).
         focus_agreement_m: the close look is kept only when the keypoint head and the rendered
             segmentation then place the part within this distance of each other, m.
+        sighting_weight: weight of the `PartSighting` term, w log(1 + d^2 / s^2) for the keypoint
+            head's part at distance d from the sighted point (0: the sighting is ignored).
+        sighting_scale_m: s of that term, m: about the sighting's accuracy; beyond it the term
+            grows only logarithmically, so a wrong sighting cannot drag the fit far.
     """
 
     restarts: int = 4
@@ -80,6 +89,8 @@ class FitConfig:
     focus_radius_m: float = 0.12
     focus_lr: float = 5e-3
     focus_agreement_m: float = 0.05
+    sighting_weight: float = 2e-3
+    sighting_scale_m: float = 0.015
 
     @classmethod
     def budget(cls, restarts: int = 4, max_steps: int = 400,
@@ -115,6 +126,15 @@ class FocusTarget:
 
     keypoint: int
     label: int
+
+
+@dataclass(frozen=True)
+class PartSighting:
+    """Where a part was seen by other means than the image loss (the handle detector's
+    triangulation): keypoint index `keypoint` of the keypoint head, point p_O (3,) in O, m."""
+
+    keypoint: int
+    p_O: torch.Tensor
 
 
 @dataclass
@@ -241,24 +261,39 @@ def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Te
 
 
 def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfig(),
-               z_obj_init: torch.Tensor | None = None, focus: FocusTarget | None = None
-               ) -> FitOutcome:
+               z_obj_init: torch.Tensor | None = None, focus: FocusTarget | None = None,
+               sighting: PartSighting | None = None) -> FitOutcome:
     """Fit z to the observed rays with the networks frozen (see module docstring); the close
-    look runs when `focus` names a part and `config.focus_steps` > 0."""
+    look runs when `focus` names a part and `config.focus_steps` > 0.
+
+    `z_obj_init`: the starts' z_obj, (k,) for all or (restarts, k) one per start; zeros if None.
+    `sighting`: a part seen by other means; its term joins every stage's loss and the choice
+    among the starts.
+    """
     started = time.perf_counter()
     model.eval()
     flags = [p.requires_grad for p in model.parameters()]
     for p in model.parameters():  # frozen networks: no gradient work for their weights
         p.requires_grad_(False)
     try:
-        return _fit(model, rays, config, z_obj_init, focus, started)
+        return _fit(model, rays, config, z_obj_init, focus, sighting, started)
     finally:
         for p, flag in zip(model.parameters(), flags, strict=True):
             p.requires_grad_(flag)
 
 
+def _sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | None,
+                   config: FitConfig) -> torch.Tensor:
+    """The sighting term (S,) of codes z (S, D) (`FitConfig.sighting_weight`); 0 without one."""
+    if sighting is None or config.sighting_weight == 0:
+        return torch.zeros(z.shape[0], dtype=z.dtype, device=z.device)
+    d2 = ((model.keypoints(z)[:, sighting.keypoint] - sighting.p_O.to(z)) ** 2).sum(-1)
+    return config.sighting_weight * torch.log1p(d2 / config.sighting_scale_m ** 2)
+
+
 def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
-          generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool) -> int:
+          generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool,
+          sighting: PartSighting | None = None) -> int:
     """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
     each; returns the steps run.
 
@@ -274,7 +309,8 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         batch_rays, target = rays.take(index, S)
         rgb = model.render(z, batch_rays).rgb
         image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
-        loss = image + config.latent_weight * S * latent_loss(z[:, 2:])
+        loss = (image + config.latent_weight * S * latent_loss(z[:, 2:])
+                + _sighting_loss(model, z, sighting, config).sum())
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -295,7 +331,8 @@ pixel, `image_detail`): the part's inside is sampled too, not only its outline."
 
 
 def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: FocusTarget,
-                generator: torch.Generator, z: torch.Tensor) -> tuple[torch.Tensor, str, int]:
+                generator: torch.Generator, z: torch.Tensor, sighting: PartSighting | None
+                ) -> tuple[torch.Tensor, str, int]:
     """The last stage (module docstring) from code z (D,): the code to keep, what happened, and
     the steps run."""
     with torch.no_grad():
@@ -306,7 +343,7 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     focused = rays.reweighted(near.to(rays.detail.dtype) * (rays.detail + _FOCUS_FLAT_WEIGHT))
     z_look = z[None].clone()
     _adam(model, z_look, focused, replace(config, lr=config.focus_lr), generator,
-          config.focus_steps, config.rays_per_step, stop_early=False)
+          config.focus_steps, config.rays_per_step, stop_early=False, sighting=sighting)
     z_look = z_look.detach()
     index = torch.nonzero(near).squeeze(-1)
     with torch.no_grad():
@@ -325,13 +362,21 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     return z_look[0], "kept", config.focus_steps
 
 
+def start_articulations(restarts: int, dtype=torch.float32) -> torch.Tensor:
+    """q (restarts,) of the fit's starts, evenly spread: (i + 0.5) / restarts."""
+    return (torch.arange(restarts, dtype=dtype) + 0.5) / restarts
+
+
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
-         focus: FocusTarget | None, started: float) -> FitOutcome:
+         focus: FocusTarget | None, sighting: PartSighting | None, started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
-    q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
-    z_obj = (z_obj_init.to(dtype).expand(S, k).clone() if z_obj_init is not None
-             else torch.zeros(S, k, dtype=dtype, device=device))
+    q0 = start_articulations(S, dtype).to(device)
+    if z_obj_init is not None and z_obj_init.shape not in ((k,), (S, k)):
+        raise ConfigError(f"fit: z_obj_init has shape {tuple(z_obj_init.shape)}, expected "
+                          f"({k},) or ({S}, {k})")
+    z_obj = (z_obj_init.to(dtype=dtype, device=device).expand(S, k).clone()
+             if z_obj_init is not None else torch.zeros(S, k, dtype=dtype, device=device))
     z = torch.cat([q_to_z_art(q0), z_obj], dim=-1)
     generator = torch.Generator(device="cpu").manual_seed(config.seed)
     eval_index = torch.randperm(rays.rgb.shape[0], generator=generator)[:config.eval_rays]
@@ -346,17 +391,19 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
             return _per_code_mse(model, codes.detach(), eval_rays, eval_target).cpu()
 
     steps = _adam(model, z, rays, config, generator, config.explore_steps, config.explore_rays,
-                  stop_early=False)
-    start_losses = eval_losses(z, select_index)
+                  stop_early=False, sighting=sighting)
+    with torch.no_grad():
+        start_losses = eval_losses(z, select_index) + _sighting_loss(model, z, sighting, config).cpu()
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
     winner = int(torch.argmin(start_losses))
     z_best = z.detach()[winner:winner + 1].clone()
     steps += _adam(model, z_best, rays, config, generator, config.max_steps - steps,
-                   config.rays_per_step, stop_early=True)
+                   config.rays_per_step, stop_early=True, sighting=sighting)
     z_best = z_best.detach()[0]
     look = "off"
     if focus is not None and config.focus_steps > 0:
-        z_best, look, look_steps = _close_look(model, rays, config, focus, generator, z_best)
+        z_best, look, look_steps = _close_look(model, rays, config, focus, generator, z_best,
+                                                sighting)
         steps += look_steps
     return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
                       image_loss=float(eval_losses(z_best[None])[0]),

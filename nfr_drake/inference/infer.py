@@ -18,7 +18,9 @@ from nfr_drake.inference.fit import (
     FitConfig,
     FitOutcome,
     FocusTarget,
+    PartSighting,
     fit_latent,
+    start_articulations,
     observed_rays,
 )
 from nfr_drake.inference.forward import (
@@ -29,13 +31,16 @@ from nfr_drake.inference.forward import (
 )
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
+from nfr_drake.nfr.latent import q_to_z_art
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
+from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
+from nfr_drake.perception.handle_triangulation import TriangulatedHandle, locate_handle
 
 
 class FittedModel:
     """A loaded model folder: networks, the training codes (N, k) and their mean (the fit's
-    start), and its metadata."""
+    start), its metadata, and its 2D handle detector (`handle_detector/`) when it ships one."""
 
     def __init__(self, folder: Path, device: str = "cpu"):
         self.folder = Path(folder)
@@ -43,6 +48,21 @@ class FittedModel:
         self.z_obj_mean = self.codes.mean(0)
         self.category: str = self.config["category"]
         self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
+        self.handle_detector: HandleDetector | None = None
+        if (self.folder / DETECTOR_DIR).is_dir() and "handle" in self.keypoint_names:
+            self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
+
+    def codes_near(self, keypoint: int, p_O: torch.Tensor, q: torch.Tensor, count: int = 16
+                   ) -> torch.Tensor:
+        """For each articulation q (S,), the mean of the `count` training codes whose keypoint
+        `keypoint` the head puts nearest p_O (3,) at that q: (S, k)."""
+        starts = []
+        with torch.no_grad():
+            for q_i in q:
+                z = torch.cat([q_to_z_art(q_i.expand(len(self.codes))), self.codes], -1)
+                d = (self.model.keypoints(z)[:, keypoint] - p_O.to(z)).norm(dim=-1)
+                starts.append(self.codes[torch.argsort(d)[:count]].mean(0))
+        return torch.stack(starts)
 
     @property
     def focus(self) -> FocusTarget | None:
@@ -72,8 +92,17 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
     """
     started = time.perf_counter()
+    images = capture.load_images() if images is None else images
     rays = observed_rays(capture, images)
-    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus)
+    handle = None
+    if fitted.handle_detector is not None and fit_config.sighting_weight > 0:
+        handle = locate_handle(fitted.handle_detector.probabilities(images), capture.frames)
+    z_obj_init, sighting = fitted.z_obj_mean, None
+    if handle is not None:
+        h = fitted.keypoint_names.index("handle")
+        sighting = PartSighting(h, torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
+        z_obj_init = fitted.codes_near(h, sighting.p_O, start_articulations(fit_config.restarts))
+    outcome = fit_latent(fitted.model, rays, fit_config, z_obj_init, fitted.focus, sighting)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -90,9 +119,23 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         image_loss=outcome.image_loss, seconds=time.perf_counter() - started,
         z=outcome.z.double().cpu().numpy(),
         extra={"model": str(fitted.folder), "steps": outcome.steps, "focus": outcome.focus,
+               "handle_sighting": _sighting_json(fitted, fit_config, handle),
                "keypoint_source": keypoint_source,
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
     return result, outcome
+
+
+def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedHandle | None
+                   ) -> dict:
+    """What the handle detector contributed, for the result's `extra`."""
+    if fitted.handle_detector is None:
+        return {"used": False, "why": "the model ships no handle detector"}
+    if config.sighting_weight == 0:
+        return {"used": False, "why": "turned off"}
+    if handle is None:
+        return {"used": False, "why": "fewer than 3 views agree on a handle"}
+    return {"used": True, "p_O": handle.p_O.tolist(), "views": list(handle.views),
+            "sightings": handle.sightings, "rms_px": handle.rms_px}
 
 
 def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: CaptureSet,

@@ -15,10 +15,12 @@ from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import (
     FitConfig,
     FocusTarget,
+    PartSighting,
     fit_latent,
     frame_ray_directions,
     image_detail,
     observed_rays,
+    start_articulations,
 )
 from nfr_drake.inference.forward import keypoint_trajectory, render_view
 from nfr_drake.inference.infer import FittedModel, infer
@@ -243,3 +245,79 @@ def test_geometric_keypoints_keep_the_head_where_the_handle_is_never_seen(model_
     goal = fitted.keypoint_names.index("goal")
     np.testing.assert_allclose(path[:, goal], head[:, goal], atol=1e-6)  # goal always from the head
     assert np.isfinite(path).all()
+
+
+def test_a_sighting_pulls_the_head_part_towards_the_sighted_point(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = FitConfig(restarts=2, explore_steps=20, max_steps=60, explore_rays=32,
+                       rays_per_step=32, eval_rays=64, focus_steps=0, sighting_weight=1.0)
+    torch.manual_seed(1)  # a point the head can reach: its part for another code
+    other = torch.cat([torch.zeros(2), fitted.z_obj_mean + torch.randn(8)])
+    target = fitted.model.keypoints(other[None])[0, 0].detach()
+    sighting = PartSighting(keypoint=0, p_O=target)
+    free = fit_latent(fitted.model, rays, config, fitted.z_obj_mean)
+    pulled = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=sighting)
+
+    def gap(z):
+        with torch.no_grad():
+            return float((fitted.model.keypoints(z[None])[0, 0] - target).norm())
+
+    assert gap(pulled.z) < 0.5 * gap(free.z)
+    off = fit_latent(fitted.model, rays, replace(config, sighting_weight=0.0), fitted.z_obj_mean,
+                     sighting=sighting)
+    assert torch.equal(off.z, free.z)  # weight 0: the sighting changes nothing
+
+
+def test_starts_take_one_code_each_or_refuse_a_bad_shape(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = FitConfig(restarts=3, explore_steps=0, max_steps=1, explore_rays=32,
+                       rays_per_step=32, eval_rays=64, focus_steps=0)
+    codes = fitted.codes_near(0, torch.zeros(3), start_articulations(3), count=2)
+    assert codes.shape == (3, 8)
+    fit_latent(fitted.model, rays, config, codes)
+    with pytest.raises(ConfigError, match="z_obj_init has shape"):
+        fit_latent(fitted.model, rays, config, codes[:2])
+
+
+def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
+    import shutil
+
+    from safetensors.torch import save_file
+
+    from nfr_drake.perception.handle_detector import (
+        DETECTOR_DIR,
+        HandleDetector,
+        HandleDetectorConfig,
+    )
+
+    folder = tmp_path / "closet"
+    shutil.copytree(model_folder, folder)
+    (folder / DETECTOR_DIR).mkdir()
+    save_file(HandleDetector(HandleDetectorConfig(channels=4, dilations=(1,))).state_dict(),
+              str(folder / DETECTOR_DIR / "model.safetensors"))
+    (folder / DETECTOR_DIR / "config.json").write_text(json.dumps({"model": {
+        "channels": 4, "dilations": [1]}}))
+    fitted = FittedModel(folder)
+    assert fitted.handle_detector is not None
+    captures_command("closet", n=1, out=tmp_path / "caps", views=6, size=64)
+    capture = read_capture_set(tmp_path / "caps" / "closet_000")
+
+    class TrueMasks:  # a perfect detector: the capture's own handle labels
+        def probabilities(self, images):
+            return [(cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED) == 3).astype(
+                np.float32) for p in capture.gt["label_paths"]]
+
+    fitted.handle_detector = TrueMasks()
+    small = FitConfig(restarts=2, explore_steps=2, max_steps=4, explore_rays=32, rays_per_step=32,
+                      eval_rays=64, focus_steps=0)
+    result, _ = infer(fitted, capture, small, np.linspace(0, 1, 3))
+    seen = result.extra["handle_sighting"]
+    assert seen["used"] and seen["sightings"] >= len(seen["views"]) >= 3
+    # A bar's visible middle is within about its radius of the grip centre.
+    assert np.linalg.norm(np.array(seen["p_O"]) - capture.gt["keypoints"]["handle"]) < 0.03
+    result, _ = infer(fitted, capture, replace(small, sighting_weight=0.0), np.linspace(0, 1, 3))
+    assert result.extra["handle_sighting"] == {"used": False, "why": "turned off"}
+    result, _ = infer(FittedModel(model_folder), capture, small, np.linspace(0, 1, 3))
+    assert result.extra["handle_sighting"]["why"] == "the model ships no handle detector"

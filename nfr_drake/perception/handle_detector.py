@@ -1,0 +1,254 @@
+"""A 2D handle detector: a small fully convolutional network that marks handle pixels in a photo.
+
+The neural field pins a handle (1-4 px wide in the photos) down only loosely; this detector looks
+for it in each photo directly, and `nfr_drake.perception.handle_triangulation` turns its masks in
+posed views into one 3D point. It is trained on the same Drake renders as the neural field (label
+class 3 = handle), on images of several sizes so that it works at any resolution: the network has
+no pooling and no fully connected layer, so it runs on images of any size, and it sees about
+65 px around each pixel (dilated convolutions).
+
+Files in a model folder's `handle_detector/`: `config.json` (`HandleDetectorConfig` and training
+record) and `model.safetensors`.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+from torch import nn
+from tqdm import tqdm
+
+from nfr_drake.data.dataset import RenderedDataset
+from nfr_drake.errors import ConfigError
+from nfr_drake.nfr.checkpoint import CheckpointError
+
+HANDLE_LABEL = 3
+DETECTOR_DIR = "handle_detector"
+
+
+@dataclass(frozen=True)
+class HandleDetectorConfig:
+    """Architecture: 3x3 convolutions of `channels` channels with these dilations, then a 1x1
+    convolution to one logit per pixel."""
+
+    channels: int = 32
+    dilations: tuple[int, ...] = (1, 1, 2, 4, 8, 16, 1)
+
+    def __post_init__(self):
+        if self.channels < 1 or not self.dilations or min(self.dilations) < 1:
+            raise ConfigError("handle detector: channels and dilations must be positive")
+
+    @classmethod
+    def from_json(cls, d: dict) -> HandleDetectorConfig:
+        return cls(channels=int(d["channels"]), dilations=tuple(int(x) for x in d["dilations"]))
+
+
+class HandleDetector(nn.Module):
+    """(B, 3, H, W) RGB in [0, 1] -> (B, H, W) handle logits, any H and W."""
+
+    def __init__(self, config: HandleDetectorConfig):
+        super().__init__()
+        self.config = config
+        layers, c_in = [], 3
+        for d in config.dilations:
+            layers += [nn.Conv2d(c_in, config.channels, 3, padding=d, dilation=d), nn.ReLU()]
+            c_in = config.channels
+        layers.append(nn.Conv2d(c_in, 1, 1))
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return self.net(rgb - 0.5)[:, 0]
+
+    @torch.no_grad()
+    def probabilities(self, images: list[np.ndarray]) -> list[np.ndarray]:
+        """Handle probability per pixel of each uint8 RGB image (H, W, 3) -> float32 (H, W)."""
+        self.eval()
+        out = []
+        for img in images:
+            x = torch.from_numpy(np.ascontiguousarray(img, np.float32) / 255.0).permute(2, 0, 1)
+            out.append(torch.sigmoid(self(x[None]))[0].numpy())
+        return out
+
+
+@dataclass(frozen=True)
+class DetectorTrainConfig:
+    """Training: `steps` Adam steps of `images_per_batch` crops (`crop` px) from each dataset."""
+
+    steps: int = 6000
+    images_per_batch: int = 8
+    lr: float = 1e-3
+    crop: int = 64
+    pos_weight: float = 10.0
+    checkpoint_every: int = 250
+    seed: int = 0
+    threads: int = 1
+
+
+def _batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
+    """n random images of `data`, cut to crop x crop px (3 in 4 about a handle pixel where the
+    image shows one): rgb (n, 3, c, c) float32 in [0, 1], handle mask (n, c, c) float32."""
+    A, V, S = data.spec.articulations, data.spec.views, data.spec.size
+    c = min(crop, S)
+    rgb, mask = np.empty((n, c, c, 3), np.float32), np.empty((n, c, c), bool)
+    for b, (j, a, v) in enumerate(zip(rng.integers(0, data.num_objects, n),
+                                      rng.integers(0, A, n), rng.integers(0, V, n), strict=True)):
+        rec = data.records[j]
+        handle = np.asarray(rec.label[a, v]) == HANDLE_LABEL
+        rows, cols = np.nonzero(handle)
+        if rows.size and rng.random() < 0.75:
+            k = rng.integers(rows.size)
+            r0 = np.clip(rows[k] - rng.integers(0, c), 0, S - c)
+            c0 = np.clip(cols[k] - rng.integers(0, c), 0, S - c)
+        else:
+            r0, c0 = rng.integers(0, S - c + 1, 2)
+        rgb[b] = np.asarray(rec.rgb[a, v, r0:r0 + c, c0:c0 + c], np.float32) / 255.0
+        mask[b] = handle[r0:r0 + c, c0:c0 + c]
+    flip = rng.random(n) < 0.5  # mirror images: hinges on either side look alike
+    rgb[flip], mask[flip] = rgb[flip, :, ::-1], mask[flip, :, ::-1]
+    return (torch.from_numpy(rgb).permute(0, 3, 1, 2).contiguous(),
+            torch.from_numpy(mask.astype(np.float32)))
+
+
+def _loss(logits: torch.Tensor, mask: torch.Tensor, pos_weight: float) -> torch.Tensor:
+    """Weighted binary cross-entropy plus a soft Dice term (handles are ~0.2% of the pixels)."""
+    bce = nn.functional.binary_cross_entropy_with_logits(
+        logits, mask, pos_weight=torch.tensor(pos_weight))
+    p = torch.sigmoid(logits)
+    dice = 1.0 - (2.0 * (p * mask).sum() + 1.0) / (p.sum() + mask.sum() + 1.0)
+    return bce + dice
+
+
+def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
+    pred, true = logits > 0, mask > 0.5
+    union = (pred | true).sum().item()
+    return float((pred & true).sum().item() / union) if union else 1.0
+
+
+def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig,
+                   model: HandleDetectorConfig = HandleDetectorConfig(), resume: bool = False,
+                   command: str = "") -> dict:
+    """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
+
+    Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
+    objects are held out; the handle IoU on 64 of their full images per dataset is reported.
+    OUT/checkpoint.pt is written every `checkpoint_every` steps; `resume` continues from it.
+    Returns the training record written into OUT/config.json.
+    """
+    if not data_dirs:
+        raise ConfigError("train-handle-detector: give at least one --data folder")
+    out = Path(out)
+    ckpt_path = out / "checkpoint.pt"
+    if ckpt_path.is_file() and not resume:
+        raise ConfigError(f"{out} already holds a checkpoint; pass --resume or another --out")
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    sets = [RenderedDataset(d) for d in data_dirs]
+    categories = {s.spec.category for s in sets}
+    if len(categories) != 1:
+        raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
+    train_sets, val_sets = [], []
+    for s in sets:
+        held = max(1, s.num_objects // 20)
+        if s.num_objects <= held:
+            raise ConfigError(f"{s.root}: too few objects ({s.num_objects}) to hold some out")
+        val = RenderedDataset(s.root)
+        val.records, s.records = s.records[-held:], s.records[:-held]
+        train_sets.append(s)
+        val_sets.append(val)
+    net = HandleDetector(model)
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    step, seconds, losses = 0, 0.0, []
+    if resume and ckpt_path.is_file():
+        state = torch.load(ckpt_path, weights_only=False)
+        if state["model"] != asdict(model) or state["train"] != asdict(config):
+            raise ConfigError(f"{ckpt_path}: --resume with other options than the run's")
+        net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        sched.load_state_dict(state["sched"])
+        rng.bit_generator.state = state["rng"]
+        step, seconds, losses = state["step"], state["seconds"], state["losses"]
+    out.mkdir(parents=True, exist_ok=True)
+
+    def checkpoint() -> None:
+        torch.save({"model": asdict(model), "train": asdict(config), "net": net.state_dict(),
+                    "opt": opt.state_dict(), "sched": sched.state_dict(),
+                    "rng": rng.bit_generator.state, "step": step, "seconds": seconds,
+                    "losses": losses}, out / "checkpoint.pt.tmp")
+        (out / "checkpoint.pt.tmp").replace(ckpt_path)
+
+    bar = tqdm(total=config.steps, initial=step, desc="train handle detector", mininterval=5.0)
+    while step < config.steps:
+        t0 = time.perf_counter()
+        loss = sum(_loss(net(rgb), mask, config.pos_weight) for rgb, mask in
+                   (_batch(s, config.images_per_batch, config.crop, rng) for s in train_sets))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        losses.append(loss.item())
+        step += 1
+        seconds += time.perf_counter() - t0
+        bar.update(1)
+        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.3f}", refresh=False)
+        if step % config.checkpoint_every == 0 or step == config.steps:
+            checkpoint()
+    bar.close()
+    val_rng = np.random.default_rng(12345)
+    net.eval()
+    with torch.no_grad():
+        ious = {}
+        for v in val_sets:
+            rgb, mask = _batch(v, 64, v.spec.size, val_rng)
+            ious[str(v.root)] = _iou(net(rgb), mask)
+    record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
+              "data": [str(d) for d in data_dirs], "command": command, "seconds": seconds,
+              "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious}
+    save_file(net.state_dict(), str(out / "model.safetensors.tmp"))
+    (out / "model.safetensors.tmp").replace(out / "model.safetensors")
+    (out / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    return record
+
+
+def load_detector(folder: Path) -> tuple[HandleDetector, dict]:
+    """A trained detector and its record from a `handle_detector/` folder."""
+    folder = Path(folder)
+    try:
+        record = json.loads((folder / "config.json").read_text())
+        net = HandleDetector(HandleDetectorConfig.from_json(record["model"]))
+        net.load_state_dict(load_file(str(folder / "model.safetensors")))
+    except (OSError, KeyError, ValueError, RuntimeError) as err:
+        raise CheckpointError(f"{folder}: not a handle detector ({err})") from None
+    net.eval()
+    return net, record
+
+
+def train_detector_command(data: list[Path], out: Path, steps: int = 4000, batch: int = 8,
+                           crop: int = 64, lr: float = 1e-3, threads: int = 1,
+                           resume: bool = False) -> None:
+    """Train the 2D handle detector on rendered datasets of one category (any image sizes).
+
+    Args:
+        data: dataset folders from `nfr-drake generate` (e.g. the same objects at 64 and 128 px).
+        out: output folder; copy it to MODEL/handle_detector to ship it with a model.
+        steps: optimiser steps.
+        batch: crops per dataset per step.
+        crop: crop size, px.
+        lr: learning rate (cosine decay to 0).
+        threads: torch CPU threads.
+        resume: continue a killed run from OUT/checkpoint.pt.
+    """
+    config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
+                                 threads=threads)
+    command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
+    record = train_detector(list(data), out, config, resume=resume, command=command)
+    print(f"handle detector written to {out}: held-out handle IoU "
+          + ", ".join(f"{k} {v:.3f}" for k, v in record["held_out_handle_iou"].items()))

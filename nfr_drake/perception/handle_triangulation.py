@@ -1,0 +1,139 @@
+"""One 3D handle point from 2D handle masks in posed views.
+
+Each view's handle probability map (`nfr_drake.perception.handle_detector`) gives at most one
+sighting: the probability-weighted centroid of its strongest connected blob. Sightings are turned
+into rays in the capture frame O; the point is triangulated robustly: every pair of views proposes
+the point nearest both rays, the proposal that most views see within `max_error_px` (scaled to a
+128 px high image) wins, and the point nearest the rays of those views is returned.
+
+A bar's centroid is its visible middle, so the point lies within about a bar radius (1 cm) of the
+handle keypoint (the centre of the grip) on the cameras' side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import cv2
+import numpy as np
+
+from nfr_drake.data.capture import CaptureFrame
+
+_REFERENCE_HEIGHT_PX = 128.0
+
+
+@dataclass(frozen=True)
+class HandleSighting:
+    """A handle in one view: pixel (u, v) (top-left pixel centre at (0.5, 0.5)) and its mass
+    (summed probability of the blob, pixels)."""
+
+    frame: int
+    uv: np.ndarray
+    mass: float
+
+
+@dataclass(frozen=True)
+class TriangulatedHandle:
+    """p_O (3,) m in frame O; views: indices of the frames whose sighting agrees; rms_px: their
+    reprojection error RMS, px (of the frames' own size); sightings: how many views saw a handle."""
+
+    p_O: np.ndarray
+    views: tuple[int, ...]
+    rms_px: float
+    sightings: int
+
+
+def sighting(prob: np.ndarray, frame: int, threshold: float = 0.5,
+             min_mass: float = 0.5) -> HandleSighting | None:
+    """The strongest blob of pixels with probability > threshold in an (H, W) map, or None when
+    there is none or its summed probability is below `min_mass`."""
+    mask = (prob > threshold).astype(np.uint8)
+    count, labels = cv2.connectedComponents(mask, connectivity=8)
+    if count < 2:
+        return None
+    masses = np.bincount(labels.ravel(), weights=prob.ravel(), minlength=count)[1:]
+    best = int(np.argmax(masses)) + 1
+    if masses[best - 1] < min_mass:
+        return None
+    rows, cols = np.nonzero(labels == best)
+    w = prob[rows, cols]
+    uv = np.array([np.sum(w * (cols + 0.5)), np.sum(w * (rows + 0.5))]) / np.sum(w)
+    return HandleSighting(frame, uv, float(masses[best - 1]))
+
+
+def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origin and unit direction in O of the ray through pixel uv of a frame."""
+    cam = frame.camera
+    if cam.distortion is None:
+        xy = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]
+    else:
+        K_cv = cam.K.copy()
+        K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
+        xy = cv2.undistortPoints((uv - 0.5).reshape(1, 1, 2), K_cv,
+                                 np.array(cam.distortion)).reshape(2)
+    d = frame.X_OC[:3, :3] @ np.array([xy[0], xy[1], 1.0])
+    return frame.X_OC[:3, 3].copy(), d / np.linalg.norm(d)
+
+
+def _nearest_point(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The point (3,) of least summed squared distance to the rays (n, 3), n >= 2."""
+    P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
+    return np.linalg.lstsq(P.sum(0), np.einsum("nij,nj->i", P, origins), rcond=None)[0]
+
+
+def _reprojection_px(frame: CaptureFrame, p_O: np.ndarray, uv: np.ndarray) -> float:
+    """Pixel distance between uv and the projection of p_O (inf behind the camera)."""
+    X_CO = np.linalg.inv(frame.X_OC)
+    p_C = X_CO[:3, :3] @ p_O + X_CO[:3, 3]
+    if p_C[2] <= 1e-6:
+        return np.inf
+    cam = frame.camera
+    dist = np.zeros(4) if cam.distortion is None else np.array(cam.distortion)
+    K_cv = cam.K.copy()
+    K_cv[:2, 2] -= 0.5
+    proj = cv2.projectPoints(p_C.reshape(1, 3), np.zeros(3), np.zeros(3), K_cv, dist)[0]
+    return float(np.linalg.norm(proj.reshape(2) + 0.5 - uv))
+
+
+def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSighting],
+                       max_error_px: float = 3.0, min_views: int = 3
+                       ) -> TriangulatedHandle | None:
+    """Robust triangulation (module docstring); None when fewer than `min_views` views agree."""
+    if len(sightings) < max(2, min_views):
+        return None
+    rays = [_ray(frames[s.frame], s.uv) for s in sightings]
+    origins = np.array([o for o, _ in rays])
+    directions = np.array([d for _, d in rays])
+    tolerance = [max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
+                 for s in sightings]
+
+    def agreeing(p: np.ndarray) -> tuple[list[int], float]:
+        errors = [_reprojection_px(frames[s.frame], p, s.uv) for s in sightings]
+        inliers = [i for i, e in enumerate(errors) if e <= tolerance[i]]
+        return inliers, float(np.sqrt(np.mean([errors[i] ** 2 for i in inliers]))) if inliers else np.inf
+
+    best: tuple[int, float, list[int]] | None = None
+    for i, j in combinations(range(len(sightings)), 2):
+        if abs(float(directions[i] @ directions[j])) > np.cos(np.radians(2.0)):
+            continue  # nearly parallel rays fix no depth
+        inliers, rms = agreeing(_nearest_point(origins[[i, j]], directions[[i, j]]))
+        if best is None or (len(inliers), -rms) > (best[0], -best[1]):
+            best = (len(inliers), rms, inliers)
+    if best is None or best[0] < min_views:
+        return None
+    inliers = best[2]
+    p = _nearest_point(origins[inliers], directions[inliers])
+    inliers, rms = agreeing(p)
+    if len(inliers) < min_views:
+        return None
+    p = _nearest_point(origins[inliers], directions[inliers])
+    return TriangulatedHandle(p, tuple(sightings[i].frame for i in inliers), agreeing(p)[1],
+                              len(sightings))
+
+
+def locate_handle(probabilities: list[np.ndarray], frames: list[CaptureFrame]
+                  ) -> TriangulatedHandle | None:
+    """The handle triangulated from per-frame handle probability maps (H, W), one per frame."""
+    found = [s for i, prob in enumerate(probabilities) if (s := sighting(prob, i)) is not None]
+    return triangulate_handle(frames, found)
