@@ -78,6 +78,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
                           max_steps: int = 400, focus_steps: int = Scenario.focus_steps,
+                          handle_detector: bool = Scenario.handle_detector,
                           image_size: int = Scenario.image_size, threads: int = 1) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
@@ -93,6 +94,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         keypoints: keypoint source ("geometry" or "head").
         max_steps: fit steps at most.
         focus_steps: steps of the fit's final close look at the handle (0: none).
+        handle_detector: use the model's 2D handle detector, when it ships one.
         image_size: square image size of the ten perception cameras, pixels.
         threads: torch CPU threads (more threads than free cores slows the fit many times over).
     """
@@ -101,7 +103,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, max_steps=max_steps,
-                    focus_steps=focus_steps, image_size=image_size)
+                    focus_steps=focus_steps, handle_detector=handle_detector,
+                    image_size=image_size)
     done = set()
     if csv_path.exists():
         with open(csv_path) as f:

@@ -95,12 +95,14 @@ class FitConfig:
     @classmethod
     def budget(cls, restarts: int = 4, max_steps: int = 400,
                detail_fraction: float = detail_fraction,
-               focus_steps: int = focus_steps) -> FitConfig:
+               focus_steps: int = focus_steps, sightings: bool = True) -> FitConfig:
         """Defaults with another number of starts and steps (exploration capped by max_steps),
-        another share of edge-weighted rays and another length of the close look."""
+        another share of edge-weighted rays, another length of the close look, and sightings
+        (the handle detector's) used or ignored."""
         return cls(restarts=restarts, max_steps=max_steps,
                    explore_steps=min(cls.explore_steps, max_steps), detail_fraction=detail_fraction,
-                   focus_steps=focus_steps)
+                   focus_steps=focus_steps,
+                   sighting_weight=cls.sighting_weight if sightings else 0.0)
 
     def __post_init__(self):
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
@@ -113,6 +115,8 @@ class FitConfig:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
+        if self.sighting_weight < 0 or self.sighting_scale_m <= 0:
+            raise ConfigError("FitConfig: sighting_weight must be >= 0, sighting_scale_m > 0")
         if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
@@ -297,6 +301,11 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
     each; returns the steps run.
 
+    After each step z_art is reflected onto the upper half of the circle: the networks were
+    trained there only, and the reported q (`z_art_to_q`) mirrors the lower half, so a code left
+    below would be reported at another articulation than the one that was rendered and fitted
+    (a shut door at q = -0.02 reported at +0.02: its handle 2-3 cm off).
+
     With `stop_early`, stops when the smoothed summed loss has not improved by
     `min_improvement` (relative) for `patience` steps.
     """
@@ -314,6 +323,8 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
+        with torch.no_grad():  # keep z_art on the upper half circle, where q lies (see below)
+            z[:, 1].abs_()
         value = float(image.detach())
         smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
         if smoothed < best * (1.0 - config.min_improvement):
@@ -362,16 +373,11 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     return z_look[0], "kept", config.focus_steps
 
 
-def start_articulations(restarts: int, dtype=torch.float32) -> torch.Tensor:
-    """q (restarts,) of the fit's starts, evenly spread: (i + 0.5) / restarts."""
-    return (torch.arange(restarts, dtype=dtype) + 0.5) / restarts
-
-
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
          focus: FocusTarget | None, sighting: PartSighting | None, started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
-    q0 = start_articulations(S, dtype).to(device)
+    q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
     if z_obj_init is not None and z_obj_init.shape not in ((k,), (S, k)):
         raise ConfigError(f"fit: z_obj_init has shape {tuple(z_obj_init.shape)}, expected "
                           f"({k},) or ({S}, {k})")

@@ -20,7 +20,6 @@ from nfr_drake.inference.fit import (
     FocusTarget,
     PartSighting,
     fit_latent,
-    start_articulations,
     observed_rays,
 )
 from nfr_drake.inference.forward import (
@@ -31,7 +30,6 @@ from nfr_drake.inference.forward import (
 )
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
-from nfr_drake.nfr.latent import q_to_z_art
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
@@ -51,18 +49,6 @@ class FittedModel:
         self.handle_detector: HandleDetector | None = None
         if (self.folder / DETECTOR_DIR).is_dir() and "handle" in self.keypoint_names:
             self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
-
-    def codes_near(self, keypoint: int, p_O: torch.Tensor, q: torch.Tensor, count: int = 16
-                   ) -> torch.Tensor:
-        """For each articulation q (S,), the mean of the `count` training codes whose keypoint
-        `keypoint` the head puts nearest p_O (3,) at that q: (S, k)."""
-        starts = []
-        with torch.no_grad():
-            for q_i in q:
-                z = torch.cat([q_to_z_art(q_i.expand(len(self.codes))), self.codes], -1)
-                d = (self.model.keypoints(z)[:, keypoint] - p_O.to(z)).norm(dim=-1)
-                starts.append(self.codes[torch.argsort(d)[:count]].mean(0))
-        return torch.stack(starts)
 
     @property
     def focus(self) -> FocusTarget | None:
@@ -97,12 +83,9 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     handle = None
     if fitted.handle_detector is not None and fit_config.sighting_weight > 0:
         handle = locate_handle(fitted.handle_detector.probabilities(images), capture.frames)
-    z_obj_init, sighting = fitted.z_obj_mean, None
-    if handle is not None:
-        h = fitted.keypoint_names.index("handle")
-        sighting = PartSighting(h, torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
-        z_obj_init = fitted.codes_near(h, sighting.p_O, start_articulations(fit_config.restarts))
-    outcome = fit_latent(fitted.model, rays, fit_config, z_obj_init, fitted.focus, sighting)
+    sighting = None if handle is None else PartSighting(
+        fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
+    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -165,6 +148,7 @@ def infer_command(
     trajectory_points: int = 21,
     keypoints: KeypointSource = "head",
     focus_steps: int = FitConfig.focus_steps,
+    handle_detector: bool = True,
     threads: int = 2,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (DESIGN.md format).
@@ -183,6 +167,7 @@ def infer_command(
         keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
             axis read from the fitted field's rendered segmentation, the head for the rest).
         focus_steps: steps of the fit's final close look at the handle (0: none).
+        handle_detector: use the model's 2D handle detector (MODEL/handle_detector), if any.
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
@@ -192,7 +177,8 @@ def infer_command(
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
     result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps,
-                                                          focus_steps=focus_steps),
+                                                          focus_steps=focus_steps,
+                                                          sightings=handle_detector),
                             np.linspace(0.0, 1.0, trajectory_points), keypoint_source=keypoints)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)

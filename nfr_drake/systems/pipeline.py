@@ -56,6 +56,7 @@ class Scenario:
         restarts: fit starts.
         max_steps: fit steps at most.
         focus_steps: steps of the fit's final close look at the handle (0: none).
+        handle_detector: use the model's 2D handle detector, when it ships one.
         keypoints: "head" (the keypoint head, as in the paper; the better of the two on unseen
             objects, docs/EVALUATION.md) or "geometry" (handle and hinge axis read from the
             fitted field's segmentation).
@@ -77,6 +78,7 @@ class Scenario:
     restarts: int = 4
     max_steps: int = 400
     focus_steps: int = FitConfig.focus_steps
+    handle_detector: bool = True
     keypoints: str = "head"
     replay: str = ""
 
@@ -154,7 +156,8 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
                                   X_WCs, camera,
                                   FitConfig.budget(scenario.restarts, scenario.max_steps,
-                                                   focus_steps=scenario.focus_steps),
+                                                   focus_steps=scenario.focus_steps,
+                                                   sightings=scenario.handle_detector),
                                   keypoint_source=scenario.keypoints)
     diagram = builder.Build()
     simulator = Simulator(diagram)

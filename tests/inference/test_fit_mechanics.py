@@ -20,13 +20,13 @@ from nfr_drake.inference.fit import (
     frame_ray_directions,
     image_detail,
     observed_rays,
-    start_articulations,
 )
 from nfr_drake.inference.forward import keypoint_trajectory, render_view
 from nfr_drake.inference.infer import FittedModel, infer
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import write_model_folder
 from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
 from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.nfr.rays import pixel_centers
 
@@ -114,7 +114,8 @@ def test_detail_sampling_draws_edge_pixels(capture):
 
 @pytest.mark.parametrize("bad", [{"restarts": 0}, {"explore_steps": 500}, {"detail_fraction": 1.5},
                                  {"lr": 0.0}, {"focus_steps": -1}, {"focus_radius_m": 0.0},
-                                 {"focus_agreement_m": -0.01}])
+                                 {"focus_agreement_m": -0.01}, {"sighting_weight": -1.0},
+                                 {"sighting_scale_m": 0.0}])
 def test_fit_config_rejects_bad_values(bad):
     with pytest.raises(ConfigError):
         FitConfig(**bad)
@@ -274,8 +275,7 @@ def test_starts_take_one_code_each_or_refuse_a_bad_shape(model_folder, capture):
     rays = observed_rays(capture)
     config = FitConfig(restarts=3, explore_steps=0, max_steps=1, explore_rays=32,
                        rays_per_step=32, eval_rays=64, focus_steps=0)
-    codes = fitted.codes_near(0, torch.zeros(3), start_articulations(3), count=2)
-    assert codes.shape == (3, 8)
+    codes = fitted.codes[:3]
     fit_latent(fitted.model, rays, config, codes)
     with pytest.raises(ConfigError, match="z_obj_init has shape"):
         fit_latent(fitted.model, rays, config, codes[:2])
@@ -321,3 +321,23 @@ def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
     assert result.extra["handle_sighting"] == {"used": False, "why": "turned off"}
     result, _ = infer(FittedModel(model_folder), capture, small, np.linspace(0, 1, 3))
     assert result.extra["handle_sighting"]["why"] == "the model ships no handle detector"
+
+
+def test_the_reported_q_is_the_articulation_that_was_fitted(model_folder, capture):
+    """A code below q = 0 (the lower half circle, never trained) is put back on the upper half
+    by the first step, so keypoints at the reported q are those of the fitted code."""
+    from nfr_drake.inference.fit import _adam
+
+    fitted = FittedModel(model_folder)
+    z = torch.cat([q_to_z_art(torch.tensor([-0.2, -0.05])), fitted.z_obj_mean.expand(2, -1)], -1)
+    config = FitConfig(restarts=2, explore_rays=32, focus_steps=0)
+    _adam(fitted.model, z, observed_rays(capture), config, torch.Generator().manual_seed(0),
+          steps=1, rays_per_step=32, stop_early=False)
+    z = z.detach()
+    assert (z[:, 1] >= 0.0).all()
+    with torch.no_grad():
+        fitted_keypoints = fitted.model.keypoints(z).double().numpy()
+    for code, keypoints in zip(z, fitted_keypoints, strict=True):
+        q = float(z_art_to_q(code[:2]))
+        np.testing.assert_allclose(keypoint_trajectory(fitted.model, code, np.array([q]))[0],
+                                   keypoints, atol=1e-5)
