@@ -36,7 +36,7 @@ import torch
 
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.errors import ConfigError
-from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
+from nfr_drake.nfr.latent import normalize_z_art, q_to_z_art, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.nfr.rays import Rays, pixel_centers, pixel_rays
@@ -71,6 +71,10 @@ class FitConfig:
             head's part at distance d from the sighted point (0: the sighting is ignored).
         sighting_scale_m: s of that term, m: about the sighting's accuracy; beyond it the term
             grows only logarithmically, so a wrong sighting cannot drag the fit far.
+        sighting_codes: with a sighting and the training codes, the exploration's winner meets a
+            second start: its z_art with the mean of the `sighting_codes` training z_obj whose
+            part the head puts nearest the sighting at the winner's q (0: no second start); the
+            two explore for half of `explore_steps` (within `max_steps`).
     """
 
     restarts: int = 4
@@ -91,6 +95,7 @@ class FitConfig:
     focus_agreement_m: float = 0.05
     sighting_weight: float = 2e-3
     sighting_scale_m: float = 0.015
+    sighting_codes: int = 16
 
     @classmethod
     def budget(cls, restarts: int = 4, max_steps: int = 400,
@@ -115,8 +120,9 @@ class FitConfig:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
-        if self.sighting_weight < 0 or self.sighting_scale_m <= 0:
-            raise ConfigError("FitConfig: sighting_weight must be >= 0, sighting_scale_m > 0")
+        if self.sighting_weight < 0 or self.sighting_scale_m <= 0 or self.sighting_codes < 0:
+            raise ConfigError("FitConfig: sighting_weight and sighting_codes must be >= 0, "
+                              "sighting_scale_m > 0")
         if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
@@ -240,7 +246,8 @@ class FitOutcome:
     evaluation rays; start_losses (S,) (on the selection rays, edge-weighted when
     detail_fraction > 0) and start_q (S,) of every start after exploration; steps
     run in all; seconds of wall time; focus what became of the close look ("kept", "off", or
-    why it was discarded)."""
+    why it was discarded); sighted_start whether the start from the codes near the sighting
+    (`FitConfig.sighting_codes`) won over the exploration's winner."""
 
     z: torch.Tensor
     q: float
@@ -250,6 +257,7 @@ class FitOutcome:
     steps: int
     seconds: float
     focus: str = "off"
+    sighted_start: bool = False
 
 
 def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Tensor,
@@ -266,13 +274,14 @@ def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Te
 
 def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfig(),
                z_obj_init: torch.Tensor | None = None, focus: FocusTarget | None = None,
-               sighting: PartSighting | None = None) -> FitOutcome:
+               sighting: PartSighting | None = None, codes: torch.Tensor | None = None
+               ) -> FitOutcome:
     """Fit z to the observed rays with the networks frozen (see module docstring); the close
     look runs when `focus` names a part and `config.focus_steps` > 0.
 
     `z_obj_init`: the starts' z_obj, (k,) for all or (restarts, k) one per start; zeros if None.
     `sighting`: a part seen by other means; its term joins every stage's loss and the choice
-    among the starts.
+    among the starts. `codes`: the training z_obj (N, k), for the start near the sighting.
     """
     started = time.perf_counter()
     model.eval()
@@ -280,7 +289,7 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
     for p in model.parameters():  # frozen networks: no gradient work for their weights
         p.requires_grad_(False)
     try:
-        return _fit(model, rays, config, z_obj_init, focus, sighting, started)
+        return _fit(model, rays, config, z_obj_init, focus, sighting, codes, started)
     finally:
         for p, flag in zip(model.parameters(), flags, strict=True):
             p.requires_grad_(flag)
@@ -373,8 +382,32 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     return z_look[0], "kept", config.focus_steps
 
 
+def _sighted_start(model: NFRModel, rays: ObservedRays, config: FitConfig,
+                   generator: torch.Generator, z_best: torch.Tensor, sighting: PartSighting,
+                   codes: torch.Tensor, steps: int, select_losses) -> tuple[torch.Tensor, bool]:
+    """The exploration's winner z_best (1, D) against a start from the training codes near the
+    sighting at the winner's q (`FitConfig.sighting_codes`), both explored for `steps` steps;
+    returns the better (1, D) and whether it is the new start.
+
+    The codes are matched at the fitted q, not at the starts' spread q: matched at another q, a
+    drawer's codes would be those whose handle reaches the sighted point after a shorter pull."""
+    with torch.no_grad():
+        z_art = normalize_z_art(z_best[:, :2])
+        bank = codes.to(z_best)
+        part = model.keypoints(torch.cat([z_art.expand(len(bank), 2), bank], -1))[:, sighting.keypoint]
+        near = torch.argsort((part - sighting.p_O.to(z_best)).norm(dim=-1))[:config.sighting_codes]
+        z = torch.cat([z_best, torch.cat([z_art, bank[near].mean(0, keepdim=True)], -1)]).clone()
+    _adam(model, z, rays, config, generator, steps, config.explore_rays, stop_early=False,
+          sighting=sighting)
+    with torch.no_grad():
+        losses = select_losses(z) + _sighting_loss(model, z, sighting, config).cpu()
+    best = int(torch.argmin(losses))
+    return z.detach()[best:best + 1].clone(), best == 1
+
+
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
-         focus: FocusTarget | None, sighting: PartSighting | None, started: float) -> FitOutcome:
+         focus: FocusTarget | None, sighting: PartSighting | None, codes: torch.Tensor | None,
+         started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
     q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
@@ -403,7 +436,14 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
     winner = int(torch.argmin(start_losses))
     z_best = z.detach()[winner:winner + 1].clone()
-    steps += _adam(model, z_best, rays, config, generator, config.max_steps - steps,
+    sighted_start = False
+    second = min(config.explore_steps // 2, config.max_steps - steps)
+    if sighting is not None and codes is not None and config.sighting_codes > 0 and second > 0:
+        z_best, sighted_start = _sighted_start(model, rays, config, generator, z_best, sighting,
+                                               codes, second,
+                                               lambda c: eval_losses(c, select_index))
+        steps += second
+    steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
                    config.rays_per_step, stop_early=True, sighting=sighting)
     z_best = z_best.detach()[0]
     look = "off"
@@ -414,4 +454,5 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     return FitOutcome(z=z_best, q=float(z_art_to_q(z_best[:2])),
                       image_loss=float(eval_losses(z_best[None])[0]),
                       start_losses=start_losses.numpy(), start_q=start_q, steps=steps,
-                      seconds=time.perf_counter() - started, focus=look)
+                      seconds=time.perf_counter() - started, focus=look,
+                      sighted_start=sighted_start)

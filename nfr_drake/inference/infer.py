@@ -85,7 +85,8 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         handle = locate_handle(fitted.handle_detector.probabilities(images), capture.frames)
     sighting = None if handle is None else PartSighting(
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
-    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting)
+    outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
+                         fitted.codes)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -103,6 +104,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         z=outcome.z.double().cpu().numpy(),
         extra={"model": str(fitted.folder), "steps": outcome.steps, "focus": outcome.focus,
                "handle_sighting": _sighting_json(fitted, fit_config, handle),
+               "sighted_start": outcome.sighted_start,
                "keypoint_source": keypoint_source,
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
     return result, outcome

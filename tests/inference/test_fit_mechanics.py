@@ -341,3 +341,23 @@ def test_the_reported_q_is_the_articulation_that_was_fitted(model_folder, captur
         q = float(z_art_to_q(code[:2]))
         np.testing.assert_allclose(keypoint_trajectory(fitted.model, code, np.array([q]))[0],
                                    keypoints, atol=1e-5)
+
+
+def test_the_start_near_the_sighting_runs_only_with_codes_and_a_sighting(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = FitConfig(restarts=2, explore_steps=10, max_steps=12, explore_rays=32,
+                       rays_per_step=32, eval_rays=64, focus_steps=0)
+    z0 = torch.cat([torch.zeros(2), fitted.codes[0]])
+    sighting = PartSighting(0, fitted.model.keypoints(z0[None])[0, 0].detach())
+    plain = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=sighting)
+    assert not plain.sighted_start
+    with_codes = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=sighting,
+                            codes=fitted.codes)
+    assert isinstance(with_codes.sighted_start, bool) and not torch.equal(with_codes.z, plain.z)
+    assert plain.steps == with_codes.steps == 12  # the second start stays within max_steps
+    off = fit_latent(fitted.model, rays, replace(config, sighting_codes=0), fitted.z_obj_mean,
+                     sighting=sighting, codes=fitted.codes)
+    assert torch.equal(off.z, plain.z) and not off.sighted_start
+    with pytest.raises(ConfigError):
+        FitConfig(sighting_codes=-1)
