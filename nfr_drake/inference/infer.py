@@ -33,7 +33,7 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
-from nfr_drake.perception.handle_triangulation import TriangulatedHandle, locate_handle
+from nfr_drake.perception.handle_triangulation import TriangulatedHandle, locate_handle, project
 
 
 class FittedModel:
@@ -124,17 +124,41 @@ def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedH
 
 
 def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: CaptureSet,
-                         max_views: int = 10) -> np.ndarray:
-    """uint8 RGB figure: observed views (top row), renders of the fit (middle), segmentation."""
+                         max_views: int = 10, detector: HandleDetector | None = None,
+                         sighted_p_O: np.ndarray | None = None,
+                         handle_p_O: np.ndarray | None = None) -> np.ndarray:
+    """uint8 RGB figure: observed views (top row), renders of the fit (second), segmentation
+    (third) and, with a `detector`, its handle probability over the photo (bottom row) with the
+    triangulated handle `sighted_p_O` (green cross) and the fitted handle `handle_p_O` (magenta
+    square), both (3,) in O."""
     images = capture.load_images()[:max_views]
-    rows = [[], [], []]
-    for frame, image in zip(capture.frames[:max_views], images, strict=True):
+    frames = capture.frames[:max_views]
+    rows = [[], [], [], []]
+    probs = detector.probabilities(images) if detector is not None else [None] * len(images)
+    for frame, image, prob in zip(frames, images, probs, strict=True):
         view = render_view(model, z, q, frame.camera, frame.X_OC)
         size = (view.rgb.shape[1], view.rgb.shape[0])
         rows[0].append(cv2.resize(image, size, interpolation=cv2.INTER_AREA))
         rows[1].append(view.rgb)
         rows[2].append(colorize_labels(view.labels))
-    return image_grid(rows)
+        if prob is not None:
+            rows[3].append(_detector_view(image, prob, frame, size, sighted_p_O, handle_p_O))
+    return image_grid([r for r in rows if r])
+
+
+def _detector_view(image: np.ndarray, prob: np.ndarray, frame, size: tuple[int, int],
+                   sighted_p_O: np.ndarray | None, handle_p_O: np.ndarray | None) -> np.ndarray:
+    """The photo greyed, the handle probability in red, and the two handle points marked."""
+    grey = np.repeat(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[..., None], 3, -1) * 0.6
+    overlay = (grey + prob[..., None] * np.array([255.0, -150.0, -150.0])).clip(0, 255)
+    overlay = np.ascontiguousarray(overlay.astype(np.uint8))
+    for point, colour, marker in ((sighted_p_O, (0, 255, 0), cv2.MARKER_CROSS),
+                                  (handle_p_O, (255, 0, 255), cv2.MARKER_SQUARE)):
+        uv = None if point is None else project(frame, np.asarray(point, float))
+        if uv is not None:
+            centre = (int(round(uv[0] - 0.5)), int(round(uv[1] - 0.5)))
+            cv2.drawMarker(overlay, centre, colour, marker, markerSize=7, thickness=1)
+    return cv2.resize(overlay, size, interpolation=cv2.INTER_NEAREST)
 
 
 def infer_command(
@@ -159,7 +183,8 @@ def infer_command(
         capture: capture-set folder (transforms.json + images).
         model: model folder (model.safetensors + config.json).
         out: result JSON to write.
-        report: optional PNG: observed views, renders of the fit and its segmentation.
+        report: optional PNG: observed views, renders of the fit, its segmentation and, with a
+            handle detector, its handle probability with the triangulated and fitted handle.
         point_cloud: optional PLY: semantically labelled points of the object at the fitted q.
         handle_plot: optional PNG: predicted handle path over q against gt.json's (needs gt.json).
         category: the capture's category, checked against the model's (gt.json's when omitted).
@@ -188,7 +213,11 @@ def infer_command(
           f"({outcome.steps} steps, {restarts} starts; close look at the handle: {outcome.focus})"
           f" -> {out}")
     if report is not None:
-        figure = observed_vs_rendered(fitted.model, outcome.z, outcome.q, cap)
+        seen = result.extra["handle_sighting"]
+        figure = observed_vs_rendered(
+            fitted.model, outcome.z, outcome.q, cap,
+            detector=fitted.handle_detector if handle_detector else None,
+            sighted_p_O=seen.get("p_O"), handle_p_O=result.keypoints.get("handle"))
         report.parent.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(report), cv2.cvtColor(np.repeat(np.repeat(figure, 2, 0), 2, 1),
                                               cv2.COLOR_RGB2BGR))

@@ -3,8 +3,11 @@
 Each view's handle probability map (`nfr_drake.perception.handle_detector`) gives at most one
 sighting: the probability-weighted centroid of its strongest connected blob. Sightings are turned
 into rays in the capture frame O; the point is triangulated robustly: every pair of views proposes
-the point nearest both rays, the proposal that most views see within `max_error_px` (scaled to a
-128 px high image) wins, and the point nearest the rays of those views is returned.
+the point nearest both rays, the proposal whose agreeing views (reprojection within `max_error_px`,
+scaled to a 128 px high image) have the largest summed mass wins, and the point nearest the rays
+of those views, weighted by mass, is returned. Mass, not the number of views, decides: a bar seen
+in part (one bracket, the end below an edge) gives a small blob whose centroid is off its middle,
+and several such views can agree with each other.
 
 A bar's centroid is its visible middle, so the point lies within about a bar radius (1 cm) of the
 handle keypoint (the centre of the grip) on the cameras' side.
@@ -76,24 +79,33 @@ def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return frame.X_OC[:3, 3].copy(), d / np.linalg.norm(d)
 
 
-def _nearest_point(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """The point (3,) of least summed squared distance to the rays (n, 3), n >= 2."""
-    P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
+def _nearest_point(origins: np.ndarray, directions: np.ndarray,
+                   weights: np.ndarray | None = None) -> np.ndarray:
+    """The point (3,) of least weighted summed squared distance to the rays (n, 3), n >= 2."""
+    w = np.ones(len(origins)) if weights is None else weights
+    P = (np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]) * w[:, None, None]
     return np.linalg.lstsq(P.sum(0), np.einsum("nij,nj->i", P, origins), rcond=None)[0]
+
+
+def project(frame: CaptureFrame, p_O: np.ndarray) -> np.ndarray | None:
+    """Pixel (u, v) (top-left pixel centre at (0.5, 0.5)) of the point p_O (3,) in a frame, with
+    its distortion; None behind the camera."""
+    X_CO = np.linalg.inv(frame.X_OC)
+    p_C = X_CO[:3, :3] @ p_O + X_CO[:3, 3]
+    if p_C[2] <= 1e-6:
+        return None
+    cam = frame.camera
+    dist = np.zeros(4) if cam.distortion is None else np.array(cam.distortion)
+    K_cv = cam.K.copy()
+    K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
+    proj = cv2.projectPoints(p_C.reshape(1, 3), np.zeros(3), np.zeros(3), K_cv, dist)[0]
+    return proj.reshape(2) + 0.5
 
 
 def _reprojection_px(frame: CaptureFrame, p_O: np.ndarray, uv: np.ndarray) -> float:
     """Pixel distance between uv and the projection of p_O (inf behind the camera)."""
-    X_CO = np.linalg.inv(frame.X_OC)
-    p_C = X_CO[:3, :3] @ p_O + X_CO[:3, 3]
-    if p_C[2] <= 1e-6:
-        return np.inf
-    cam = frame.camera
-    dist = np.zeros(4) if cam.distortion is None else np.array(cam.distortion)
-    K_cv = cam.K.copy()
-    K_cv[:2, 2] -= 0.5
-    proj = cv2.projectPoints(p_C.reshape(1, 3), np.zeros(3), np.zeros(3), K_cv, dist)[0]
-    return float(np.linalg.norm(proj.reshape(2) + 0.5 - uv))
+    uv_p = project(frame, p_O)
+    return np.inf if uv_p is None else float(np.linalg.norm(uv_p - uv))
 
 
 def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSighting],
@@ -113,21 +125,24 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
         inliers = [i for i, e in enumerate(errors) if e <= tolerance[i]]
         return inliers, float(np.sqrt(np.mean([errors[i] ** 2 for i in inliers]))) if inliers else np.inf
 
-    best: tuple[int, float, list[int]] | None = None
+    mass = np.array([s.mass for s in sightings])
+    best: tuple[float, float, list[int]] | None = None
     for i, j in combinations(range(len(sightings)), 2):
         if abs(float(directions[i] @ directions[j])) > np.cos(np.radians(2.0)):
             continue  # nearly parallel rays fix no depth
         inliers, rms = agreeing(_nearest_point(origins[[i, j]], directions[[i, j]]))
-        if best is None or (len(inliers), -rms) > (best[0], -best[1]):
-            best = (len(inliers), rms, inliers)
-    if best is None or best[0] < min_views:
+        score = float(mass[inliers].sum()) if len(inliers) >= min_views else 0.0
+        if best is None or (score, -rms) > (best[0], -best[1]):
+            best = (score, rms, inliers)
+    if best is None or best[0] == 0.0:
         return None
     inliers = best[2]
-    p = _nearest_point(origins[inliers], directions[inliers])
-    inliers, rms = agreeing(p)
-    if len(inliers) < min_views:
-        return None
-    p = _nearest_point(origins[inliers], directions[inliers])
+    for _ in range(2):  # refit on the agreeing views, then on those that agree with the refit
+        p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+        inliers, _ = agreeing(p)
+        if len(inliers) < min_views:
+            return None
+    p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
     return TriangulatedHandle(p, tuple(sightings[i].frame for i in inliers), agreeing(p)[1],
                               len(sightings))
 

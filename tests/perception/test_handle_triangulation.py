@@ -99,3 +99,17 @@ def test_sighting_takes_the_strongest_blob():
     assert s is not None and s.frame == 3
     np.testing.assert_allclose(s.uv, [11.0, 21.5])
     assert sighting(np.full((8, 8), 0.4, np.float32), 0) is None
+
+
+def test_strong_sightings_outweigh_more_numerous_weak_ones():
+    """Four faint partial blobs agree on a point 8 cm off; three full ones on the handle."""
+    frames = _frames(7, 128)
+    decoy = P_TRUE + [0.0, 0.0, -0.08]
+    found = []
+    for i, f in enumerate(frames):
+        strong = i in (1, 3, 5)
+        prob = _blob(128, _project(f, P_TRUE if strong else decoy)) * (1.0 if strong else 0.3)
+        found.append(sighting(prob, i, threshold=0.1))
+    result = triangulate_handle(frames, found)
+    assert result is not None and set(result.views) == {1, 3, 5}
+    assert np.linalg.norm(result.p_O - P_TRUE) < 0.005
