@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
        [--n 5] [--threads 2] [--max-steps 400] [--restarts 4] [--focus-steps 150]
+       [--no-handle-detector]
 Create the captures with `nfr-drake captures --category closet --n 5 --out DIR --size 64`.
 Prints seconds per capture (fit + forward simulation of 21 keypoint sets), steps run, and the
 articulation error against gt.json, as a markdown table with its median.
@@ -34,13 +35,17 @@ def main() -> None:
     parser.add_argument("--restarts", type=int, default=4)
     parser.add_argument("--focus-steps", type=int, default=FitConfig.focus_steps,
                         help="steps of the close look at the handle (0: none)")
+    parser.add_argument("--no-handle-detector", action="store_true",
+                        help="fit without the model's handle detector")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig.budget(args.restarts, args.max_steps, focus_steps=args.focus_steps)
+    config = FitConfig.budget(args.restarts, args.max_steps, focus_steps=args.focus_steps,
+                              sightings=not args.no_handle_detector)
     print(f"{date.today()}, {platform.machine()}, {os.cpu_count()} CPUs, {args.threads} threads, "
           f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}, "
-          f"close look {args.focus_steps} steps")
+          f"close look {args.focus_steps} steps, handle detector "
+          f"{'off' if args.no_handle_detector or fitted.handle_detector is None else 'on'}")
     print("| capture | views | image size | seconds | steps | q error |")
     print("|---|---|---|---|---|---|")
     seconds = []

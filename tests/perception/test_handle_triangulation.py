@@ -86,7 +86,7 @@ def test_too_few_agreeing_views_give_none():
     frames = _frames(4, 64)
     offsets = np.array([[0, 0, 0], [0, 0, 0.15], [0, -0.2, -0.1], [0.1, 0.2, 0.2]])
     found = [sighting(_blob(64, _project(f, P_TRUE + o)), i)
-             for i, (f, o) in enumerate(zip(frames, offsets))]  # each view sees another point
+             for i, (f, o) in enumerate(zip(frames, offsets, strict=True))]  # each sees another
     assert triangulate_handle(frames, found) is None
     assert triangulate_handle(frames, found[:2]) is None
 
