@@ -10,4 +10,17 @@ do so with package_map networking off and an empty download cache. We therefore 
 
 import os
 
+import pytest
+
 os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat:package_map")
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory):
+    """2 closets x 2 articulations x 4 views at 32 px, rendered by Drake (a few seconds)."""
+    from nfr_drake.data.generate import generate_command
+
+    out = tmp_path_factory.mktemp("nfr_data") / "closets"
+    generate_command(category="closet", objects=2, out=out, articulations=2, views=4, size=32,
+                     workers=1)
+    return out

@@ -81,7 +81,7 @@ class HandleDetector(nn.Module):
 class DetectorTrainConfig:
     """Training: `steps` Adam steps of `images_per_batch` crops (`crop` px) from each dataset."""
 
-    steps: int = 6000
+    steps: int = 4000
     images_per_batch: int = 8
     lr: float = 1e-3
     crop: int = 64
@@ -89,6 +89,14 @@ class DetectorTrainConfig:
     checkpoint_every: int = 250
     seed: int = 0
     threads: int = 1
+
+    def __post_init__(self):
+        if min(self.steps, self.images_per_batch, self.checkpoint_every, self.threads) < 1:
+            raise ConfigError("handle detector training: steps, batch, checkpoint_every and "
+                              "threads must be >= 1")
+        if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0:
+            raise ConfigError("handle detector training: crop must be >= 8 px, lr and "
+                              "pos_weight > 0")
 
 
 def _batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
@@ -231,8 +239,12 @@ def load_detector(folder: Path) -> tuple[HandleDetector, dict]:
     return net, record
 
 
-def train_detector_command(data: list[Path], out: Path, steps: int = 4000, batch: int = 8,
-                           crop: int = 64, lr: float = 1e-3, threads: int = 1,
+def train_detector_command(data: list[Path], out: Path,
+                           steps: int = DetectorTrainConfig.steps,
+                           batch: int = DetectorTrainConfig.images_per_batch,
+                           crop: int = DetectorTrainConfig.crop,
+                           lr: float = DetectorTrainConfig.lr,
+                           threads: int = DetectorTrainConfig.threads,
                            resume: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
 

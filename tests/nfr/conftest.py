@@ -3,7 +3,6 @@
 import pytest
 import torch
 
-from nfr_drake.data.generate import generate_command
 from nfr_drake.nfr.config import NFRModelConfig
 
 TINY = NFRModelConfig(latent_obj_dim=4, hyper_hidden=8, field_width=8, field_layers=2,
@@ -24,11 +23,3 @@ def _one_thread():
     yield
     torch.set_num_threads(old)
 
-
-@pytest.fixture(scope="session")
-def tiny_dataset(tmp_path_factory):
-    """2 closets x 2 articulations x 4 views at 32 px, rendered by Drake (a few seconds)."""
-    out = tmp_path_factory.mktemp("nfr_data") / "closets"
-    generate_command(category="closet", objects=2, out=out, articulations=2, views=4, size=32,
-                     workers=1)
-    return out

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from nfr_drake.data.generate import generate_command
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.perception.handle_detector import (
@@ -20,15 +19,6 @@ from nfr_drake.perception.handle_detector import (
 SMALL = HandleDetectorConfig(channels=8, dilations=(1, 2, 1))
 
 
-@pytest.fixture(scope="module")
-def closets(tmp_path_factory):
-    """3 closets x 2 articulations x 3 views at 32 px, rendered by Drake."""
-    out = tmp_path_factory.mktemp("detector_data") / "closets"
-    generate_command(category="closet", objects=3, out=out, articulations=2, views=3, size=32,
-                     workers=1)
-    return out
-
-
 def test_any_image_size_gives_a_map_of_that_size():
     net = HandleDetector(SMALL)
     for h, w in ((32, 32), (48, 80)):
@@ -36,28 +26,28 @@ def test_any_image_size_gives_a_map_of_that_size():
         assert prob.shape == (h, w) and np.all((prob >= 0) & (prob <= 1))
 
 
-def test_training_lowers_the_loss_resumes_and_round_trips(closets, tmp_path):
+def test_training_lowers_the_loss_resumes_and_round_trips(tiny_dataset, tmp_path):
     torch.manual_seed(0)
     config = DetectorTrainConfig(steps=40, images_per_batch=4, crop=24, checkpoint_every=20)
     out = tmp_path / "det"
-    record = train_detector([closets], out, config, SMALL)
+    record = train_detector([tiny_dataset], out, config, SMALL)
     state = torch.load(out / "checkpoint.pt", weights_only=False)
     losses = state["losses"]
     assert len(losses) == 40 and np.mean(losses[-10:]) < np.mean(losses[:10])
-    assert set(record["held_out_handle_iou"]) == {str(closets)}
+    assert set(record["held_out_handle_iou"]) == {str(tiny_dataset)}
     saved = json.loads((out / "config.json").read_text())
     assert saved["model"]["channels"] == 8 and saved["train"]["steps"] == 40
 
     net, _ = load_detector(out)
     image = np.random.default_rng(0).integers(0, 255, (32, 32, 3), dtype=np.uint8)
     with pytest.raises(ConfigError, match="--resume"):
-        train_detector([closets], out, config, SMALL)
+        train_detector([tiny_dataset], out, config, SMALL)
     # A finished run resumed is already done: the same weights come out.
-    train_detector([closets], out, config, SMALL, resume=True)
+    train_detector([tiny_dataset], out, config, SMALL, resume=True)
     again, _ = load_detector(out)
     np.testing.assert_allclose(net.probabilities([image])[0], again.probabilities([image])[0])
     with pytest.raises(ConfigError, match="other options"):
-        train_detector([closets], out, DetectorTrainConfig(steps=41, checkpoint_every=20), SMALL,
+        train_detector([tiny_dataset], out, DetectorTrainConfig(steps=41, checkpoint_every=20), SMALL,
                        resume=True)
 
 
@@ -66,5 +56,7 @@ def test_bad_folder_and_bad_options(tmp_path):
         load_detector(tmp_path)
     with pytest.raises(ConfigError):
         HandleDetectorConfig(channels=0)
+    with pytest.raises(ConfigError):
+        DetectorTrainConfig(crop=4)
     with pytest.raises(ConfigError, match="at least one"):
         train_detector([], tmp_path / "x", DetectorTrainConfig())
