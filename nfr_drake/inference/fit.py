@@ -17,8 +17,10 @@ focused rays' surface points labelled with the part's class) stay within `focus_
 
 A part seen by other means (`PartSighting`: the handle triangulated from a 2D detector's masks,
 `nfr_drake.perception.handle_triangulation`) adds a robust term w log(1 + d^2 / s^2) on the keypoint
-head's distance d to it, in every stage and in the choice among the starts; it is what fixes the
-hinge side of a shut door, which the image loss alone, with a handle of a few pixels, leaves open.
+head's distance d to it, in every stage and in the choice among the starts, and after the
+exploration the winner meets one more start, from the training codes whose head puts the part
+nearest the sighting at the winner's q. It is what fixes the hinge side of a shut door, which the
+image loss alone, with a handle of a few pixels, leaves open.
 
 Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
 views works (the paper's claim of robustness to camera parameters never seen in training).
@@ -332,7 +334,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-        with torch.no_grad():  # keep z_art on the upper half circle, where q lies (see below)
+        with torch.no_grad():  # keep z_art on the upper half circle, where q lies (docstring)
             z[:, 1].abs_()
         value = float(image.detach())
         smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
@@ -424,10 +426,10 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     select_index = (rays.sample(config.eval_rays, config.detail_fraction, generator)
                     if config.detail_fraction > 0 else eval_index)
 
-    def eval_losses(codes: torch.Tensor, index: torch.Tensor = eval_index) -> torch.Tensor:
+    def eval_losses(candidates: torch.Tensor, index: torch.Tensor = eval_index) -> torch.Tensor:
         with torch.no_grad():
-            eval_rays, eval_target = rays.take(index.to(device), codes.shape[0])
-            return _per_code_mse(model, codes.detach(), eval_rays, eval_target).cpu()
+            eval_rays, eval_target = rays.take(index.to(device), candidates.shape[0])
+            return _per_code_mse(model, candidates.detach(), eval_rays, eval_target).cpu()
 
     steps = _adam(model, z, rays, config, generator, config.explore_steps, config.explore_rays,
                   stop_early=False, sighting=sighting)

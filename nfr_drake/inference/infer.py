@@ -11,7 +11,7 @@ import numpy as np
 import torch
 import tyro
 
-from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import (
@@ -146,7 +146,7 @@ def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: Ca
     return image_grid([r for r in rows if r])
 
 
-def _detector_view(image: np.ndarray, prob: np.ndarray, frame, size: tuple[int, int],
+def _detector_view(image: np.ndarray, prob: np.ndarray, frame: CaptureFrame, size: tuple[int, int],
                    sighted_p_O: np.ndarray | None, handle_p_O: np.ndarray | None) -> np.ndarray:
     """The photo greyed, the handle probability in red, and the two handle points marked."""
     grey = np.repeat(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[..., None], 3, -1) * 0.6

@@ -361,3 +361,20 @@ def test_the_start_near_the_sighting_runs_only_with_codes_and_a_sighting(model_f
     assert torch.equal(off.z, plain.z) and not off.sighted_start
     with pytest.raises(ConfigError):
         FitConfig(sighting_codes=-1)
+
+
+def test_report_adds_the_detector_row_with_both_handles_marked(model_folder, capture):
+    from nfr_drake.inference.infer import observed_vs_rendered
+    from nfr_drake.perception.handle_detector import HandleDetector, HandleDetectorConfig
+
+    fitted = FittedModel(model_folder)
+    z = torch.cat([torch.zeros(2), fitted.z_obj_mean])
+    plain = observed_vs_rendered(fitted.model, z, 0.0, capture)
+    detector = HandleDetector(HandleDetectorConfig(channels=4, dilations=(1,)))
+    handle = np.array(capture.gt["keypoints"]["handle"])
+    with_row = observed_vs_rendered(fitted.model, z, 0.0, capture, detector=detector,
+                                    sighted_p_O=handle, handle_p_O=handle + 0.05)
+    assert with_row.shape[0] > plain.shape[0] and with_row.shape[1] == plain.shape[1]
+    bottom = with_row[plain.shape[0]:]
+    assert (np.all(bottom == [0, 255, 0], axis=-1)).any()  # the green cross is drawn
+    assert (np.all(bottom == [255, 0, 255], axis=-1)).any()  # and the magenta square
