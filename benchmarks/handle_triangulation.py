@@ -21,13 +21,14 @@ import torch
 
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.eval.evaluate import capture_dirs
-from nfr_drake.perception.handle_detector import HANDLE_LABEL, load_detector
+from nfr_drake.objects import SemanticClass
+from nfr_drake.perception.handle_detector import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handle
 
 
 def true_masks(capture) -> list[np.ndarray]:
     """The capture's handle labels as probability maps (1 on handle pixels)."""
-    return [(cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED) == HANDLE_LABEL)
+    return [(cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED) == SemanticClass.HANDLE)
             .astype(np.float32) for p in capture.gt["label_paths"]]
 
 

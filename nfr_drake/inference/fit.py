@@ -281,7 +281,7 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
     """Fit z to the observed rays with the networks frozen (see module docstring); the close
     look runs when `focus` names a part and `config.focus_steps` > 0.
 
-    `z_obj_init`: the starts' z_obj, (k,) for all or (restarts, k) one per start; zeros if None.
+    `z_obj_init`: the starts' z_obj (k,); zeros if None.
     `sighting`: a part seen by other means; its term joins every stage's loss and the choice
     among the starts. `codes`: the training z_obj (N, k), for the start near the sighting.
     """
@@ -315,7 +315,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     After each step z_art is reflected onto the upper half of the circle: the networks were
     trained there only, and the reported q (`z_art_to_q`) mirrors the lower half, so a code left
     below would be reported at another articulation than the one that was rendered and fitted
-    (a shut door at q = -0.02 reported at +0.02: its handle 2-3 cm off).
+    (a shut door fitted at q = -0.02 was reported, and forward-simulated, at +0.02).
 
     With `stop_early`, stops when the smoothed summed loss has not improved by
     `min_improvement` (relative) for `patience` steps.
@@ -413,9 +413,8 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
     q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
-    if z_obj_init is not None and z_obj_init.shape not in ((k,), (S, k)):
-        raise ConfigError(f"fit: z_obj_init has shape {tuple(z_obj_init.shape)}, expected "
-                          f"({k},) or ({S}, {k})")
+    if z_obj_init is not None and z_obj_init.shape != (k,):
+        raise ConfigError(f"fit: z_obj_init has shape {tuple(z_obj_init.shape)}, expected ({k},)")
     z_obj = (z_obj_init.to(dtype=dtype, device=device).expand(S, k).clone()
              if z_obj_init is not None else torch.zeros(S, k, dtype=dtype, device=device))
     z = torch.cat([q_to_z_art(q0), z_obj], dim=-1)

@@ -33,7 +33,12 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
-from nfr_drake.perception.handle_triangulation import TriangulatedHandle, locate_handle, project
+from nfr_drake.perception.handle_triangulation import (
+    MIN_VIEWS,
+    TriangulatedHandle,
+    locate_handle,
+    project,
+)
 
 
 class FittedModel:
@@ -118,7 +123,7 @@ def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedH
     if config.sighting_weight == 0:
         return {"used": False, "why": "turned off"}
     if handle is None:
-        return {"used": False, "why": "fewer than 3 views agree on a handle"}
+        return {"used": False, "why": f"fewer than {MIN_VIEWS} views agree on a handle"}
     return {"used": True, "p_O": handle.p_O.tolist(), "views": list(handle.views),
             "sightings": handle.sightings, "rms_px": handle.rms_px}
 

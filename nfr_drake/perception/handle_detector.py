@@ -28,8 +28,8 @@ from tqdm import tqdm
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.objects import SemanticClass
 
-HANDLE_LABEL = 3
 DETECTOR_DIR = "handle_detector"
 
 
@@ -108,7 +108,7 @@ def _batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
     for b, (j, a, v) in enumerate(zip(rng.integers(0, data.num_objects, n),
                                       rng.integers(0, A, n), rng.integers(0, V, n), strict=True)):
         rec = data.records[j]
-        handle = np.asarray(rec.label[a, v]) == HANDLE_LABEL
+        handle = np.asarray(rec.label[a, v]) == SemanticClass.HANDLE
         rows, cols = np.nonzero(handle)
         if rows.size and rng.random() < 0.75:
             k = rng.integers(rows.size)

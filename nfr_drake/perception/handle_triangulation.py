@@ -24,6 +24,8 @@ import numpy as np
 from nfr_drake.data.capture import CaptureFrame
 
 _REFERENCE_HEIGHT_PX = 128.0
+MIN_VIEWS = 3
+"""Views that must agree on a handle for a point."""
 
 
 @dataclass(frozen=True)
@@ -109,7 +111,7 @@ def _reprojection_px(frame: CaptureFrame, p_O: np.ndarray, uv: np.ndarray) -> fl
 
 
 def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSighting],
-                       max_error_px: float = 3.0, min_views: int = 3
+                       max_error_px: float = 3.0, min_views: int = MIN_VIEWS
                        ) -> TriangulatedHandle | None:
     """Robust triangulation (module docstring); None when fewer than `min_views` views agree."""
     if len(sightings) < max(2, min_views):

@@ -270,15 +270,12 @@ def test_a_sighting_pulls_the_head_part_towards_the_sighted_point(model_folder, 
     assert torch.equal(off.z, free.z)  # weight 0: the sighting changes nothing
 
 
-def test_starts_take_one_code_each_or_refuse_a_bad_shape(model_folder, capture):
+def test_a_start_code_of_the_wrong_shape_is_refused(model_folder, capture):
     fitted = FittedModel(model_folder)
-    rays = observed_rays(capture)
     config = FitConfig(restarts=3, explore_steps=0, max_steps=1, explore_rays=32,
                        rays_per_step=32, eval_rays=64, focus_steps=0)
-    codes = fitted.codes[:3]
-    fit_latent(fitted.model, rays, config, codes)
     with pytest.raises(ConfigError, match="z_obj_init has shape"):
-        fit_latent(fitted.model, rays, config, codes[:2])
+        fit_latent(fitted.model, observed_rays(capture), config, fitted.codes[:3])
 
 
 def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
