@@ -1,11 +1,13 @@
 """Accuracy of the handle triangulated from the 2D handle detector, against gt.json.
 
 Usage: python benchmarks/handle_triangulation.py --detector models/closet/handle_detector
-       --sets data/eval/closet_train_cams data/eval/closet_shut128 [--true-masks] [--threads 1]
+       --sets data/eval/closet_train_cams data/eval/closet_shut128 [--true-masks | --centroids]
+       [--threads 1]
 Per capture set: how many captures gave a point (at least 3 views agreeing), and the distance from
 that point to the true handle keypoint (median, 90th percentile, largest, count over 5 cm), as a
-markdown table. `--true-masks` triangulates the capture's own label images instead (the
-detector's ceiling: a bar's visible middle is not its grip centre).
+markdown table. `--centroids` drops the detector's offsets (each view's sighting is its blob's
+centroid); `--true-masks` triangulates the centroids of the capture's own label images (the
+ceiling of centroids: a handle's visible middle, posts included, is not its grip centre).
 """
 
 from __future__ import annotations
@@ -23,34 +25,42 @@ from nfr_drake.data.capture import read_capture_set
 from nfr_drake.eval.evaluate import capture_dirs
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector import load_detector
-from nfr_drake.perception.handle_triangulation import locate_handle
+from nfr_drake.perception.handle_triangulation import HandleMap, locate_handle
 
 
-def true_masks(capture) -> list[np.ndarray]:
-    """The capture's handle labels as probability maps (1 on handle pixels)."""
-    return [(cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED) == SemanticClass.HANDLE)
-            .astype(np.float32) for p in capture.gt["label_paths"]]
+def true_masks(capture) -> list[HandleMap]:
+    """The capture's handle labels as maps (probability 1 on handle pixels, no offsets)."""
+    return [HandleMap.centroid_only((cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED)
+                                     == SemanticClass.HANDLE).astype(np.float32))
+            for p in capture.gt["label_paths"]]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--detector", type=Path, required=True)
     parser.add_argument("--sets", type=Path, nargs="+", required=True)
-    parser.add_argument("--true-masks", action="store_true")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--true-masks", action="store_true")
+    mode.add_argument("--centroids", action="store_true")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     detector, _ = load_detector(args.detector)
-    print(f"{date.today()}, {platform.processor() or platform.machine()}, "
-          f"{'true masks' if args.true_masks else args.detector}")
+    source = ("true masks" if args.true_masks
+              else f"{args.detector}{', centroids' if args.centroids else ''}")
+    print(f"{date.today()}, {platform.processor() or platform.machine()}, {source}")
     print("| set | captures | triangulated | error median (cm) | p90 | max | over 5 cm |")
     print("|---|---|---|---|---|---|---|")
     for root in args.sets:
         errors, dirs = [], capture_dirs(root)
         for d in dirs:
             capture = read_capture_set(d)
-            maps = (true_masks(capture) if args.true_masks
-                    else detector.probabilities(capture.load_images()))
+            if args.true_masks:
+                maps = true_masks(capture)
+            else:
+                maps = detector.detect(capture.load_images())
+                if args.centroids:
+                    maps = [HandleMap.centroid_only(m.probability) for m in maps]
             found = locate_handle(maps, capture.frames)
             if found is not None:
                 errors.append(np.linalg.norm(found.p_O - capture.gt["keypoints"]["handle"]))

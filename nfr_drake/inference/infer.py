@@ -87,7 +87,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     rays = observed_rays(capture, images)
     handle = None
     if fitted.handle_detector is not None and fit_config.sighting_weight > 0:
-        handle = locate_handle(fitted.handle_detector.probabilities(images), capture.frames)
+        handle = locate_handle(fitted.handle_detector.detect(images), capture.frames)
     sighting = None if handle is None else PartSighting(
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
@@ -139,7 +139,8 @@ def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: Ca
     images = capture.load_images()[:max_views]
     frames = capture.frames[:max_views]
     rows = [[], [], [], []]
-    probs = detector.probabilities(images) if detector is not None else [None] * len(images)
+    probs = ([m.probability for m in detector.detect(images)] if detector is not None
+             else [None] * len(images))
     for frame, image, prob in zip(frames, images, probs, strict=True):
         view = render_view(model, z, q, frame.camera, frame.X_OC)
         size = (view.rgb.shape[1], view.rgb.shape[0])

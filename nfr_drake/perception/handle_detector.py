@@ -1,11 +1,14 @@
-"""A 2D handle detector: a small fully convolutional network that marks handle pixels in a photo.
+"""A 2D handle detector: a small fully convolutional network that finds the handle in a photo.
 
 The neural field pins a handle (1-4 px wide in the photos) down only loosely; this detector looks
-for it in each photo directly, and `nfr_drake.perception.handle_triangulation` turns its masks in
-posed views into one 3D point. It is trained on the same Drake renders as the neural field (label
-class 3 = handle), on images of several sizes so that it works at any resolution: the network has
-no pooling and no fully connected layer, so it runs on images of any size, and it sees about
-65 px around each pixel (dilated convolutions).
+for it in each photo directly, and `nfr_drake.perception.handle_triangulation` turns its output in
+posed views into one 3D point. Per pixel it predicts whether the pixel shows the handle and, for
+handle pixels, the offset (du, dv) in pixels to the projection of the handle keypoint (the grip
+centre): a bar's visible pixels (posts included) are not centred on the grip, and their votes
+are. It is trained on the same Drake renders as the neural field (label class 3 = handle), on
+images of several sizes so that it works at any resolution: the network has no pooling and no
+fully connected layer, so it runs on images of any size, and it sees about 65 px around each
+pixel (dilated convolutions).
 
 Files in a model folder's `handle_detector/`: `config.json` (`HandleDetectorConfig` and training
 record) and `model.safetensors`.
@@ -29,14 +32,17 @@ from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.objects import SemanticClass
+from nfr_drake.perception.handle_triangulation import HandleMap
 
 DETECTOR_DIR = "handle_detector"
+OFFSET_SCALE_PX = 4.0
+"""The offset outputs are in units of this many pixels (keeps them near 1 for the optimiser)."""
 
 
 @dataclass(frozen=True)
 class HandleDetectorConfig:
     """Architecture: 3x3 convolutions of `channels` channels with these dilations, then a 1x1
-    convolution to one logit per pixel."""
+    convolution to three outputs per pixel (handle logit, du, dv)."""
 
     channels: int = 32
     dilations: tuple[int, ...] = (1, 1, 2, 4, 8, 16, 1)
@@ -51,7 +57,8 @@ class HandleDetectorConfig:
 
 
 class HandleDetector(nn.Module):
-    """(B, 3, H, W) RGB in [0, 1] -> (B, H, W) handle logits, any H and W."""
+    """(B, 3, H, W) RGB in [0, 1] -> handle logits (B, H, W) and offsets to the projected grip
+    centre (B, 2, H, W), pixels (du right, dv down); any H and W."""
 
     def __init__(self, config: HandleDetectorConfig):
         super().__init__()
@@ -60,20 +67,23 @@ class HandleDetector(nn.Module):
         for d in config.dilations:
             layers += [nn.Conv2d(c_in, config.channels, 3, padding=d, dilation=d), nn.ReLU()]
             c_in = config.channels
-        layers.append(nn.Conv2d(c_in, 1, 1))
+        layers.append(nn.Conv2d(c_in, 3, 1))
         self.net = nn.Sequential(*layers)
 
-    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
-        return self.net(rgb - 0.5)[:, 0]
+    def forward(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        out = self.net(rgb - 0.5)
+        return out[:, 0], out[:, 1:] * OFFSET_SCALE_PX
 
     @torch.no_grad()
-    def probabilities(self, images: list[np.ndarray]) -> list[np.ndarray]:
-        """Handle probability per pixel of each uint8 RGB image (H, W, 3) -> float32 (H, W)."""
+    def detect(self, images: list[np.ndarray]) -> list[HandleMap]:
+        """The handle map of each uint8 RGB image (H, W, 3)."""
         self.eval()
         out = []
         for img in images:
             x = torch.from_numpy(np.ascontiguousarray(img, np.float32) / 255.0).permute(2, 0, 1)
-            out.append(torch.sigmoid(self(x[None]))[0].numpy())
+            logits, offsets = self(x[None])
+            out.append(HandleMap(torch.sigmoid(logits)[0].numpy(),
+                                 offsets[0].permute(1, 2, 0).numpy()))
         return out
 
 
@@ -86,6 +96,7 @@ class DetectorTrainConfig:
     lr: float = 1e-3
     crop: int = 64
     pos_weight: float = 10.0
+    offset_weight: float = 0.5
     checkpoint_every: int = 250
     seed: int = 0
     threads: int = 1
@@ -94,17 +105,29 @@ class DetectorTrainConfig:
         if min(self.steps, self.images_per_batch, self.checkpoint_every, self.threads) < 1:
             raise ConfigError("handle detector training: steps, batch, checkpoint_every and "
                               "threads must be >= 1")
-        if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0:
+        if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0 or self.offset_weight < 0:
             raise ConfigError("handle detector training: crop must be >= 8 px, lr and "
-                              "pos_weight > 0")
+                              "pos_weight > 0, offset_weight >= 0")
+
+
+def _projected_handle(data: RenderedDataset, j: int, a: int, v: int) -> np.ndarray:
+    """Pixel (u, v) (top-left pixel centre at (0.5, 0.5)) of the handle keypoint of object j at
+    articulation a in view v."""
+    rec = data.records[j]
+    p_O = rec.keypoints[a, data.keypoint_names.index("handle")].astype(np.float64)
+    X_OC = rec.X_OC[a, v].astype(np.float64)
+    p_C = X_OC[:3, :3].T @ (p_O - X_OC[:3, 3])
+    return (data.camera.K @ (p_C / p_C[2]))[:2]
 
 
 def _batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
     """n random images of `data`, cut to crop x crop px (3 in 4 about a handle pixel where the
-    image shows one): rgb (n, 3, c, c) float32 in [0, 1], handle mask (n, c, c) float32."""
+    image shows one): rgb (n, 3, c, c) float32 in [0, 1], handle mask (n, c, c) float32 and the
+    offset of every pixel to the projected handle keypoint (n, 2, c, c) float32, px."""
     A, V, S = data.spec.articulations, data.spec.views, data.spec.size
     c = min(crop, S)
     rgb, mask = np.empty((n, c, c, 3), np.float32), np.empty((n, c, c), bool)
+    offset = np.empty((n, 2, c, c), np.float32)
     for b, (j, a, v) in enumerate(zip(rng.integers(0, data.num_objects, n),
                                       rng.integers(0, A, n), rng.integers(0, V, n), strict=True)):
         rec = data.records[j]
@@ -118,19 +141,38 @@ def _batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
             r0, c0 = rng.integers(0, S - c + 1, 2)
         rgb[b] = np.asarray(rec.rgb[a, v, r0:r0 + c, c0:c0 + c], np.float32) / 255.0
         mask[b] = handle[r0:r0 + c, c0:c0 + c]
+        u, w = _projected_handle(data, j, a, v)
+        offset[b, 0] = u - (c0 + np.arange(c) + 0.5)[None, :]
+        offset[b, 1] = w - (r0 + np.arange(c) + 0.5)[:, None]
     flip = rng.random(n) < 0.5  # mirror images: hinges on either side look alike
     rgb[flip], mask[flip] = rgb[flip, :, ::-1], mask[flip, :, ::-1]
+    offset[flip] = offset[flip, :, :, ::-1]
+    offset[flip, 0] *= -1.0
     return (torch.from_numpy(rgb).permute(0, 3, 1, 2).contiguous(),
-            torch.from_numpy(mask.astype(np.float32)))
+            torch.from_numpy(mask.astype(np.float32)), torch.from_numpy(offset))
 
 
-def _loss(logits: torch.Tensor, mask: torch.Tensor, pos_weight: float) -> torch.Tensor:
-    """Weighted binary cross-entropy plus a soft Dice term (handles are ~0.2% of the pixels)."""
+def _loss(logits: torch.Tensor, offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor,
+          pos_weight: float, offset_weight: float) -> torch.Tensor:
+    """Weighted binary cross-entropy plus a soft Dice term (handles are ~0.2% of the pixels), plus
+    `offset_weight` times the Huber loss (1 px) of the offsets on the true handle pixels."""
     bce = nn.functional.binary_cross_entropy_with_logits(
         logits, mask, pos_weight=torch.tensor(pos_weight))
     p = torch.sigmoid(logits)
     dice = 1.0 - (2.0 * (p * mask).sum() + 1.0) / (p.sum() + mask.sum() + 1.0)
-    return bce + dice
+    on = mask > 0.5
+    if not on.any():
+        return bce + dice
+    huber = nn.functional.huber_loss(offsets.permute(0, 2, 3, 1)[on],
+                                     true_offsets.permute(0, 2, 3, 1)[on], delta=1.0)
+    return bce + dice + offset_weight * huber
+
+
+def _offset_error_px(offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor) -> float:
+    """Median distance, px, between predicted and true offsets on the true handle pixels."""
+    on = mask > 0.5
+    d = (offsets - true_offsets).norm(dim=1)[on]
+    return float(d.median()) if d.numel() else float("nan")
 
 
 def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
@@ -145,7 +187,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
 
     Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
-    objects are held out; the handle IoU on 64 of their full images per dataset is reported.
+    objects are held out; the handle IoU and the median offset error (px, on handle pixels) on 64
+    of their full images per dataset are reported.
     OUT/checkpoint.pt is written every `checkpoint_every` steps; `resume` continues from it.
     Returns the training record written into OUT/config.json.
     """
@@ -196,7 +239,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     bar = tqdm(total=config.steps, initial=step, desc="train handle detector", mininterval=5.0)
     while step < config.steps:
         t0 = time.perf_counter()
-        loss = sum(_loss(net(rgb), mask, config.pos_weight) for rgb, mask in
+        loss = sum(_loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
+                   for rgb, mask, offsets in
                    (_batch(s, config.images_per_batch, config.crop, rng) for s in train_sets))
         opt.zero_grad()
         loss.backward()
@@ -213,13 +257,16 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     val_rng = np.random.default_rng(12345)
     net.eval()
     with torch.no_grad():
-        ious = {}
+        ious, offset_errors = {}, {}
         for v in val_sets:
-            rgb, mask = _batch(v, 64, v.spec.size, val_rng)
-            ious[str(v.root)] = _iou(net(rgb), mask)
+            rgb, mask, true_offsets = _batch(v, 64, v.spec.size, val_rng)
+            logits, offsets = net(rgb)
+            ious[str(v.root)] = _iou(logits, mask)
+            offset_errors[str(v.root)] = _offset_error_px(offsets, mask, true_offsets)
     record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
               "data": [str(d) for d in data_dirs], "command": command, "seconds": seconds,
-              "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious}
+              "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious,
+              "held_out_offset_error_px": offset_errors}
     save_file(net.state_dict(), str(out / "model.safetensors.tmp"))
     (out / "model.safetensors.tmp").replace(out / "model.safetensors")
     (out / "config.json").write_text(json.dumps(record, indent=2) + "\n")
@@ -262,5 +309,6 @@ def train_detector_command(data: list[Path], out: Path,
                                  threads=threads)
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
     record = train_detector(list(data), out, config, resume=resume, command=command)
-    print(f"handle detector written to {out}: held-out handle IoU "
-          + ", ".join(f"{k} {v:.3f}" for k, v in record["held_out_handle_iou"].items()))
+    print(f"handle detector written to {out}: held-out handle IoU, offset error "
+          + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
+                      for k, v in record["held_out_handle_iou"].items()))

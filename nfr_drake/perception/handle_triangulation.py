@@ -1,7 +1,8 @@
-"""One 3D handle point from 2D handle masks in posed views.
+"""One 3D handle point from 2D handle maps in posed views.
 
-Each view's handle probability map (`nfr_drake.perception.handle_detector`) gives at most one
-sighting: the probability-weighted centroid of its strongest connected blob. Sightings are turned
+Each view's handle map (`nfr_drake.perception.handle_detector`: a handle probability and, per
+pixel, an offset to the projected grip centre) gives at most one sighting: the
+probability-weighted mean of the votes (pixel + offset) of its strongest connected blob. Sightings are turned
 into rays in the capture frame O; the point is triangulated robustly: every pair of views proposes
 the point nearest both rays, the proposal whose agreeing views (reprojection within `max_error_px`,
 scaled to a 128 px high image) have the largest summed mass wins, and the point nearest the rays
@@ -9,8 +10,8 @@ of those views, weighted by mass, is returned. Mass, not the number of views, de
 in part (one bracket, the end below an edge) gives a small blob whose centroid is off its middle,
 and several such views can agree with each other.
 
-A bar's centroid is its visible middle, so the point lies within about a bar radius (1 cm) of the
-handle keypoint (the centre of the grip) on the cameras' side.
+With zero offsets the sighting is the blob's centroid, the visible middle of the handle (posts
+included), which lies 1-2 cm from the grip centre, between the bar and the door.
 """
 
 from __future__ import annotations
@@ -26,6 +27,21 @@ from nfr_drake.data.capture import CaptureFrame
 _REFERENCE_HEIGHT_PX = 128.0
 MIN_VIEWS = 3
 """Views that must agree on a handle for a point."""
+
+
+@dataclass(frozen=True)
+class HandleMap:
+    """A detector's output for one image: probability (H, W) float32 of each pixel showing the
+    handle, and offset_px (H, W, 2) float32 from each pixel's centre to the projected grip
+    centre, pixels (du right, dv down)."""
+
+    probability: np.ndarray
+    offset_px: np.ndarray
+
+    @classmethod
+    def centroid_only(cls, probability: np.ndarray) -> HandleMap:
+        """A map without offsets: sightings are the blobs' centroids."""
+        return cls(probability, np.zeros((*probability.shape, 2), np.float32))
 
 
 @dataclass(frozen=True)
@@ -49,10 +65,11 @@ class TriangulatedHandle:
     sightings: int
 
 
-def sighting(prob: np.ndarray, frame: int, threshold: float = 0.5,
+def sighting(handle_map: HandleMap, frame: int, threshold: float = 0.5,
              min_mass: float = 0.5) -> HandleSighting | None:
-    """The strongest blob of pixels with probability > threshold in an (H, W) map, or None when
-    there is none or its summed probability is below `min_mass`."""
+    """The votes of the strongest blob of pixels with probability > threshold, or None when there
+    is none or its summed probability is below `min_mass`."""
+    prob = handle_map.probability
     mask = (prob > threshold).astype(np.uint8)
     count, labels = cv2.connectedComponents(mask, connectivity=8)
     if count < 2:
@@ -63,7 +80,8 @@ def sighting(prob: np.ndarray, frame: int, threshold: float = 0.5,
         return None
     rows, cols = np.nonzero(labels == best)
     w = prob[rows, cols]
-    uv = np.array([np.sum(w * (cols + 0.5)), np.sum(w * (rows + 0.5))]) / np.sum(w)
+    votes = np.stack([cols + 0.5, rows + 0.5], -1) + handle_map.offset_px[rows, cols]
+    uv = (w[:, None] * votes).sum(0) / np.sum(w)
     return HandleSighting(frame, uv, float(masses[best - 1]))
 
 
@@ -149,8 +167,7 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
                               len(sightings))
 
 
-def locate_handle(probabilities: list[np.ndarray], frames: list[CaptureFrame]
-                  ) -> TriangulatedHandle | None:
-    """The handle triangulated from per-frame handle probability maps (H, W), one per frame."""
-    found = [s for i, prob in enumerate(probabilities) if (s := sighting(prob, i)) is not None]
+def locate_handle(maps: list[HandleMap], frames: list[CaptureFrame]) -> TriangulatedHandle | None:
+    """The handle triangulated from per-frame handle maps, one per frame."""
+    found = [s for i, m in enumerate(maps) if (s := sighting(m, i)) is not None]
     return triangulate_handle(frames, found)

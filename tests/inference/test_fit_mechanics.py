@@ -29,6 +29,7 @@ from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
 from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.nfr.rays import pixel_centers
+from nfr_drake.perception.handle_triangulation import HandleMap
 
 SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
                        pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
@@ -301,10 +302,11 @@ def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
     captures_command("closet", n=1, out=tmp_path / "caps", views=6, size=64)
     capture = read_capture_set(tmp_path / "caps" / "closet_000")
 
-    class TrueMasks:  # a perfect detector: the capture's own handle labels
-        def probabilities(self, images):
-            return [(cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED) == 3).astype(
-                np.float32) for p in capture.gt["label_paths"]]
+    class TrueMasks:  # a perfect mask detector: the capture's own handle labels, no offsets
+        def detect(self, images):
+            return [HandleMap.centroid_only((cv2.imread(str(capture.root / p), cv2.IMREAD_UNCHANGED)
+                                             == 3).astype(np.float32))
+                    for p in capture.gt["label_paths"]]
 
     fitted.handle_detector = TrueMasks()
     small = FitConfig(restarts=2, explore_steps=2, max_steps=4, explore_rays=32, rays_per_step=32,

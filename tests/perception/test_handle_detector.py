@@ -12,9 +12,11 @@ from nfr_drake.perception.handle_detector import (
     DetectorTrainConfig,
     HandleDetector,
     HandleDetectorConfig,
+    _batch,
     load_detector,
     train_detector,
 )
+from nfr_drake.data.dataset import RenderedDataset
 
 SMALL = HandleDetectorConfig(channels=8, dilations=(1, 2, 1))
 
@@ -22,8 +24,10 @@ SMALL = HandleDetectorConfig(channels=8, dilations=(1, 2, 1))
 def test_any_image_size_gives_a_map_of_that_size():
     net = HandleDetector(SMALL)
     for h, w in ((32, 32), (48, 80)):
-        (prob,) = net.probabilities([np.zeros((h, w, 3), np.uint8)])
+        (found,) = net.detect([np.zeros((h, w, 3), np.uint8)])
+        prob = found.probability
         assert prob.shape == (h, w) and np.all((prob >= 0) & (prob <= 1))
+        assert found.offset_px.shape == (h, w, 2)
 
 
 def test_training_lowers_the_loss_resumes_and_round_trips(tiny_dataset, tmp_path):
@@ -45,7 +49,9 @@ def test_training_lowers_the_loss_resumes_and_round_trips(tiny_dataset, tmp_path
     # A finished run resumed is already done: the same weights come out.
     train_detector([tiny_dataset], out, config, SMALL, resume=True)
     again, _ = load_detector(out)
-    np.testing.assert_allclose(net.probabilities([image])[0], again.probabilities([image])[0])
+    (a,), (b,) = net.detect([image]), again.detect([image])
+    np.testing.assert_allclose(a.probability, b.probability)
+    np.testing.assert_allclose(a.offset_px, b.offset_px)
     with pytest.raises(ConfigError, match="other options"):
         train_detector([tiny_dataset], out, DetectorTrainConfig(steps=41, checkpoint_every=20), SMALL,
                        resume=True)
@@ -60,3 +66,23 @@ def test_bad_folder_and_bad_options(tmp_path):
         DetectorTrainConfig(crop=4)
     with pytest.raises(ConfigError, match="at least one"):
         train_detector([], tmp_path / "x", DetectorTrainConfig())
+
+
+def test_offset_targets_point_at_the_projected_grip_centre(tiny_dataset):
+    """On handle pixels, pixel centre + target offset is one point: the handle keypoint's
+    projection, inside the handle's pixel box (so the projection's conventions are right), and
+    mirrored crops mirror the offsets."""
+    data = RenderedDataset(tiny_dataset)
+    rgb, mask, offset = _batch(data, 128, data.spec.size, np.random.default_rng(0))
+    S = data.spec.size
+    seen = 0
+    for m, o in zip(mask.numpy() > 0.5, offset.numpy(), strict=True):
+        rows, cols = np.nonzero(m)
+        if rows.size < 3:
+            continue
+        votes = np.stack([cols + 0.5 + o[0, rows, cols], rows + 0.5 + o[1, rows, cols]], -1)
+        np.testing.assert_allclose(votes, np.broadcast_to(votes[0], votes.shape), atol=1e-3)
+        assert cols.min() - 1 <= votes[0, 0] <= cols.max() + 2
+        assert rows.min() - 1 <= votes[0, 1] <= rows.max() + 2
+        seen += 1
+    assert seen >= 5 and rgb.shape[-1] == S

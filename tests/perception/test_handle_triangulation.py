@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nfr_drake.data.capture import CaptureFrame, PinholeCamera
-from nfr_drake.perception.handle_triangulation import sighting, triangulate_handle
+from nfr_drake.perception.handle_triangulation import HandleMap, sighting, triangulate_handle
 
 P_TRUE = np.array([0.25, -0.2, 0.5])
 
@@ -48,15 +48,15 @@ def _project(frame: CaptureFrame, p: np.ndarray) -> np.ndarray:
     return np.array([cam.fx * x + cam.cx, cam.fy * y + cam.cy])
 
 
-def _blob(size: int, uv: np.ndarray) -> np.ndarray:
-    """A 3 x 3 px probability blob centred on pixel uv (sub-pixel weights)."""
+def _blob(size: int, uv: np.ndarray) -> HandleMap:
+    """A 3 x 3 px probability blob centred on pixel uv (sub-pixel weights), without offsets."""
     prob = np.zeros((size, size), np.float32)
     c, r = uv - 0.5
     for dr in (-1, 0, 1):
         for dc in (-1, 0, 1):
             rr, cc = int(round(r)) + dr, int(round(c)) + dc
             prob[rr, cc] = max(0.0, 1.0 - 0.4 * np.hypot(rr - r, cc - c))
-    return prob
+    return HandleMap.centroid_only(prob)
 
 
 @pytest.mark.parametrize("distortion", [None, (-0.1, 0.02, 0.001, -0.001)])
@@ -95,10 +95,22 @@ def test_sighting_takes_the_strongest_blob():
     prob = np.zeros((32, 32), np.float32)
     prob[5, 5] = 0.6  # a weak speck
     prob[20:23, 10:12] = 0.9  # the handle
-    s = sighting(prob, 3)
+    s = sighting(HandleMap.centroid_only(prob), 3)
     assert s is not None and s.frame == 3
     np.testing.assert_allclose(s.uv, [11.0, 21.5])
-    assert sighting(np.full((8, 8), 0.4, np.float32), 0) is None
+    assert sighting(HandleMap.centroid_only(np.full((8, 8), 0.4, np.float32)), 0) is None
+
+
+def test_sighting_is_where_the_blob_votes():
+    """Offsets that all point at one spot put the sighting there, wherever the blob's centroid."""
+    prob = np.zeros((32, 32), np.float32)
+    prob[20:23, 10:14] = [0.6, 0.9, 0.9, 0.7]
+    rows, cols = np.mgrid[0:32, 0:32]
+    target = np.array([15.3, 18.8])
+    offset = np.stack([target[0] - (cols + 0.5), target[1] - (rows + 0.5)], -1).astype(np.float32)
+    s = sighting(HandleMap(prob, offset), 0)
+    np.testing.assert_allclose(s.uv, target, atol=1e-5)
+    assert abs(s.mass - prob.sum()) < 1e-5
 
 
 def test_strong_sightings_outweigh_more_numerous_weak_ones():
@@ -108,8 +120,9 @@ def test_strong_sightings_outweigh_more_numerous_weak_ones():
     found = []
     for i, f in enumerate(frames):
         strong = i in (1, 3, 5)
-        prob = _blob(128, _project(f, P_TRUE if strong else decoy)) * (1.0 if strong else 0.3)
-        found.append(sighting(prob, i, threshold=0.1))
+        blob = _blob(128, _project(f, P_TRUE if strong else decoy))
+        prob = blob.probability * (1.0 if strong else 0.3)
+        found.append(sighting(HandleMap.centroid_only(prob), i, threshold=0.1))
     result = triangulate_handle(frames, found)
     assert result is not None and set(result.views) == {1, 3, 5}
     assert np.linalg.norm(result.p_O - P_TRUE) < 0.005
