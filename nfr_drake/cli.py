@@ -31,6 +31,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                        "train the paper's image-encoder baseline on a dataset"),
     "train-handle-detector": ("nfr_drake.perception.handle_detector:train_detector_command",
                               "train the 2D handle detector on rendered datasets"),
+    "tune-head": ("nfr_drake.inference.head_tuning:tune_head_command",
+                  "tune a model's keypoint head on the codes the fit finds for unseen objects"),
     "poses": ("nfr_drake.perception.poses:poses_command",
               "camera poses of a folder of photos (pycolmap SfM, metric alignment) as a capture set"),
     "train": ("nfr_drake.nfr.train:train_command", "train the neural field (auto-decoder) on a dataset"),

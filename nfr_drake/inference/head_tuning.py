@@ -1,0 +1,221 @@
+"""Tuning the keypoint head Gamma on the codes the fit finds for unseen objects.
+
+The head is trained on the training objects' codes; the fit of an unseen object lands on another
+code, where the head extrapolates while the field's geometry still matches the photos (a fitted
+closet's rendered top edge is within a few millimetres of the truth where the head's hinge_top is
+2 cm off). This module fits synthetic capture sets of objects never used in training or
+evaluation (`nfr-drake captures` with a seed of its own) with the default fit, then trains the
+head alone on (fitted z_obj, z_art(q)) -> the true keypoints along q, while keeping its answers
+on the training codes (a distillation term), and writes a model folder in which only the head
+differs. The fits are kept as OUT/fits/<capture>.json, so a killed run resumes without fitting
+again.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import shutil
+import sys
+import time
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+from tqdm import tqdm
+
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.eval.evaluate import capture_dirs
+from nfr_drake.eval.metrics import keypoint_rmse_cm
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.nfr.checkpoint import CONFIG_FILE, WEIGHTS_FILE
+from nfr_drake.nfr.latent import compose_z, q_to_z_art
+
+FITS_DIR = "fits"
+_HEAD_PREFIX = "keypoint_head."
+
+
+@dataclass(frozen=True)
+class HeadTuningConfig:
+    """`steps` full-batch Adam steps at `lr`; `distill_weight` times the squared change of the
+    head's keypoints on `distill_samples` random (training code, q) pairs per step joins the
+    loss; the last `holdout` share of the fitted captures is held out, and the head of the step
+    with the lowest held-out keypoint RMSE (checked every `check_every` steps) is kept."""
+
+    steps: int = 3000
+    lr: float = 3e-4
+    distill_weight: float = 1.0
+    distill_samples: int = 1024
+    holdout: float = 0.1
+    check_every: int = 50
+    seed: int = 0
+
+    def __post_init__(self):
+        if min(self.steps, self.distill_samples, self.check_every) < 1 or self.lr <= 0:
+            raise ConfigError("head tuning: steps, distill_samples, check_every >= 1, lr > 0")
+        if not 0.0 < self.holdout < 0.5 or self.distill_weight < 0:
+            raise ConfigError("head tuning: holdout in (0, 0.5), distill_weight >= 0")
+
+
+_worker_model: FittedModel | None = None
+
+
+def _start_worker(model_dir: Path, threads: int) -> None:
+    global _worker_model
+    torch.set_num_threads(threads)
+    _worker_model = FittedModel(model_dir)
+
+
+def _fit_one(job: tuple[Path, Path]) -> str:
+    """Fit one capture in a worker; writes OUT/fits/<capture>.json: z (2 + k,), q."""
+    capture_dir, out_file = job
+    capture = read_capture_set(capture_dir)
+    _worker_model.check_capture(capture)
+    result, _ = infer(_worker_model, capture, FitConfig(), np.array([0.0]))
+    tmp = out_file.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"capture": capture_dir.name, "q": result.q, "z": result.z.tolist()}))
+    tmp.replace(out_file)
+    return capture_dir.name
+
+
+def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1,
+                 threads: int = 1) -> list[Path]:
+    """Fit every capture set under `captures` that has no fit in OUT/fits yet; returns the
+    capture folders (all of them, fitted now or before)."""
+    dirs = capture_dirs(captures)
+    fits = out / FITS_DIR
+    fits.mkdir(parents=True, exist_ok=True)
+    todo = [(d, fits / f"{d.name}.json") for d in dirs if not (fits / f"{d.name}.json").is_file()]
+    if todo:
+        with get_context("spawn").Pool(workers, _start_worker, (model_dir, threads)) as pool:
+            for _ in tqdm(pool.imap_unordered(_fit_one, todo), total=len(todo),
+                          desc="fit captures", unit="capture"):
+                pass
+    return dirs
+
+
+def _pairs(fitted: FittedModel, dirs: list[Path], out: Path):
+    """(z (P, 2 + k), true keypoints (P, K, 3), capture index (P,)) along each capture's q grid,
+    and per capture the fitted code and the true keypoints at the observed state."""
+    names = fitted.keypoint_names
+    zs, kps, owner, observed = [], [], [], []
+    for i, d in enumerate(dirs):
+        fit = json.loads((out / FITS_DIR / f"{d.name}.json").read_text())
+        gt = json.loads((d / "gt.json").read_text())
+        z = torch.tensor(fit["z"], dtype=torch.float32)
+        grid = torch.tensor(gt["trajectory"]["q"], dtype=torch.float32)
+        along = np.stack([np.asarray(gt["trajectory"]["keypoints"][n]) for n in names], 1)
+        zs.append(torch.cat([q_to_z_art(grid), z[2:].expand(len(grid), -1)], -1))
+        kps.append(torch.tensor(along, dtype=torch.float32))
+        owner.append(torch.full((len(grid),), i))
+        observed.append((z, np.array([gt["keypoints"][n] for n in names])))
+    return torch.cat(zs), torch.cat(kps), torch.cat(owner), observed
+
+
+def tune_head(fitted: FittedModel, dirs: list[Path], out: Path, config: HeadTuningConfig) -> dict:
+    """Train `fitted.model.keypoint_head` in place on the fits of `dirs` (module docstring);
+    returns the record: held-out keypoint RMSE at the observed state before and after (median,
+    cm), its curve, and the training pairs' mean squared error (m^2) at the first and last step."""
+    if len(dirs) < 10:
+        raise NfrDrakeError(f"head tuning needs at least 10 fitted captures, got {len(dirs)}")
+    torch.manual_seed(config.seed)
+    model = fitted.model
+    z_all, kp_all, owner, observed = _pairs(fitted, dirs, out)
+    n_val = max(1, int(round(config.holdout * len(dirs))))
+    train = owner < len(dirs) - n_val
+    val = observed[-n_val:]
+    head = model.keypoint_head
+    old_head = copy.deepcopy(head).requires_grad_(False)
+    head.requires_grad_(True)
+    codes = fitted.codes.float()
+
+    def held_out_rmse() -> float:
+        with torch.no_grad():
+            pred = model.keypoints(torch.stack([z for z, _ in val])).numpy()
+        return float(np.median([keypoint_rmse_cm(p, t) for p, (_, t) in zip(pred, val,
+                                                                               strict=True)]))
+
+    before = best = held_out_rmse()
+    best_state, best_step, curve, fit_curve = copy.deepcopy(head.state_dict()), 0, [], []
+    opt = torch.optim.Adam(head.parameters(), lr=config.lr)
+    generator = torch.Generator().manual_seed(config.seed)
+    for step in tqdm(range(1, config.steps + 1), desc="tune keypoint head", mininterval=5.0):
+        pick = torch.randint(len(codes), (config.distill_samples,), generator=generator)
+        q = torch.rand(config.distill_samples, generator=generator)
+        z_train = torch.cat([q_to_z_art(q), codes[pick]], -1)
+        with torch.no_grad():
+            keep = old_head(compose_z(z_train[:, :2], z_train[:, 2:]))
+        fit_term = ((model.keypoints(z_all[train]) - kp_all[train]) ** 2).sum(-1).mean()
+        distill = ((model.keypoints(z_train) - keep) ** 2).sum(-1).mean()
+        loss = fit_term + config.distill_weight * distill
+        fit_curve.append(fit_term.item())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if step % config.check_every == 0:
+            rmse = held_out_rmse()
+            curve.append((step, rmse))
+            if rmse < best:
+                best, best_step = rmse, step
+                best_state = copy.deepcopy(head.state_dict())
+    head.load_state_dict(best_state)
+    return {"config": asdict(config), "captures": len(dirs), "held_out": n_val,
+            "held_out_keypoint_rmse_cm": {"before": before, "after": best},
+            "best_step": best_step, "held_out_curve": curve,
+            "train_fit_m2": {"first": fit_curve[0], "last": fit_curve[-1]}}
+
+
+def write_tuned_model(source: Path, fitted: FittedModel, out_model: Path, record: dict) -> None:
+    """A copy of the model folder `source` (with its handle detector) whose keypoint head is
+    `fitted.model.keypoint_head`; config.json gains `keypoint_head_tuning` = record."""
+    tmp = out_model.with_name(out_model.name + ".tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    shutil.copytree(source, tmp, ignore=shutil.ignore_patterns("MODEL_CARD.md", "baseline"))
+    state = load_file(str(source / WEIGHTS_FILE))
+    for k, v in fitted.model.keypoint_head.state_dict().items():
+        state[_HEAD_PREFIX + k] = v.detach().clone().contiguous()
+    save_file(state, str(tmp / WEIGHTS_FILE))
+    config = json.loads((source / CONFIG_FILE).read_text())
+    config["keypoint_head_tuning"] = record
+    (tmp / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+    if out_model.exists():
+        shutil.rmtree(out_model)
+    tmp.replace(out_model)
+
+
+def tune_head_command(model: Path, captures: Path, out: Path,
+                      steps: int = HeadTuningConfig.steps, lr: float = HeadTuningConfig.lr,
+                      distill_weight: float = HeadTuningConfig.distill_weight,
+                      workers: int = 1, threads: int = 1) -> None:
+    """Fit capture sets of unseen objects, then tune the keypoint head on the fitted codes.
+
+    Args:
+        model: model folder to tune (not changed).
+        captures: folder of capture sets with gt.json (`nfr-drake captures`, a seed used for
+            nothing else).
+        out: work folder: fits/ (one per capture, kept on resume) and model/ (the tuned model).
+        steps: Adam steps of the head.
+        lr: learning rate.
+        distill_weight: weight of keeping the head's keypoints on the training codes.
+        workers: fitting processes.
+        threads: torch threads per fitting process.
+    """
+    out = Path(out)
+    started = time.perf_counter()
+    dirs = fit_captures(Path(model), Path(captures), out, workers, threads)
+    fitted = FittedModel(Path(model))
+    torch.set_num_threads(threads)
+    record = tune_head(fitted, dirs, out, HeadTuningConfig(steps=steps, lr=lr,
+                                                           distill_weight=distill_weight))
+    record.update(command="nfr-drake tune-head " + " ".join(sys.argv[2:]),
+                  captures_dir=str(captures), seconds=time.perf_counter() - started)
+    write_tuned_model(Path(model), fitted, out / "model", record)
+    rmse = record["held_out_keypoint_rmse_cm"]
+    print(f"tuned model written to {out / 'model'}: held-out keypoint RMSE "
+          f"{rmse['before']:.2f} -> {rmse['after']:.2f} cm (step {record['best_step']})")
