@@ -24,26 +24,9 @@ from nfr_drake.inference.fit import (
 from nfr_drake.inference.forward import keypoint_trajectory, render_view
 from nfr_drake.inference.infer import FittedModel, infer
 from nfr_drake.inference.result import FitResult
-from nfr_drake.nfr.checkpoint import write_model_folder
-from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
-from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.nfr.rays import pixel_centers
 from nfr_drake.perception.handle_triangulation import HandleMap
-
-SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
-                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
-                       keypoint_hidden=16)
-
-
-@pytest.fixture(scope="module")
-def model_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("model") / "closet"
-    torch.manual_seed(0)
-    write_model_folder(folder, NFRAutoDecoder(SMALL, num_objects=3),
-                       {"category": "closet",
-                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
-    return folder
 
 
 @pytest.fixture(scope="module")

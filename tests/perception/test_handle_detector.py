@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.perception.handle_detector import (
@@ -16,7 +17,6 @@ from nfr_drake.perception.handle_detector import (
     load_detector,
     train_detector,
 )
-from nfr_drake.data.dataset import RenderedDataset
 
 SMALL = HandleDetectorConfig(channels=8, dilations=(1, 2, 1))
 
