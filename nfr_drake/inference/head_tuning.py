@@ -88,6 +88,10 @@ def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1,
     """Fit every capture set under `captures` that has no fit in OUT/fits yet; returns the
     capture folders (all of them, fitted now or before)."""
     dirs = capture_dirs(captures)
+    missing = [d.name for d in dirs if not (d / "gt.json").is_file()]
+    if missing:
+        raise NfrDrakeError(f"{captures}: head tuning needs gt.json (the true keypoints) in every "
+                            f"capture set; missing in {', '.join(missing[:5])}")
     fits = out / FITS_DIR
     fits.mkdir(parents=True, exist_ok=True)
     todo = [(d, fits / f"{d.name}.json") for d in dirs if not (fits / f"{d.name}.json").is_file()]

@@ -1,6 +1,7 @@
 """Tuning the keypoint head on fitted codes: fits resume, the head learns, only the head changes."""
 
 import json
+import shutil
 
 import pytest
 import torch
@@ -66,8 +67,12 @@ def test_the_head_learns_the_pairs_and_only_the_head_changes(model_folder, fitte
         "keypoint_head_tuning"]["best_step"] == record["best_step"]
 
 
-def test_bad_options_and_too_few_captures(model_folder, fitted_run):
+def test_bad_options_and_too_few_captures(model_folder, fitted_run, tmp_path):
     root, dirs = fitted_run
+    shutil.copytree(dirs[0], tmp_path / "caps" / "closet_000")
+    (tmp_path / "caps" / "closet_000" / "gt.json").unlink()
+    with pytest.raises(NfrDrakeError, match="gt.json"):
+        fit_captures(model_folder, tmp_path / "caps", tmp_path / "run")
     with pytest.raises(ConfigError):
         HeadTuningConfig(holdout=0.7)
     with pytest.raises(ConfigError):
