@@ -9,7 +9,7 @@ Conventions at this boundary:
   z backward). In code, poses are `X_OC` with OpenCV axes (x right, y down, z forward); the
   conversion happens here and nowhere else.
 - Intrinsics use COLMAP/nerfstudio's pixel convention: the top-left pixel's centre is (0.5, 0.5).
-  (Drake's `CameraInfo` puts it at (0, 0); `PinholeCamera.from_drake` converts.)
+  (`nfr_drake.data.render.drake_camera_info` gives Drake's renderer the matching camera.)
 """
 
 from __future__ import annotations
@@ -57,12 +57,6 @@ class PinholeCamera:
         """A centred, square-pixel camera with the given vertical field of view."""
         f = height / 2.0 / math.tan(fov_y_rad / 2.0)
         return cls(f, f, width / 2.0, height / 2.0, width, height)
-
-    @classmethod
-    def from_drake(cls, info) -> PinholeCamera:
-        """From a pydrake `CameraInfo` (whose pixel centres are at integer coordinates)."""
-        return cls(info.focal_x(), info.focal_y(), info.center_x() + 0.5, info.center_y() + 0.5,
-                   info.width(), info.height())
 
     @property
     def K(self) -> np.ndarray:

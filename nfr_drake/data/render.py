@@ -88,11 +88,16 @@ class RenderedView:
 
 
 def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
-    """Drake's CameraInfo of a pinhole camera (Drake puts pixel centres at integer coordinates)."""
+    """Drake's CameraInfo of a pinhole camera whose renders match the camera's intrinsics.
+
+    CameraInfo's documentation puts pixel centres at integer coordinates, but RenderEngineVtk
+    (drake 1.51) draws a point at (fx x / z + center_x, fy y / z + center_y) in our convention,
+    top-left pixel centre at (0.5, 0.5): the principal point passes through unchanged.
+    Subtracting half a pixel, as the documentation suggests, shifts every render by -0.5 px in u
+    and v against the stated intrinsics (tests/data/test_render_alignment.py measures it)."""
     if camera.distortion is not None:
         raise ValueError("Drake renders undistorted pinhole images only")
-    return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx - 0.5,
-                      camera.cy - 0.5)
+    return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy)
 
 
 class ObjectRenderer:
