@@ -2,12 +2,13 @@
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from nfr_drake.data.cameras import CameraDistribution, look_at
 from nfr_drake.data.capture import PinholeCamera
-from nfr_drake.data.render import ObjectRenderer
+from nfr_drake.data.render import RENDERER_NAME, ObjectRenderer, drake_camera_info
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, SemanticClass, object_rng, sample_object
 
 SIZE = 128
@@ -96,3 +97,48 @@ def test_drawer_moves_out_in_depth():
     moving = lambda v: v.depth[v.label == SemanticClass.MOVING].min()  # noqa: E731
     # The front comes towards the camera by about the travel times cos(elevation).
     assert moving(closed) - moving(opened) > 0.6 * obj.joint_upper
+
+
+def test_spheres_render_where_the_intrinsics_project_them():
+    """Sub-pixel check of `drake_camera_info`: the silhouette centroid of small spheres, in an
+    off-centre, non-square camera, matches their centres' projection to the silhouettes' quantisation
+    (the renders were once shifted by -0.5 px in u and v)."""
+    from pydrake.geometry import (ClippingRange, DepthRange, DepthRenderCamera,
+                                  MakeRenderEngineVtk, RenderCameraCore, RenderEngineVtkParams,
+                                  Sphere)
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.sensors import RgbdSensor
+
+    camera = PinholeCamera(fx=70.0, fy=72.0, cx=43.3, cy=27.8, width=90, height=60)
+    centres = np.array([[0.0, 0.0, 1.0], [0.2, 0.1, 1.1], [-0.25, -0.12, 1.3]])  # camera frame
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    scene_graph.AddRenderer(RENDERER_NAME, MakeRenderEngineVtk(RenderEngineVtkParams()))
+    for i, p in enumerate(centres):
+        plant.RegisterVisualGeometry(plant.world_body(), RigidTransform(p), Sphere(0.08),
+                                     f"sphere{i}", np.array([0.8, 0.2, 0.2, 1.0]))
+    plant.Finalize()
+    core = RenderCameraCore(RENDERER_NAME, drake_camera_info(camera), ClippingRange(0.05, 10.0),
+                            RigidTransform())
+    sensor = builder.AddSystem(RgbdSensor(
+        parent_id=scene_graph.world_frame_id(), X_PB=RigidTransform(),
+        depth_camera=DepthRenderCamera(core, DepthRange(0.05, 10.0))))
+    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    diagram = builder.Build()
+    context = sensor.GetMyContextFromRoot(diagram.CreateDefaultContext())
+    depth = np.array(sensor.depth_image_32F_output_port().Eval(context).data)[..., 0]
+    count, blobs = cv2.connectedComponents(np.isfinite(depth).astype(np.uint8))
+    assert count == 1 + len(centres)
+    projected = centres[:, :2] / centres[:, 2:] * [camera.fx, camera.fy] + [camera.cx, camera.cy]
+    errors = []
+    for k in range(1, count):
+        rows, cols = np.nonzero(blobs == k)
+        centroid = np.array([cols.mean() + 0.5, rows.mean() + 0.5])
+        nearest = np.argmin(np.linalg.norm(projected - centroid, axis=1))
+        errors.append(centroid - projected[nearest])
+    errors = np.array(errors)
+    # A silhouette's centroid is quantised to ~0.1 px; a shifted principal point moves all alike.
+    assert np.abs(errors).max() < 0.2, errors
+    assert np.abs(errors.mean(0)).max() < 0.1, errors
