@@ -100,12 +100,18 @@ def test_drawer_moves_out_in_depth():
 
 
 def test_spheres_render_where_the_intrinsics_project_them():
-    """Sub-pixel check of `drake_camera_info`: the silhouette centroid of small spheres, in an
-    off-centre, non-square camera, matches their centres' projection to the silhouettes' quantisation
-    (the renders were once shifted by -0.5 px in u and v)."""
-    from pydrake.geometry import (ClippingRange, DepthRange, DepthRenderCamera,
-                                  MakeRenderEngineVtk, RenderCameraCore, RenderEngineVtkParams,
-                                  Sphere)
+    """Sub-pixel check of `drake_camera_info`: the silhouette centroids of small spheres in an
+    off-centre, non-square camera match their centres' projections to the silhouettes'
+    quantisation (the renders were once shifted by -0.5 px in u and v)."""
+    from pydrake.geometry import (
+        ClippingRange,
+        DepthRange,
+        DepthRenderCamera,
+        MakeRenderEngineVtk,
+        RenderCameraCore,
+        RenderEngineVtkParams,
+        Sphere,
+    )
     from pydrake.math import RigidTransform
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.systems.framework import DiagramBuilder
