@@ -94,7 +94,8 @@ def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
     (drake 1.51) draws a point at (fx x / z + center_x, fy y / z + center_y) in our convention,
     top-left pixel centre at (0.5, 0.5): the principal point passes through unchanged.
     Subtracting half a pixel, as the documentation suggests, shifts every render by -0.5 px in u
-    and v against the stated intrinsics (tests/data/test_render_alignment.py measures it)."""
+    and v against the stated intrinsics (measured by
+    tests/data/test_render.py::test_spheres_render_where_the_intrinsics_project_them)."""
     if camera.distortion is not None:
         raise ValueError("Drake renders undistorted pinhole images only")
     return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy)
