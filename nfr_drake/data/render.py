@@ -29,8 +29,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from nfr_drake.data.capture import PinholeCamera
-from nfr_drake.objects import ArticulatedObject, SemanticClass
-from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels
+from nfr_drake.objects import ArticulatedObject
+from nfr_drake.objects.articulated import LABELS_PER_PART, MAX_FRONTS
+from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels, set_articulation
 
 RENDERER_NAME = "nfr_vtk"
 DEFAULT_BACKGROUND_RGB = (0.92, 0.92, 0.92)
@@ -80,11 +81,29 @@ def sample_lighting(rng: np.random.Generator) -> Lighting:
 @dataclass(frozen=True)
 class RenderedView:
     """One view. rgb: uint8 (H, W, 3); label: uint8 (H, W) semantic class (DESIGN.md);
-    depth: float32 (H, W), metres along the optical axis, inf where no surface is hit."""
+    depth: float32 (H, W), metres along the optical axis, inf where no surface is hit;
+    part: int8 (H, W) index of the front seen in each pixel (docs/FURNITURE.md), -1 where none."""
 
     rgb: np.ndarray
     label: np.ndarray
     depth: np.ndarray
+    part: np.ndarray
+
+
+# Render labels this package assigns: 1 (carcass) to class + 4 (k + 1) of the last front.
+_MAX_LABEL = LABELS_PER_PART * (MAX_FRONTS + 1) + LABELS_PER_PART - 1
+
+
+def split_render_label(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Semantic class (uint8) and front index (int8, -1 where none) of raw RenderLabel values.
+
+    Labels outside this package's range (background, Drake's reserved values) are class 0, part -1.
+    """
+    raw = np.asarray(raw, dtype=np.int64)
+    ours = (raw >= 1) & (raw <= _MAX_LABEL)
+    label = np.where(ours, raw % LABELS_PER_PART, 0).astype(np.uint8)
+    part = np.where(ours, raw // LABELS_PER_PART - 1, -1).astype(np.int8)
+    return label, part
 
 
 def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
@@ -145,23 +164,22 @@ class ObjectRenderer:
         self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
         self._sensor_context = sensor.GetMyContextFromRoot(self._context)
 
-    def set_state(self, q: float, X_OC: np.ndarray) -> None:
-        """Set articulation q in [0, 1] and camera pose X_OC (4x4, OpenCV axes)."""
-        self._plant.SetPositions(self._plant_context, self._model,
-                                 np.array([self.obj.joint_value(q)]))
+    def set_state(self, q: float | np.ndarray, X_OC: np.ndarray) -> None:
+        """Set articulation q in [0, 1] (one value for all fronts, or shape (F,)) and camera pose
+        X_OC (4x4, OpenCV axes)."""
+        set_articulation(self._plant, self._plant_context, self.obj, self._model, q)
         self._plant.SetFreeBodyPose(self._plant_context, self._rig, RigidTransform(X_OC))
 
-    def render_rgb(self, q: float, X_OC: np.ndarray) -> np.ndarray:
+    def render_rgb(self, q: float | np.ndarray, X_OC: np.ndarray) -> np.ndarray:
         """uint8 RGB image (H, W, 3)."""
         self.set_state(q, X_OC)
         return self._sensor.color_image_output_port().Eval(self._sensor_context).data[..., :3].copy()
 
-    def render(self, q: float, X_OC: np.ndarray) -> RenderedView:
-        """RGB, semantic labels and depth of one view."""
+    def render(self, q: float | np.ndarray, X_OC: np.ndarray) -> RenderedView:
+        """RGB, semantic labels, depth and front indices of one view."""
         self.set_state(q, X_OC)
         ctx = self._sensor_context
         rgb = self._sensor.color_image_output_port().Eval(ctx).data[..., :3].copy()
-        raw = self._sensor.label_image_output_port().Eval(ctx).data[..., 0]
-        label = np.where((raw >= SemanticClass.CARCASS) & (raw <= SemanticClass.HANDLE), raw, 0)
+        label, part = split_render_label(self._sensor.label_image_output_port().Eval(ctx).data[..., 0])
         depth = self._sensor.depth_image_32F_output_port().Eval(ctx).data[..., 0].copy()
-        return RenderedView(rgb, label.astype(np.uint8), depth)
+        return RenderedView(rgb, label, depth, part)

@@ -10,8 +10,10 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects.articulated import (
     SEMANTIC_CLASS_NAMES,
     ArticulatedObject,
+    Front,
     Part,
     SemanticClass,
+    part_index_of,
     part_semantic_class,
 )
 from nfr_drake.objects.closet import sample_closet
@@ -48,9 +50,11 @@ __all__ = [
     "SEED_DOMAIN_TRAIN",
     "SEMANTIC_CLASS_NAMES",
     "ArticulatedObject",
+    "Front",
     "Part",
     "SemanticClass",
     "object_rng",
+    "part_index_of",
     "part_semantic_class",
     "sample_object",
     "to_sdformat",

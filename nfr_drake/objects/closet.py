@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nfr_drake.objects.appearance import sample_front_rgba, sample_handle_rgba, sample_rgba
-from nfr_drake.objects.articulated import ArticulatedObject, Part, SemanticClass
+from nfr_drake.objects.articulated import ArticulatedObject, Front, Part, SemanticClass
 from nfr_drake.objects.carcass import carcass_parts
 
 KEYPOINT_NAMES = ("handle", "hinge_top", "hinge_bottom", "goal")
@@ -115,11 +115,11 @@ def sample_closet(rng: np.random.Generator, ranges: ClosetRanges = ClosetRanges(
                   handle_length=handle_length, handle_standoff=standoff,
                   handle_edge_offset=edge_offset, handle_height=z_handle,
                   carcass_rgba=carcass_rgba, door_rgba=door_rgba, handle_rgba=handle_rgba)
-    return ArticulatedObject(
-        category="closet",
-        name=name,
-        base_parts=carcass_parts(W, D, H, t, carcass_rgba, shelf_heights),
-        moving_parts=(door, *handle),
+    door_front = Front(
+        kind="door",
+        link_name="door",
+        joint_name="door_hinge",
+        parts=(door, *handle),
         joint_type="revolute",
         p_OJ=p_OJ,
         axis_O=axis,
@@ -131,5 +131,13 @@ def sample_closet(rng: np.random.Generator, ranges: ClosetRanges = ClosetRanges(
         },
         moving_keypoints={"handle": p_MH},
         keypoint_names=KEYPOINT_NAMES,
+        grip_axis_M=(0.0, 0.0, 1.0),
+        grip_half_length=handle_length / 2,
+    )
+    return ArticulatedObject(
+        category="closet",
+        name=name,
+        base_parts=carcass_parts(W, D, H, t, carcass_rgba, shelf_heights),
+        fronts=(door_front,),
         params=params,
     )

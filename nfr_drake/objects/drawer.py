@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nfr_drake.objects.appearance import sample_front_rgba, sample_handle_rgba, sample_rgba
-from nfr_drake.objects.articulated import ArticulatedObject, Part, SemanticClass
+from nfr_drake.objects.articulated import ArticulatedObject, Front, Part, SemanticClass
 from nfr_drake.objects.carcass import carcass_parts
 
 KEYPOINT_NAMES = ("handle", "goal")
@@ -96,11 +96,11 @@ def sample_drawer(rng: np.random.Generator, ranges: DrawerRanges = DrawerRanges(
                   box_depth=box_d, handle_length=length, handle_standoff=standoff,
                   handle_height=z_handle, handle_lateral=y_handle, carcass_rgba=carcass_rgba,
                   front_rgba=front_rgba, box_rgba=box_rgba, handle_rgba=handle_rgba)
-    return ArticulatedObject(
-        category="drawer",
-        name=name,
-        base_parts=carcass_parts(W, D, H, t, carcass_rgba),
-        moving_parts=tuple(moving),
+    drawer_front = Front(
+        kind="drawer",
+        link_name="drawer",
+        joint_name="drawer_slide",
+        parts=tuple(moving),
         joint_type="prismatic",
         p_OJ=(D / 2, 0.0, 0.0),
         axis_O=(1.0, 0.0, 0.0),
@@ -108,5 +108,13 @@ def sample_drawer(rng: np.random.Generator, ranges: DrawerRanges = DrawerRanges(
         fixed_keypoints={},
         moving_keypoints={"handle": p_MH, "goal": (-box_d / 2, 0.0, box_z0 + wall)},
         keypoint_names=KEYPOINT_NAMES,
+        grip_axis_M=(0.0, 1.0, 0.0),
+        grip_half_length=length / 2,
+    )
+    return ArticulatedObject(
+        category="drawer",
+        name=name,
+        base_parts=carcass_parts(W, D, H, t, carcass_rgba),
+        fronts=(drawer_front,),
         params=params,
     )

@@ -9,7 +9,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
-from nfr_drake.objects.articulated import ArticulatedObject, part_semantic_class
+from nfr_drake.objects.articulated import ArticulatedObject, render_label_value
 from nfr_drake.objects.sdformat import to_sdformat
 
 
@@ -39,23 +39,27 @@ def add_articulated_object(
 
 
 def set_articulation(plant: MultibodyPlant, plant_context, obj: ArticulatedObject,
-                     model: ModelInstanceIndex, q: float) -> None:
-    """Set the object's joint to articulation q in [0, 1]."""
-    plant.SetPositions(plant_context, model, np.array([obj.joint_value(q)]))
+                     model: ModelInstanceIndex, q: float | np.ndarray) -> None:
+    """Set the object's joints to articulation q in [0, 1]: one value for all fronts, or shape (F,)."""
+    positions = plant.GetPositions(plant_context)
+    for front, value in zip(obj.fronts, obj.joint_values(q), strict=True):
+        positions[plant.GetJointByName(front.joint_name, model).position_start()] = value
+    plant.SetPositions(plant_context, positions)
 
 
 def apply_semantic_labels(plant: MultibodyPlant, scene_graph: SceneGraph,
                           model: ModelInstanceIndex) -> None:
-    """Give each perception geometry of `model` the RenderLabel of its semantic class.
+    """Give each perception geometry of `model` its RenderLabel: class and front index.
 
-    Geometry names carry their class (see `Part.geometry_name`). Call before creating a context.
+    Geometry names carry both (`render_label_value`: 1 for the carcass, class + 4 (k + 1) for
+    the parts of front k). Call before creating a context.
     """
     inspector = scene_graph.model_inspector()
     source_id = plant.get_source_id()
     for body_index in plant.GetBodyIndices(model):
         frame_id = plant.GetBodyFrameIdOrThrow(body_index)
         for geometry_id in inspector.GetGeometries(frame_id, Role.kPerception):
-            label = int(part_semantic_class(inspector.GetName(geometry_id)))
+            label = render_label_value(inspector.GetName(geometry_id))
             props = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
             props.UpdateProperty("label", "id", RenderLabel(label))
             # Perception properties cannot be replaced in place: remove the role, assign anew.

@@ -1,4 +1,4 @@
-"""SDFormat 1.9 text of an `ArticulatedObject`: two links, one joint, visuals and collisions.
+"""SDFormat 1.9 text of an `ArticulatedObject`: the carcass link, one link and joint per front.
 
 The carcass is not welded here: whoever loads the model welds `carcass` to the world at X_WO.
 """
@@ -9,7 +9,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from nfr_drake.objects.articulated import ArticulatedObject, Part
+from nfr_drake.objects.articulated import ArticulatedObject, Front, Part
 
 # Effort and velocity limits of the object's joint; generous, the arm is what limits motion.
 _JOINT_EFFORT = 100.0
@@ -35,9 +35,10 @@ def _part_elements(part: Part) -> str:
     geom = _geometry(part)
     rgba = _vec(part.rgba)
     name = escape(part.geometry_name)
+    texture = "" if part.texture is None else f"<drake:diffuse_map>{escape(part.texture)}</drake:diffuse_map>"
     return (
         f'      <visual name="{name}">{pose}<geometry>{geom}</geometry>'
-        f"<material><diffuse>{rgba}</diffuse><ambient>{rgba}</ambient></material></visual>\n"
+        f"<material><diffuse>{rgba}</diffuse><ambient>{rgba}</ambient>{texture}</material></visual>\n"
         f'      <collision name="{name}">{pose}<geometry>{geom}</geometry></collision>\n'
     )
 
@@ -52,31 +53,35 @@ def _inertial(mass: float, p_cm, inertia: np.ndarray) -> str:
     )
 
 
+def _front_elements(obj: ArticulatedObject, front: Front) -> str:
+    mass, p_Mcm, inertia = front.inertia()
+    parts = "".join(_part_elements(p) for p in front.parts)
+    return f"""    <link name="{front.link_name}">
+      <pose>{_vec(front.p_OJ)} 0 0 0</pose>
+{_inertial(mass, p_Mcm, inertia)}{parts}    </link>
+    <joint name="{front.joint_name}" type="{front.joint_type}">
+      <parent>{obj.base_link_name}</parent>
+      <child>{front.link_name}</child>
+      <axis>
+        <xyz>{_vec(front.axis_O)}</xyz>
+        <limit><lower>0</lower><upper>{front.joint_upper:.6g}</upper>
+          <effort>{_JOINT_EFFORT}</effort><velocity>{_JOINT_VELOCITY}</velocity></limit>
+        <dynamics><damping>{front.damping:.6g}</damping></dynamics>
+      </axis>
+    </joint>
+"""
+
+
 def to_sdformat(obj: ArticulatedObject) -> str:
     """The object as an SDFormat string that Drake's Parser loads as one model instance."""
-    mass, p_Mcm, inertia = obj.moving_inertia()
     carcass_inertia = np.eye(3) * _CARCASS_MASS_KG * obj.height**2 / 12.0
     base = "".join(_part_elements(p) for p in obj.base_parts)
-    moving = "".join(_part_elements(p) for p in obj.moving_parts)
-    lower, upper = 0.0, obj.joint_upper
+    fronts = "".join(_front_elements(obj, f) for f in obj.fronts)
     return f"""<?xml version="1.0"?>
-<sdf version="1.9">
+<sdf version="1.9" xmlns:drake="http://drake.mit.edu">
   <model name="{escape(obj.name)}">
     <link name="{obj.base_link_name}">
 {_inertial(_CARCASS_MASS_KG, (0, 0, obj.height / 2), carcass_inertia)}{base}    </link>
-    <link name="{obj.moving_link_name}">
-      <pose>{_vec(obj.p_OJ)} 0 0 0</pose>
-{_inertial(mass, p_Mcm, inertia)}{moving}    </link>
-    <joint name="{obj.joint_name}" type="{obj.joint_type}">
-      <parent>{obj.base_link_name}</parent>
-      <child>{obj.moving_link_name}</child>
-      <axis>
-        <xyz>{_vec(obj.axis_O)}</xyz>
-        <limit><lower>{lower:.6g}</lower><upper>{upper:.6g}</upper>
-          <effort>{_JOINT_EFFORT}</effort><velocity>{_JOINT_VELOCITY}</velocity></limit>
-        <dynamics><damping>{obj.joint_damping:.6g}</damping></dynamics>
-      </axis>
-    </joint>
-  </model>
+{fronts}  </model>
 </sdf>
 """

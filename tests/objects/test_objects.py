@@ -2,9 +2,6 @@
 
 import numpy as np
 import pytest
-from pydrake.geometry import Role
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import (
@@ -16,34 +13,6 @@ from nfr_drake.objects import (
 )
 from nfr_drake.objects.closet import ClosetRanges
 from nfr_drake.objects.drawer import TRAVEL_FRACTION, DrawerRanges
-from nfr_drake.objects.plant import add_articulated_object, set_articulation
-
-
-class LoadedObject:
-    """An object in its own plant, with geometry poses queryable by part name."""
-
-    def __init__(self, obj):
-        builder = DiagramBuilder()
-        self.plant, self.scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-        self.model = add_articulated_object(self.plant, obj)
-        self.plant.Finalize()
-        self.diagram = builder.Build()
-        self.context = self.diagram.CreateDefaultContext()
-        self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)
-        self.obj = obj
-
-    def set_q(self, q):
-        set_articulation(self.plant, self.plant_context, self.obj, self.model, q)
-
-    def geometry_pose(self, local_name):
-        """X_WG (4x4) of the visual geometry whose name ends with `local_name`."""
-        sg_context = self.scene_graph.GetMyContextFromRoot(self.context)
-        query = self.scene_graph.get_query_output_port().Eval(sg_context)
-        inspector = query.inspector()
-        for gid in inspector.GetAllGeometryIds(Role.kIllustration):
-            if inspector.GetName(gid).endswith("::" + local_name):
-                return query.GetPoseInWorld(gid).GetAsMatrix4()
-        raise KeyError(local_name)
 
 
 def _objects(category, n=12):
@@ -51,9 +20,9 @@ def _objects(category, n=12):
 
 
 @pytest.mark.parametrize("category", ["closet", "drawer"])
-def test_many_seeds_parse_with_one_articulated_joint(category):
+def test_many_seeds_parse_with_one_articulated_joint(category, load_object):
     for obj in _objects(category, 25):
-        loaded = LoadedObject(obj)
+        loaded = load_object(obj)
         assert loaded.plant.num_positions() == 1
         joint = loaded.plant.GetJointByName(obj.joint_name, loaded.model)
         expected = "revolute" if category == "closet" else "prismatic"
@@ -78,10 +47,10 @@ def test_parameters_lie_in_their_ranges():
 
 
 @pytest.mark.parametrize("q", [0.0, 0.37, 1.0])
-def test_closet_keypoints_match_plant_geometry(q):
+def test_closet_keypoints_match_plant_geometry(q, load_object):
     seen_sides = set()
     for obj in _objects("closet", 12):
-        loaded = LoadedObject(obj)
+        loaded = load_object(obj)
         loaded.set_q(q)
         kp = obj.keypoints(q)
         grip = "knob" if obj.params["handle_type"] == "knob" else "bar"
@@ -119,9 +88,9 @@ def test_closet_door_opens_outward_and_handle_moves_on_an_arc():
 
 
 @pytest.mark.parametrize("q", [0.0, 0.5, 1.0])
-def test_drawer_keypoints_match_plant_geometry(q):
+def test_drawer_keypoints_match_plant_geometry(q, load_object):
     for obj in _objects("drawer", 10):
-        loaded = LoadedObject(obj)
+        loaded = load_object(obj)
         loaded.set_q(q)
         kp = obj.keypoints(q)
         np.testing.assert_allclose(kp["handle"], loaded.geometry_pose("handle__bar")[:3, 3],
