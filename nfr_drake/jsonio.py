@@ -15,5 +15,7 @@ def read_json(path: str | Path, error: type[NfrDrakeError], what: str = "file"):
         return json.loads(path.read_text())
     except FileNotFoundError:
         raise error(f"{path}: {what} not found") from None
+    except OSError as err:
+        raise error(f"{path}: cannot read the {what} ({err.strerror})") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise error(f"{path}: malformed JSON ({err})") from None

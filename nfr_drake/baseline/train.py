@@ -16,12 +16,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from tqdm import tqdm
 
 from nfr_drake.baseline.model import BaselineConfig, ImageEncoderBaseline
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import CheckpointError, load_strict, read_tensors
 
 MODEL_KIND = "nfr-drake-image-encoder-baseline"
 
@@ -75,18 +77,14 @@ def save_baseline(folder: Path, model: ImageEncoderBaseline, extra: dict) -> Non
 def load_baseline(folder: Path) -> tuple[ImageEncoderBaseline, dict]:
     """Load a baseline folder; NfrDrakeError for a missing, corrupt or foreign checkpoint."""
     folder = Path(folder)
+    doc = read_json(folder / "config.json", CheckpointError, "baseline config")
+    if not isinstance(doc, dict) or doc.get("kind") != MODEL_KIND:
+        raise CheckpointError(f"{folder / 'config.json'}: not an image-encoder baseline")
     try:
-        doc = json.loads((folder / "config.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError) as err:
-        raise NfrDrakeError(f"{folder / 'config.json'}: cannot read ({err})") from None
-    if doc.get("kind") != MODEL_KIND:
-        raise NfrDrakeError(f"{folder}: not an image-encoder baseline (kind {doc.get('kind')!r})")
-    model = ImageEncoderBaseline(BaselineConfig.from_json(doc["architecture"]))
-    try:
-        state = load_file(str(folder / "model.safetensors"))
-        model.load_state_dict(state)
-    except Exception as err:  # safetensors raises several types for damaged files
-        raise NfrDrakeError(f"{folder / 'model.safetensors'}: cannot load ({err})") from None
+        model = ImageEncoderBaseline(BaselineConfig.from_json(doc["architecture"]))
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f"{folder / 'config.json'}: bad architecture ({err})") from None
+    load_strict(model, read_tensors(folder / "model.safetensors"), folder / "model.safetensors")
     return model.eval(), doc
 
 

@@ -3,7 +3,8 @@
 Model folder (DESIGN.md): `model.safetensors` (weights of the networks, plus the training objects'
 codes under `codes.weight`) and `config.json` (format, architecture, category, keypoint names,
 training data and command). A resumable checkpoint adds `optimizer.safetensors` (Adam moments,
-RNG states) and `trainer.json` (step, parameter groups, sampler RNG state).
+torch RNG state) and `trainer.json` (step, parameter groups, sampler RNG state); the same three
+files hold the training state of any other module (`write_training_checkpoint`).
 
 Folders are written under a temporary name and renamed into place, so a reader (or `--resume`
 after a kill) never sees half a checkpoint. Tensors are read with safetensors only; `torch.load`
@@ -24,6 +25,7 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.jsonio import read_json
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.field import encoding_dim
 from nfr_drake.nfr.model import NFRAutoDecoder, NFRModel
@@ -84,10 +86,9 @@ def read_model_config(folder: Path) -> dict:
     path = Path(folder) / CONFIG_FILE
     if not path.is_file():
         raise CheckpointError(f"{folder}: no {CONFIG_FILE}; not a model folder")
-    try:
-        config = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise CheckpointError(f"{path}: not valid JSON ({err})") from None
+    config = read_json(path, CheckpointError)
+    if not isinstance(config, dict):
+        raise CheckpointError(f"{path}: not a JSON object")
     if config.get("format") != MODEL_FORMAT:
         raise CheckpointError(f"{path}: format is {config.get('format')!r}, expected {MODEL_FORMAT!r}")
     if config.get("version") != MODEL_VERSION:
@@ -105,8 +106,9 @@ def read_model_architecture(folder: Path) -> tuple[dict, NFRModelConfig]:
         raise CheckpointError(f"{Path(folder) / CONFIG_FILE}: bad architecture ({err})") from None
 
 
-def _read_tensors(path: Path) -> dict[str, torch.Tensor]:
-    if not path.is_file():
+def read_tensors(path: Path) -> dict[str, torch.Tensor]:
+    """The tensors of a safetensors file; CheckpointError naming it when missing or damaged."""
+    if not Path(path).is_file():
         raise CheckpointError(f"{path}: missing")
     try:
         return load_file(str(path))
@@ -114,7 +116,9 @@ def _read_tensors(path: Path) -> dict[str, torch.Tensor]:
         raise CheckpointError(f"{path}: not a readable safetensors file ({err})") from None
 
 
-def _load_strict(module: nn.Module, state: dict[str, torch.Tensor], where: Path) -> None:
+def load_strict(module: nn.Module, state: dict[str, torch.Tensor], where: Path) -> None:
+    """Load `state` into `module`; CheckpointError naming `where` on missing, unexpected or
+    misshapen tensors."""
     expected = module.state_dict()
     missing = sorted(set(expected) - set(state))
     unexpected = sorted(set(state) - set(expected))
@@ -139,18 +143,18 @@ def load_model(folder: Path, device: torch.device | str = "cpu"
     """Read a model folder: (networks in eval mode, training codes z_obj (N, k), config.json)."""
     folder = Path(folder)
     config, arch = read_model_architecture(folder)
-    state = _read_tensors(folder / WEIGHTS_FILE)
+    state = read_tensors(folder / WEIGHTS_FILE)
     codes = state.pop(CODES_KEY, None)
     if codes is None:
         raise CheckpointError(f"{folder / WEIGHTS_FILE}: no {CODES_KEY}")
     model = NFRModel(arch)
-    _load_strict(model, state, folder / WEIGHTS_FILE)
+    load_strict(model, state, folder / WEIGHTS_FILE)
     return model.to(device).eval(), codes.to(device), config
 
 
 def _auto_decoder_state(folder: Path) -> dict[str, torch.Tensor]:
     """A model folder's tensors named as in `NFRAutoDecoder` (networks under `model.`)."""
-    state = _read_tensors(Path(folder) / WEIGHTS_FILE)
+    state = read_tensors(Path(folder) / WEIGHTS_FILE)
     if CODES_KEY not in state:
         raise CheckpointError(f"{Path(folder) / WEIGHTS_FILE}: no {CODES_KEY}")
     return {(k if k == CODES_KEY else "model." + k): v for k, v in state.items()}
@@ -159,7 +163,7 @@ def _auto_decoder_state(folder: Path) -> dict[str, torch.Tensor]:
 def load_auto_decoder(folder: Path, module: NFRAutoDecoder) -> dict:
     """Load a model folder's weights and codes into an existing training module (strict)."""
     config = read_model_config(folder)
-    _load_strict(module, _auto_decoder_state(folder), Path(folder) / WEIGHTS_FILE)
+    load_strict(module, _auto_decoder_state(folder), Path(folder) / WEIGHTS_FILE)
     return config
 
 
@@ -188,16 +192,34 @@ def load_optimizer_tensors(optimizer: torch.optim.Optimizer, tensors: dict[str, 
     optimizer.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
 
 
+def _write_trainer_state(folder: Path, optimizer: torch.optim.Optimizer, trainer: dict) -> None:
+    """optimizer.safetensors (optimizer tensors, torch RNG) and trainer.json (`trainer` + the
+    optimizer's parameter groups and scalars) into `folder`."""
+    tensors, meta = optimizer_tensors(optimizer)
+    tensors["rng.torch"] = torch.get_rng_state()
+    save_file(tensors, str(folder / OPTIMIZER_FILE))
+    _write_json(folder / TRAINER_FILE, {**trainer, "optimizer": meta})
+
+
+def _read_trainer_state(folder: Path, optimizer: torch.optim.Optimizer) -> dict:
+    """Restore optimizer and torch RNG from `_write_trainer_state`; returns trainer.json."""
+    tensors = read_tensors(folder / OPTIMIZER_FILE)
+    trainer = read_json(folder / TRAINER_FILE, CheckpointError)
+    try:
+        torch.set_rng_state(tensors.pop("rng.torch"))
+        load_optimizer_tensors(optimizer, tensors, trainer["optimizer"])
+    except (KeyError, ValueError, RuntimeError) as err:
+        raise CheckpointError(f"{folder}: optimizer state does not match ({err})") from None
+    return trainer
+
+
 def write_checkpoint(folder: Path, module: NFRAutoDecoder, optimizer: torch.optim.Optimizer,
                      info: dict, trainer: dict) -> None:
     """A resumable checkpoint: model folder + optimizer moments + trainer state, atomically."""
     folder = Path(folder)
     tmp = folder.with_name(folder.name + ".tmp")
     write_model_folder(tmp, module, info)
-    tensors, meta = optimizer_tensors(optimizer)
-    tensors["rng.torch"] = torch.get_rng_state()
-    save_file(tensors, str(tmp / OPTIMIZER_FILE))
-    _write_json(tmp / TRAINER_FILE, {**trainer, "optimizer": meta})
+    _write_trainer_state(tmp, optimizer, trainer)
     _replace_dir(tmp, folder)
 
 
@@ -206,17 +228,31 @@ def read_checkpoint(folder: Path, module: NFRAutoDecoder,
     """Restore module, optimizer and torch RNG from `write_checkpoint`; returns trainer.json."""
     folder = Path(folder)
     load_auto_decoder(folder, module)
-    tensors = _read_tensors(folder / OPTIMIZER_FILE)
-    torch.set_rng_state(tensors.pop("rng.torch"))
-    try:
-        trainer = json.loads((folder / TRAINER_FILE).read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise CheckpointError(f"{folder / TRAINER_FILE}: unreadable ({err})") from None
-    try:
-        load_optimizer_tensors(optimizer, tensors, trainer["optimizer"])
-    except (KeyError, ValueError) as err:
-        raise CheckpointError(f"{folder}: optimizer state does not match ({err})") from None
-    return trainer
+    return _read_trainer_state(folder, optimizer)
+
+
+def write_training_checkpoint(folder: Path, module: nn.Module, optimizer: torch.optim.Optimizer,
+                              trainer: dict) -> None:
+    """A resumable checkpoint of any module, atomically: its state_dict in model.safetensors,
+    optimizer.safetensors and trainer.json (`trainer`: JSON values only)."""
+    folder = Path(folder)
+    tmp = folder.with_name(folder.name + ".tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    save_file({k: v.detach().cpu().contiguous() for k, v in module.state_dict().items()},
+              str(tmp / WEIGHTS_FILE))
+    _write_trainer_state(tmp, optimizer, trainer)
+    _replace_dir(tmp, folder)
+
+
+def read_training_checkpoint(folder: Path, module: nn.Module,
+                             optimizer: torch.optim.Optimizer) -> dict:
+    """Restore module, optimizer and torch RNG from `write_training_checkpoint`; returns
+    trainer.json."""
+    folder = Path(folder)
+    load_strict(module, read_tensors(folder / WEIGHTS_FILE), folder / WEIGHTS_FILE)
+    return _read_trainer_state(folder, optimizer)
 
 
 def _widen_first_layer(state: dict[str, torch.Tensor], old_frequencies: int,
@@ -272,5 +308,5 @@ def init_from_model_folder(folder: Path, module: NFRAutoDecoder) -> dict:
     state[CODES_KEY] = grown
     if arch.pe_frequencies < target.pe_frequencies:
         state = _widen_first_layer(state, arch.pe_frequencies, target.pe_frequencies)
-    _load_strict(module, state, folder / WEIGHTS_FILE)
+    load_strict(module, state, folder / WEIGHTS_FILE)
     return config

@@ -11,7 +11,8 @@ fully connected layer, so it runs on images of any size, and it sees about 65 px
 pixel (dilated convolutions).
 
 Files in a model folder's `handle_detector/`: `config.json` (`HandleDetectorConfig` and training
-record) and `model.safetensors`.
+record) and `model.safetensors`. A training run's `checkpoint/` is a resumable safetensors + JSON
+checkpoint (`nfr_drake.nfr.checkpoint.write_training_checkpoint`); nothing is ever unpickled.
 """
 
 from __future__ import annotations
@@ -24,17 +25,28 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from torch import nn
 from tqdm import tqdm
 
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
-from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import (
+    TRAINER_FILE,
+    CheckpointError,
+    load_strict,
+    read_tensors,
+    read_training_checkpoint,
+    write_training_checkpoint,
+)
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_triangulation import HandleMap
 
 DETECTOR_DIR = "handle_detector"
+CHECKPOINT_DIR = "checkpoint"
+PICKLED_CHECKPOINT = "checkpoint.pt"
+"""What older versions wrote instead of CHECKPOINT_DIR: refused, never loaded."""
 OFFSET_SCALE_PX = 4.0
 """The offset outputs are in units of this many pixels (keeps them near 1 for the optimiser)."""
 
@@ -189,14 +201,18 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
     objects are held out; the handle IoU and the median offset error (px, on handle pixels) on 64
     of their full images per dataset are reported.
-    OUT/checkpoint.pt is written every `checkpoint_every` steps; `resume` continues from it.
+    OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
     Returns the training record written into OUT/config.json.
     """
     if not data_dirs:
         raise ConfigError("train-handle-detector: give at least one --data folder")
     out = Path(out)
-    ckpt_path = out / "checkpoint.pt"
-    if ckpt_path.is_file() and not resume:
+    ckpt_path = out / CHECKPOINT_DIR
+    if (out / PICKLED_CHECKPOINT).exists():
+        raise CheckpointError(f"{out / PICKLED_CHECKPOINT}: a pickled checkpoint of an older version; "
+                              "it is never loaded (unpickling can run code): delete it or use another "
+                              "--out")
+    if ckpt_path.is_dir() and not resume:
         raise ConfigError(f"{out} already holds a checkpoint; pass --resume or another --out")
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
@@ -217,24 +233,25 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     net = HandleDetector(model)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    options = json.loads(json.dumps({"model": asdict(model), "train": asdict(config)}))
     step, seconds, losses = 0, 0.0, []
-    if resume and ckpt_path.is_file():
-        state = torch.load(ckpt_path, weights_only=False)
-        if state["model"] != asdict(model) or state["train"] != asdict(config):
+    if resume and ckpt_path.is_dir():
+        saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
+        if not isinstance(saved, dict) or {k: saved.get(k) for k in options} != options:
             raise ConfigError(f"{ckpt_path}: --resume with other options than the run's")
-        net.load_state_dict(state["net"])
-        opt.load_state_dict(state["opt"])
-        sched.load_state_dict(state["sched"])
-        rng.bit_generator.state = state["rng"]
-        step, seconds, losses = state["step"], state["seconds"], state["losses"]
+        state = read_training_checkpoint(ckpt_path, net, opt)
+        try:
+            sched.load_state_dict(state["sched"])
+            rng.bit_generator.state = state["rng"]
+            step, seconds, losses = int(state["step"]), float(state["seconds"]), list(state["losses"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise CheckpointError(f"{ckpt_path / TRAINER_FILE}: bad training state ({err})") from None
     out.mkdir(parents=True, exist_ok=True)
 
     def checkpoint() -> None:
-        torch.save({"model": asdict(model), "train": asdict(config), "net": net.state_dict(),
-                    "opt": opt.state_dict(), "sched": sched.state_dict(),
-                    "rng": rng.bit_generator.state, "step": step, "seconds": seconds,
-                    "losses": losses}, out / "checkpoint.pt.tmp")
-        (out / "checkpoint.pt.tmp").replace(ckpt_path)
+        write_training_checkpoint(ckpt_path, net, opt, {
+            **options, "sched": sched.state_dict(), "rng": rng.bit_generator.state, "step": step,
+            "seconds": seconds, "losses": losses})
 
     bar = tqdm(total=config.steps, initial=step, desc="train handle detector", mininterval=5.0)
     while step < config.steps:
@@ -267,21 +284,30 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
               "data": [str(d) for d in data_dirs], "command": command, "seconds": seconds,
               "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious,
               "held_out_offset_error_px": offset_errors}
-    save_file(net.state_dict(), str(out / "model.safetensors.tmp"))
-    (out / "model.safetensors.tmp").replace(out / "model.safetensors")
-    (out / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    save_detector(out, net, record)
     return record
 
 
+def save_detector(folder: Path, net: HandleDetector, record: dict) -> None:
+    """Write `model.safetensors` and `config.json` (`record`, with the architecture under
+    "model") into `folder`, each atomically."""
+    folder.mkdir(parents=True, exist_ok=True)
+    save_file(net.state_dict(), str(folder / "model.safetensors.tmp"))
+    (folder / "model.safetensors.tmp").replace(folder / "model.safetensors")
+    (folder / "config.json.tmp").write_text(json.dumps(record, indent=2) + "\n")
+    (folder / "config.json.tmp").replace(folder / "config.json")
+
+
 def load_detector(folder: Path) -> tuple[HandleDetector, dict]:
-    """A trained detector and its record from a `handle_detector/` folder."""
+    """A trained detector and its record from a `handle_detector/` folder; CheckpointError
+    naming the file that is missing or damaged."""
     folder = Path(folder)
+    record = read_json(folder / "config.json", CheckpointError, "handle detector config")
     try:
-        record = json.loads((folder / "config.json").read_text())
         net = HandleDetector(HandleDetectorConfig.from_json(record["model"]))
-        net.load_state_dict(load_file(str(folder / "model.safetensors")))
-    except (OSError, KeyError, ValueError, RuntimeError) as err:
-        raise CheckpointError(f"{folder}: not a handle detector ({err})") from None
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f"{folder / 'config.json'}: not a handle detector ({err})") from None
+    load_strict(net, read_tensors(folder / "model.safetensors"), folder / "model.safetensors")
     net.eval()
     return net, record
 
@@ -303,7 +329,7 @@ def train_detector_command(data: list[Path], out: Path,
         crop: crop size, px.
         lr: learning rate (cosine decay to 0).
         threads: torch CPU threads.
-        resume: continue a killed run from OUT/checkpoint.pt.
+        resume: continue a killed run from OUT/checkpoint/.
     """
     config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
                                  threads=threads)

@@ -45,9 +45,9 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     x, poses = torch.rand(1, 2, 3, 32, 32), torch.eye(4).expand(1, 2, 4, 4)
     torch.testing.assert_close(loaded(x, poses).keypoints, model.eval()(x, poses).keypoints)
     (tmp_path / "m" / "model.safetensors").write_bytes(b"not a safetensors file")
-    with pytest.raises(NfrDrakeError, match="cannot load"):
+    with pytest.raises(NfrDrakeError, match="model.safetensors: not a readable safetensors"):
         load_baseline(tmp_path / "m")
-    with pytest.raises(NfrDrakeError, match="cannot read"):
+    with pytest.raises(NfrDrakeError, match="config.json: baseline config not found"):
         load_baseline(tmp_path / "missing")
 
 

@@ -101,7 +101,7 @@ def test_bad_config_json(tmp_path, tiny_config):
         load_model(tmp_path)
     write_model_folder(tmp_path / "m", NFRAutoDecoder(tiny_config, 2), INFO)
     (tmp_path / "m" / "config.json").write_text("{broken")
-    with pytest.raises(CheckpointError, match="not valid JSON"):
+    with pytest.raises(CheckpointError, match="config.json: malformed JSON"):
         load_model(tmp_path / "m")
     (tmp_path / "m" / "config.json").write_text(json.dumps({"format": "something-else"}))
     with pytest.raises(CheckpointError, match="format"):

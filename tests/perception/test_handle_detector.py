@@ -1,6 +1,7 @@
 """The 2D handle detector: any image size, training that learns, resumes and round-trips."""
 
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import torch
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.perception import handle_detector
 from nfr_drake.perception.handle_detector import (
     DetectorTrainConfig,
     HandleDetector,
@@ -35,8 +37,9 @@ def test_training_lowers_the_loss_resumes_and_round_trips(tiny_dataset, tmp_path
     config = DetectorTrainConfig(steps=40, images_per_batch=4, crop=24, checkpoint_every=20)
     out = tmp_path / "det"
     record = train_detector([tiny_dataset], out, config, SMALL)
-    state = torch.load(out / "checkpoint.pt", weights_only=False)
-    losses = state["losses"]
+    assert sorted(p.name for p in (out / "checkpoint").iterdir()) == [
+        "model.safetensors", "optimizer.safetensors", "trainer.json"]
+    losses = json.loads((out / "checkpoint" / "trainer.json").read_text())["losses"]
     assert len(losses) == 40 and np.mean(losses[-10:]) < np.mean(losses[:10])
     assert set(record["held_out_handle_iou"]) == {str(tiny_dataset)}
     saved = json.loads((out / "config.json").read_text())
@@ -58,7 +61,7 @@ def test_training_lowers_the_loss_resumes_and_round_trips(tiny_dataset, tmp_path
 
 
 def test_bad_folder_and_bad_options(tmp_path):
-    with pytest.raises(CheckpointError, match="not a handle detector"):
+    with pytest.raises(CheckpointError, match="config.json: handle detector config not found"):
         load_detector(tmp_path)
     with pytest.raises(ConfigError):
         HandleDetectorConfig(channels=0)
@@ -86,3 +89,54 @@ def test_offset_targets_point_at_the_projected_grip_centre(tiny_dataset):
         assert rows.min() - 1 <= votes[0, 1] <= rows.max() + 2
         seen += 1
     assert seen >= 5 and rgb.shape[-1] == S
+
+
+class _RunsCode:
+    """Unpickling this touches a file: what a crafted checkpoint could do."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (type(self.marker).touch, (self.marker,))
+
+
+def test_a_pickled_checkpoint_is_refused_and_never_unpickled(tiny_dataset, tmp_path):
+    out = tmp_path / "det"
+    out.mkdir()
+    marker = tmp_path / "code_ran"
+    (out / "checkpoint.pt").write_bytes(pickle.dumps({"model": _RunsCode(marker)}))
+    config = DetectorTrainConfig(steps=2, images_per_batch=2, crop=16, checkpoint_every=1)
+    for resume in (True, False):
+        with pytest.raises(CheckpointError, match="checkpoint.pt: a pickled checkpoint"):
+            train_detector([tiny_dataset], out, config, SMALL, resume=resume)
+    assert not marker.exists()
+
+
+def test_resume_continues_where_the_killed_run_left_off(tiny_dataset, tmp_path, monkeypatch):
+    """A run killed at step 25 (checkpoint at 20) and resumed ends with the weights of a run that
+    was never killed: weights, Adam moments, scheduler and both RNGs come back from the
+    safetensors + JSON checkpoint."""
+    config = DetectorTrainConfig(steps=40, images_per_batch=2, crop=16, checkpoint_every=10)
+    image = np.random.default_rng(1).integers(0, 255, (32, 32, 3), dtype=np.uint8)
+    torch.manual_seed(5)
+    train_detector([tiny_dataset], tmp_path / "once", config, SMALL)
+    calls = []
+
+    def killed_at_step_25(*args):
+        calls.append(1)
+        if len(calls) == 25:
+            raise KeyboardInterrupt
+        return loss(*args)
+
+    loss = handle_detector._loss
+    monkeypatch.setattr(handle_detector, "_loss", killed_at_step_25)
+    torch.manual_seed(5)
+    with pytest.raises(KeyboardInterrupt):
+        train_detector([tiny_dataset], tmp_path / "twice", config, SMALL)
+    monkeypatch.setattr(handle_detector, "_loss", loss)
+    torch.manual_seed(99)  # the resumed run restores the torch RNG itself
+    train_detector([tiny_dataset], tmp_path / "twice", config, SMALL, resume=True)
+    (a,), (b,) = (load_detector(tmp_path / run)[0].detect([image]) for run in ("once", "twice"))
+    np.testing.assert_allclose(a.probability, b.probability, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(a.offset_px, b.offset_px, rtol=1e-5, atol=1e-5)
