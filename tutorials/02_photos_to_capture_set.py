@@ -1,8 +1,8 @@
 # %% [markdown]
-# # Tutorial 3: from a folder of photos to a capture set with metric poses
+# # Tutorial 2: from a folder of photos to a capture set with metric poses
 #
 # The neural-field fit needs photos *with* camera poses, in metres, in the object's frame O
-# (DESIGN.md). A phone gives photos without poses. `nfr-drake poses` recovers them:
+# (docs/CONVENTIONS.md). A phone gives photos without poses. `nfr-drake poses` recovers them:
 #
 # 1. structure from motion with pycolmap (SIFT on the CPU, exhaustive matching, incremental
 #    mapping) gives poses in an arbitrary frame R and scale;
@@ -12,7 +12,7 @@
 #
 # Here the "photos" are rendered by Drake, so we know the true poses and can check the result.
 # With real photos, start at step 2 with your own folder. Run as plain Python:
-# `python tutorials/03_photos_to_capture_set.py` (about half a minute on 2 CPU cores). Figures go
+# `python tutorials/02_photos_to_capture_set.py` (about half a minute on 2 CPU cores). Figures go
 # to `NFR_TUTORIAL_OUT` (default `docs/images`).
 
 # %%
@@ -37,7 +37,7 @@ from nfr_drake.perception.synthetic import SyntheticPhotoScene, orbit_poses, wri
 
 out_dir = Path(os.environ.get("NFR_TUTORIAL_OUT", "docs/images"))
 out_dir.mkdir(parents=True, exist_ok=True)
-work = Path(tempfile.mkdtemp(prefix="nfr_tutorial_03_"))
+work = Path(tempfile.mkdtemp(prefix="nfr_tutorial_02_"))
 
 # %% [markdown]
 # ## 1. Photos
@@ -58,8 +58,8 @@ names = sorted(truth["X_OC"])
 thumbs = [cv2.resize(cv2.cvtColor(cv2.imread(str(photos / n)), cv2.COLOR_BGR2RGB), (240, 180),
                      interpolation=cv2.INTER_AREA) for n in names]
 sheet = image_grid([thumbs[:4], thumbs[4:]])
-cv2.imwrite(str(out_dir / "tutorial_03_photos.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
-print("wrote", out_dir / "tutorial_03_photos.png")
+cv2.imwrite(str(out_dir / "tutorial_02_photos.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+print("wrote", out_dir / "tutorial_02_photos.png")
 
 # %% [markdown]
 # ## 2. The board and the camera
@@ -91,8 +91,8 @@ height = bgr.shape[0] // 2
 small = cv2.resize(bgr, (bgr.shape[1] // 2, height), interpolation=cv2.INTER_AREA)
 zoom = cv2.resize(crop, (round(crop.shape[1] * height / crop.shape[0]), height),
                   interpolation=cv2.INTER_AREA)
-cv2.imwrite(str(out_dir / "tutorial_03_board.png"), np.hstack([small, zoom]))
-print("wrote", out_dir / "tutorial_03_board.png")
+cv2.imwrite(str(out_dir / "tutorial_02_board.png"), np.hstack([small, zoom]))
+print("wrote", out_dir / "tutorial_02_board.png")
 
 # %% [markdown]
 # In the figure the red crosses are the detected ChArUco corners (here 9 of 24: the board is
@@ -155,8 +155,8 @@ for ax, (i, j), title in zip(axes, [(0, 1), (0, 2)], ["top view (x, y)", "side v
     ax.set_aspect("equal")
 axes[0].legend(loc="lower left", fontsize=8)
 fig.tight_layout()
-fig.savefig(out_dir / "tutorial_03_poses.png", dpi=100)
-print("wrote", out_dir / "tutorial_03_poses.png")
+fig.savefig(out_dir / "tutorial_02_poses.png", dpi=100)
+print("wrote", out_dir / "tutorial_02_poses.png")
 
 # %% [markdown]
 # ## 5. Next: fit the closet
