@@ -17,8 +17,8 @@ from datetime import date
 import numpy as np
 import torch
 
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.systems.pipeline import Scenario, perceive
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 def radius_and_sweep(kt: KeypointTrajectory, q0: float, q1: float) -> tuple[float, float]:

@@ -23,8 +23,7 @@ import cv2
 import numpy as np
 import torch
 
-from nfr_drake.data.capture import read_capture_set
-from nfr_drake.eval.evaluate import capture_dirs
+from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector import load_detector
 from nfr_drake.perception.handle_triangulation import HandleMap, locate_handle, project, sighting

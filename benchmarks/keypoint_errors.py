@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nfr_drake.data.capture import read_capture_set
-from nfr_drake.eval.evaluate import capture_dirs
+from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.forward import render_view
 from nfr_drake.inference.infer import FittedModel, infer

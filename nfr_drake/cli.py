@@ -38,7 +38,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("nfr_drake.nfr.train:train_command", "train the neural field (auto-decoder) on a dataset"),
     "sheet": ("nfr_drake.data.contact_sheet:contact_sheet_command",
               "write a contact sheet PNG of a dataset's renders"),
-    "plan": ("nfr_drake.planning.command:plan_command", "plan, simulate and replay opening an object"),
+    "plan": ("nfr_drake.systems.plan_command:plan_command", "plan, simulate and replay opening an object"),
 }
 
 

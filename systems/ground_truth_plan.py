@@ -3,7 +3,7 @@
     python systems/ground_truth_plan.py systems/ground_truth_open_drawer.yaml
 
 The scenario YAML holds a `Scenario` (fields below, any left out keep their defaults), loaded with
-Drake's yaml_load_typed. The diagrams are built by nfr_drake (planning.task.run_task).
+Drake's yaml_load_typed. The diagrams are built by nfr_drake (systems.task.run_task).
 """
 
 import sys
@@ -16,9 +16,9 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlannerConfig
-from nfr_drake.planning.task import run_task
 from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import run_task
 
 
 @dataclass

@@ -239,6 +239,17 @@ def read_capture_set(root: str | os.PathLike, check_images: bool = True) -> Capt
     return CaptureSet(root, frames, gt, extra)
 
 
+def capture_dirs(root: Path) -> list[Path]:
+    """The capture sets in `root`: itself if it holds transforms.json, else its sub-folders."""
+    root = Path(root)
+    if (root / "transforms.json").exists():
+        return [root]
+    dirs = sorted(p for p in root.iterdir() if (p / "transforms.json").exists())
+    if not dirs:
+        raise CaptureSetError(f"{root}: no capture sets (folders with transforms.json) found")
+    return dirs
+
+
 def base_keys() -> set[str]:
     """transforms.json keys that describe intrinsics."""
     return {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", *_DISTORTION_KEYS}

@@ -1,6 +1,8 @@
-"""Image helpers shared by contact sheets, validation grids and fit reports."""
+"""Image and figure helpers shared by contact sheets, validation grids, fit reports and evaluations."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -23,3 +25,50 @@ def image_grid(rows: list[list[np.ndarray]], pad: int = 2, fill: int = 255) -> n
             y, x = pad + i * (h + pad), pad + j * (w + pad)
             grid[y:y + h, x:x + w] = image
     return grid
+
+
+def pyplot():
+    """matplotlib.pyplot on the Agg backend, imported on first use (the CLI starts without it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_handle_paths(q: np.ndarray, true: np.ndarray, predictions: dict[str, np.ndarray],
+                      path: Path, title: str = "") -> None:
+    """Handle positions over q (paper's Fig. 6): top view (x, y) and height (z) against q.
+
+    Args:
+        q: (N,) articulation grid.
+        true: (N, 3) true handle positions in O, m.
+        predictions: method name -> (N, 3) predicted handle positions in O, m.
+    """
+    plt = pyplot()
+    fig, (top, side) = plt.subplots(1, 2, figsize=(10, 4.5))
+    top.plot(true[:, 1], true[:, 0], "k-", lw=2, label="true")
+    top.plot(true[0, 1], true[0, 0], "ko")
+    side.plot(q, true[:, 2], "k-", lw=2, label="true")
+    for (name, pred), colour in zip(predictions.items(), ("tab:red", "tab:blue", "tab:green"),
+                                    strict=False):
+        top.plot(pred[:, 1], pred[:, 0], "--", color=colour, label=name)
+        top.plot(pred[0, 1], pred[0, 0], "o", color=colour)
+        side.plot(q, pred[:, 2], "--", color=colour, label=name)
+    top.invert_xaxis()  # a true view from above: +x up, +y to the left
+    top.set_xlabel("y (m)")
+    top.set_ylabel("x (m), out of the front")
+    top.set_aspect("equal", adjustable="datalim")
+    top.set_title("handle path seen from above (dot: q = 0)")
+    side.set_xlabel("q")
+    side.set_ylabel("handle height z (m)")
+    for ax in (top, side):
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.data.capture import CaptureSet, capture_dirs, read_capture_set
+from nfr_drake.data.visualize import plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.eval.evaluate import Method, Prediction, capture_dirs, evaluate, summary_table
-from nfr_drake.eval.plots import plot_error_distributions, plot_handle_paths
+from nfr_drake.eval.evaluate import Method, Prediction, evaluate, summary_table
+from nfr_drake.eval.plots import plot_error_distributions
 from nfr_drake.inference.fit import FitConfig
 
 

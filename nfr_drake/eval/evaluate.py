@@ -18,9 +18,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.data.capture import CaptureSet, capture_dirs, read_capture_set
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.eval.metrics import (
+from nfr_drake.inference.metrics import (
     articulation_error,
     keypoint_rmse_cm,
     mean_iou,
@@ -103,17 +103,6 @@ def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: st
         handle_trajectory_rmse_cm=trajectory_rmse_cm(traj_pred, traj_true),
         psnr_db=psnr_db, miou=miou, seconds=prediction.seconds,
         image_loss=prediction.image_loss)
-
-
-def capture_dirs(root: Path) -> list[Path]:
-    """The capture sets in `root`: itself if it holds transforms.json, else its sub-folders."""
-    root = Path(root)
-    if (root / "transforms.json").exists():
-        return [root]
-    dirs = sorted(p for p in root.iterdir() if (p / "transforms.json").exists())
-    if not dirs:
-        raise NfrDrakeError(f"{root}: no capture sets (folders with transforms.json) found")
-    return dirs
 
 
 def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,

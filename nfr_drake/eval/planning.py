@@ -10,9 +10,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.command import OPEN_TARGET
-from nfr_drake.planning.task import run_task
 from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import OPEN_TARGET, run_task
 
 FIELDS = ("category", "seed", "index", "width", "height", "q_target", "planned", "success",
           "planning_seconds", "planning_cpu_seconds", "q_final", "joint_error", "max_drift",

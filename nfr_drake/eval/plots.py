@@ -1,28 +1,18 @@
-"""Figures of the evaluation: error distributions and predicted against true handle paths."""
+"""Figures of the evaluation: error distributions (handle paths: `nfr_drake.data.visualize`)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
 
-import numpy as np
-
+from nfr_drake.data.visualize import pyplot
 from nfr_drake.eval.evaluate import COLUMNS, CaptureMetrics
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_error_distributions(results: Iterable[CaptureMetrics], unit: str, path: Path) -> None:
     """Box plots of articulation error, keypoint RMSE and handle error (paper's Fig. 5): one group
     of boxes per capture set, one colour per method."""
-    plt = _pyplot()
+    plt = pyplot()
     results = list(results)
     sets = sorted({r.set_name for r in results})
     methods = sorted({r.method for r in results})
@@ -46,43 +36,6 @@ def plot_error_distributions(results: Iterable[CaptureMetrics], unit: str, path:
         ax.set_yscale("log")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def plot_handle_paths(q: np.ndarray, true: np.ndarray, predictions: dict[str, np.ndarray],
-                      path: Path, title: str = "") -> None:
-    """Handle positions over q (paper's Fig. 6): top view (x, y) and height (z) against q.
-
-    Args:
-        q: (N,) articulation grid.
-        true: (N, 3) true handle positions in O, m.
-        predictions: method name -> (N, 3) predicted handle positions in O, m.
-    """
-    plt = _pyplot()
-    fig, (top, side) = plt.subplots(1, 2, figsize=(10, 4.5))
-    top.plot(true[:, 1], true[:, 0], "k-", lw=2, label="true")
-    top.plot(true[0, 1], true[0, 0], "ko")
-    side.plot(q, true[:, 2], "k-", lw=2, label="true")
-    for (name, pred), colour in zip(predictions.items(), ("tab:red", "tab:blue", "tab:green"),
-                                    strict=False):
-        top.plot(pred[:, 1], pred[:, 0], "--", color=colour, label=name)
-        top.plot(pred[0, 1], pred[0, 0], "o", color=colour)
-        side.plot(q, pred[:, 2], "--", color=colour, label=name)
-    top.invert_xaxis()  # a true view from above: +x up, +y to the left
-    top.set_xlabel("y (m)")
-    top.set_ylabel("x (m), out of the front")
-    top.set_aspect("equal", adjustable="datalim")
-    top.set_title("handle path seen from above (dot: q = 0)")
-    side.set_xlabel("q")
-    side.set_ylabel("handle height z (m)")
-    for ax in (top, side):
-        ax.grid(True, alpha=0.3)
-        ax.legend()
-    if title:
-        fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)

@@ -27,12 +27,11 @@ import torch
 from safetensors.torch import load_file, save_file
 from tqdm import tqdm
 
-from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.errors import ConfigError, NfrDrakeError
-from nfr_drake.eval.evaluate import capture_dirs
-from nfr_drake.eval.metrics import keypoint_rmse_cm
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.metrics import keypoint_rmse_cm
 from nfr_drake.nfr.checkpoint import CONFIG_FILE, WEIGHTS_FILE
 from nfr_drake.nfr.latent import compose_z, q_to_z_art
 

@@ -12,7 +12,7 @@ import torch
 import tyro
 
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
-from nfr_drake.data.visualize import colorize_labels, image_grid
+from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import (
     FitConfig,
@@ -236,8 +236,6 @@ def infer_command(
         write_semantic_ply(point_cloud, points, classes)
         print(f"point cloud: {point_cloud} ({len(points)} points)")
     if handle_plot is not None:
-        from nfr_drake.eval.plots import plot_handle_paths
-
         grid = np.asarray(cap.gt["trajectory"]["q"])
         predicted = np.array([np.interp(grid, result.trajectory_q, result.trajectory["handle"][:, j])
                               for j in range(3)]).T

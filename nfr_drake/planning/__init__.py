@@ -1,1 +1,1 @@
-"""Planning from keypoint trajectories: grasp frames, base placement, trajectory optimisation, tasks."""
+"""Planning from keypoint trajectories: grasp frames, base placement, trajectory optimisation."""

@@ -7,19 +7,18 @@ Conventions (all in the world frame W):
   the angle atan(standoff / radius) of the handle's standoff, 5-15 degrees here);
 - the bar axis is the axis of the handle's grip: the hinge axis (hinge_top - hinge_bottom) for a
   door, horizontal and across the pull direction for a drawer;
-- the grasp frame G has its origin at the handle keypoint, +z along the approach, +x along the bar
-  axis, +y = z x x (the fingers' closing axis). It matches the tool frame of `nfr_drake.systems.robot`.
+- the grasp frame G of a `HandleWaypoint` (`nfr_drake.world.plan`) has its origin at the handle
+  keypoint, +z along the approach, +x along the bar axis.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -36,30 +35,6 @@ _PANEL_MIN_ANGLE_DEG = 10.0  # below this opening the carcass box already covers
 _DRAWER_HALF_WIDTH = 0.4
 _DRAWER_DEPTH = 0.5
 _DRAWER_HEIGHT = 0.42
-
-
-@dataclass(frozen=True)
-class HandleWaypoint:
-    """The handle at one articulation.
-
-    Attributes:
-        q: articulation in [0, 1].
-        p_WH: handle keypoint, m, shape (3,).
-        approach_W: unit approach direction, shape (3,).
-        bar_W: unit bar axis, shape (3,).
-    """
-
-    q: float
-    p_WH: np.ndarray
-    approach_W: np.ndarray
-    bar_W: np.ndarray
-
-    def X_WG(self, flip: bool = False) -> RigidTransform:
-        """Grasp frame G (see module docstring); `flip` turns the hand 180 degrees about the approach."""
-        x = -self.bar_W if flip else self.bar_W
-        z = self.approach_W
-        R = np.column_stack([x, np.cross(z, x), z])
-        return RigidTransform(RotationMatrix(R), self.p_WH)
 
 
 def _unit(v: np.ndarray, what: str) -> np.ndarray:
@@ -88,15 +63,6 @@ def handle_waypoints(kt: KeypointTrajectory, q_values: np.ndarray) -> list[Handl
     """The handle, its approach direction and bar axis at each articulation in `q_values`."""
     return [HandleWaypoint(float(q), kt.point("handle", q), -handle_tangent(kt, q), bar_axis(kt, q))
             for q in q_values]
-
-
-@dataclass(frozen=True)
-class ObstacleBox:
-    """A box obstacle: full extents `size` (m, (3,)) and pose X_WB of its centre."""
-
-    name: str
-    size: np.ndarray
-    X_WB: RigidTransform
 
 
 def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:

@@ -13,7 +13,7 @@ grasp an open door's panel.
 """
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.math import BsplineBasis, RigidTransform, RollPitchYaw
@@ -29,15 +29,15 @@ from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.planning.grasp import (
-    HandleWaypoint,
     carcass_box,
     door_panel_box,
     handle_tangent,
     handle_waypoints,
 )
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
-from nfr_drake.systems.robot import NUM_ARM_JOINTS, Q_HOME
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import HandleWaypoint, PlanResult
+from nfr_drake.world.robot import NUM_ARM_JOINTS, Q_HOME
 
 _SPEED_MARGIN = 1.5  # peak over mean joint speed allowed for in the knot timing
 _IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on the rest
@@ -102,38 +102,6 @@ class PlannerConfig:
             raise NfrDrakeError("planner: num_waypoints must be at least 2")
         if self.end_stop_overshoot < 0.0:
             raise NfrDrakeError("planner: end_stop_overshoot must not be negative")
-
-
-@dataclass
-class PlanResult:
-    """A planned motion.
-
-    Attributes:
-        trajectory: positions of the planning plant (7 arm joints, 2 fingers) over time t in
-            [0, duration], s.
-        X_WB: the chosen robot base pose.
-        s_grasp: normalised time of the grasp; the grasp happens at t = s_grasp * duration.
-        waypoints: the handle waypoints (current q to target q, then any end-stop overshoot).
-        flip: whether the hand is turned 180 degrees about the approach (grasp frame convention).
-        seconds: wall time: "placement" (base candidates, their chained IK and any failed
-            optimisations), "trajopt" (the successful optimisation), "total"; "cpu" is the
-            process CPU time of the whole call (wall time suffers when the machine is shared).
-    """
-
-    trajectory: BsplineTrajectory
-    X_WB: RigidTransform
-    s_grasp: float
-    waypoints: list[HandleWaypoint]
-    flip: bool
-    seconds: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def duration(self) -> float:
-        return float(self.trajectory.end_time() - self.trajectory.start_time())
-
-    @property
-    def t_grasp(self) -> float:
-        return self.s_grasp * self.duration
 
 
 def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np.ndarray:

@@ -15,8 +15,8 @@ from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.planning import RobotDiagram, RobotDiagramBuilder
 from pydrake.systems.framework import Context
 
-from nfr_drake.planning.grasp import ObstacleBox
-from nfr_drake.systems.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda
+from nfr_drake.world.plan import ObstacleBox
+from nfr_drake.world.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda
 
 
 @dataclass

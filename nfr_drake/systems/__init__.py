@@ -1,1 +1,2 @@
-"""Drake systems and diagram builders: the robot, keypoint sources, simulation, replays, perception."""
+"""Drake systems and diagram builders: keypoint sources, simulation, replays, perception, tasks
+(`run_task`), the pipeline and the `demo` and `plan` commands."""

@@ -30,9 +30,10 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.planner import PlanResult
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
-from nfr_drake.systems.robot import (
+from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.world.plan import PlanResult
+from nfr_drake.world.robot import (
     FINGER_OPEN,
     HAND_BODIES,
     NUM_ARM_JOINTS,
@@ -40,7 +41,6 @@ from nfr_drake.systems.robot import (
     add_floor,
     add_panda,
 )
-from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 
 # Implicit PD gains of the actuators (arm joints 1-7, then the two fingers).
 _KP = np.array([1500.0, 1500.0, 1500.0, 1500.0, 400.0, 400.0, 200.0, 300.0, 300.0])

@@ -7,7 +7,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 class KeypointTrajectorySource(LeafSystem):

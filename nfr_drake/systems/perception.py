@@ -40,7 +40,7 @@ from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, KeypointSource, infer
 from nfr_drake.inference.result import FitResult
-from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 PERCEPTION_RENDERER = "nfr_perception"
 

@@ -27,10 +27,10 @@ from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, ArticulatedObject, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
-from nfr_drake.planning.keypoints import KeypointTrajectory
-from nfr_drake.planning.task import TaskOutcome, run_task
 from nfr_drake.systems.perception import AddNfrPerception
 from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import TaskOutcome, run_task
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @dataclass

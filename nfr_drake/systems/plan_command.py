@@ -12,11 +12,8 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlanningError
-from nfr_drake.planning.task import run_task
 from nfr_drake.systems.scene_objects import SceneObject
-
-OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
-"""Default articulation an `open` task reaches (and a `close` task starts from)."""
+from nfr_drake.systems.task import OPEN_TARGET, run_task
 
 
 def plan_command(

@@ -8,8 +8,8 @@ import numpy as np
 from pydrake.geometry import Box, Meshcat, Rgba, Sphere
 from pydrake.math import RigidTransform
 
-from nfr_drake.planning.grasp import ObstacleBox
-from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import ObstacleBox
 
 KEYPOINT_COLOURS = {"handle": Rgba(0.95, 0.15, 0.1, 1.0), "hinge_top": Rgba(0.1, 0.4, 0.95, 1.0),
                     "hinge_bottom": Rgba(0.1, 0.4, 0.95, 1.0), "goal": Rgba(0.1, 0.75, 0.2, 1.0)}

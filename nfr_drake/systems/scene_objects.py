@@ -21,7 +21,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object
-from nfr_drake.planning.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
+from nfr_drake.world.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
 
 _Z = np.array([0.0, 0.0, 1.0])
 _HINGE_HALF_SPAN = 0.25  # hinge keypoints of a loaded model: this far along the axis from the handle's foot

@@ -11,12 +11,16 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.planning.grasp import carcass_box, door_panel_box
-from nfr_drake.planning.keypoints import KeypointTrajectory
-from nfr_drake.planning.planner import PlannerConfig, PlanningError, PlanResult, plan_articulation
+from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import PlanResult
+
+OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
+"""Default articulation an `open` task reaches (and a `close` task starts from)."""
 
 
 @dataclass

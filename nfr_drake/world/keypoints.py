@@ -1,8 +1,8 @@
 """Keypoint trajectories: where an object's keypoints are for each articulation q in [0, 1].
 
-This is the planner's only knowledge of the object. It is built here from an object's model (ground
-truth, `from_articulated_object`, or `nfr_drake.planning.model_keypoints` for any SDFormat/URDF
-model) and, later, from the neural field's forward simulation (`from_fit_result`).
+This is the planner's only knowledge of the object. It is built from an object's model (ground
+truth: `from_articulated_object` here, `nfr_drake.systems.scene_objects` for any SDFormat/URDF
+model) or from the neural field's forward simulation (`from_fit_result`).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from nfr_drake.eval.metrics import articulation_error, keypoint_rmse_cm, mean_iou, psnr
+from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, mean_iou, psnr
 
 
 def test_articulation_error_units():

@@ -7,7 +7,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.grasp import PANEL_SETBACK, carcass_box, door_panel_box, handle_waypoints
-from nfr_drake.planning.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, 0.4), [0.3, -0.2, 0.0])
 

@@ -6,9 +6,9 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.grasp import handle_tangent
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.planning.scene import build_planning_scene
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @pytest.mark.parametrize("category,seed,q_target", [("closet", 0, 0.6), ("drawer", 3, 1.0)])

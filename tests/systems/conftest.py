@@ -4,8 +4,8 @@ import pytest
 from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.task import run_task
 from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import run_task
 
 
 @pytest.fixture(scope="session")

@@ -8,8 +8,8 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @pytest.mark.parametrize("category", ["closet", "drawer"])

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.systems.pipeline import Scenario, perceive
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 MODELS = Path(__file__).parents[2] / "models"
 

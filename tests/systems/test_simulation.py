@@ -5,11 +5,11 @@ import pytest
 from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.keypoints import KeypointTrajectory
 from nfr_drake.planning.planner import PlannerConfig
-from nfr_drake.planning.task import read_keypoints, run_task
 from nfr_drake.systems.articulation import CompliantCommand, grip_points
 from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import read_keypoints, run_task
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 def test_drawer_opens(drawer_outcome):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 
-from nfr_drake.systems.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda
+from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda
 
 # Franka's published modified-DH (Craig) parameters: (a_{i-1}, d_i, alpha_{i-1}) of joints 1-7 and the
 # flange (joint 8, fixed), and the hand: rotated -pi/4 about z, tool point 0.1034 m along z.
