@@ -1,6 +1,6 @@
 """`nfr-drake captures`: capture sets of unseen objects rendered by Drake, with ground truth.
 
-Each capture is a folder in the DESIGN.md format (transforms.json + images) plus `gt.json`
+Each capture is a capture-set folder (transforms.json + images; docs/DATASET_FORMAT.md) plus `gt.json`
 (category, q, keypoints at q and along a q grid, object parameters), `object.sdf` (the true object,
 for planning and simulation) and `labels/` (semantic label images, for evaluation). Objects come
 from the capture seed domain, so they never coincide with training objects of any seed.

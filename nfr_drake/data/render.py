@@ -80,7 +80,7 @@ def sample_lighting(rng: np.random.Generator) -> Lighting:
 
 @dataclass(frozen=True)
 class RenderedView:
-    """One view. rgb: uint8 (H, W, 3); label: uint8 (H, W) semantic class (DESIGN.md);
+    """One view. rgb: uint8 (H, W, 3); label: uint8 (H, W) semantic class (docs/CONVENTIONS.md);
     depth: float32 (H, W), metres along the optical axis, inf where no surface is hit;
     part: int8 (H, W) index of the front seen in each pixel (docs/FURNITURE.md), -1 where none."""
 

@@ -4,7 +4,7 @@
 DIR/dataset.json                 DatasetSpec (what the images are) + format version
 DIR/objects/obj_000123/          one folder per object, renamed into place when complete
     rgb.npy     uint8   (A, V, S, S, 3)
-    label.npy   uint8   (A, V, S, S)      semantic class per pixel (DESIGN.md)
+    label.npy   uint8   (A, V, S, S)      semantic class per pixel (docs/CONVENTIONS.md)
     depth.npy   uint16  (A, V, S, S)      millimetres along the optical axis, 0 = no surface
     meta.json   q (A,), X_OC (A, V, 4, 4) OpenCV axes, keypoints (A, K, 3) in O, params
     object.sdf  the object's SDFormat

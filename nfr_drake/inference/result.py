@@ -1,4 +1,4 @@
-"""The fit result file of `nfr-drake infer` (DESIGN.md format), read and written."""
+"""The fit result file of `nfr-drake infer` (docs/CONVENTIONS.md), read and written."""
 
 from __future__ import annotations
 

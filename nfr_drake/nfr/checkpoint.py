@@ -1,6 +1,6 @@
 """Model folders and resumable training checkpoints, written atomically, read without unpickling.
 
-Model folder (DESIGN.md): `model.safetensors` (weights of the networks, plus the training objects'
+Model folder (docs/CONVENTIONS.md): `model.safetensors` (weights of the networks, plus the training objects'
 codes under `codes.weight`) and `config.json` (format, architecture, category, keypoint names,
 training data and command). A resumable checkpoint adds `optimizer.safetensors` (Adam moments,
 torch RNG state) and `trainer.json` (step, parameter groups, sampler RNG state); the same three

@@ -63,7 +63,7 @@ class NFRModelConfig:
     pixel_hidden: int = 64
     """Hidden width of the RGB (psi_1) and segmentation (psi_2) pixel generators."""
     num_classes: int = 4
-    """Semantic classes: 0 background, 1 carcass, 2 door or drawer, 3 handle (DESIGN.md)."""
+    """Semantic classes: 0 background, 1 carcass, 2 door or drawer, 3 handle (docs/CONVENTIONS.md)."""
     num_keypoints: int = 4
     """K, keypoints predicted by Gamma(z); set from the dataset's keypoint names when training."""
     keypoint_hidden: int = 128

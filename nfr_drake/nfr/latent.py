@@ -1,4 +1,4 @@
-"""The structured latent code z = [z_art (2), z_obj (k)] (paper, "Latent code"; DESIGN.md).
+"""The structured latent code z = [z_art (2), z_obj (k)] (paper, "Latent code"; docs/CONVENTIONS.md).
 
 `z_art` is normalised onto the unit circle before the networks see it. The upper half of the circle
 (angle in [0, pi]) covers q in [0, 1]; the lower half mirrors it, so there is no seam at q = 0 or

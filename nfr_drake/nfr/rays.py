@@ -1,7 +1,7 @@
 """Camera rays from intrinsics and poses (OpenCV axes: x right, y down, z forward), any resolution.
 
-Pixel convention (DESIGN.md, COLMAP/nerfstudio): the top-left pixel's centre is at (u, v) = (0.5, 0.5),
-so pixel (row i, column j) has centre (j + 0.5, i + 0.5).
+Pixel convention (docs/CONVENTIONS.md, COLMAP/nerfstudio): the top-left pixel's centre is at
+(u, v) = (0.5, 0.5), so pixel (row i, column j) has centre (j + 0.5, i + 0.5).
 """
 
 from __future__ import annotations

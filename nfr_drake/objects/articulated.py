@@ -5,7 +5,7 @@ Every category (closet, drawer, furniture) samples its parameters and returns an
 its own revolute or prismatic joint. The SDFormat writer, the keypoint functions and the semantic
 labels are shared by all categories.
 
-Frames (see DESIGN.md): O is the object frame (origin on the floor under the centre of the carcass
+Frames (see docs/CONVENTIONS.md): O is the object frame (origin on the floor under the centre of the carcass
 footprint, +x out of the front face, +z up). The carcass link's frame is O. The link frame M_k of
 front k sits on its joint: at q = 0 it has O's orientation and origin `Front.p_OJ`.
 
@@ -25,7 +25,7 @@ import numpy as np
 
 
 class SemanticClass(enum.IntEnum):
-    """Label values of the semantic images (DESIGN.md)."""
+    """Label values of the semantic images (docs/CONVENTIONS.md)."""
 
     BACKGROUND = 0
     CARCASS = 1

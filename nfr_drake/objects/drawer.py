@@ -18,7 +18,7 @@ from nfr_drake.objects.carcass import carcass_parts
 KEYPOINT_NAMES = ("handle", "goal")
 
 TRAVEL_FRACTION = 0.8
-"""Joint travel at q = 1 as a fraction of the drawer box depth (DESIGN.md)."""
+"""Joint travel at q = 1 as a fraction of the drawer box depth (docs/CONVENTIONS.md)."""
 
 _FRONT_GAP = 0.003  # gap between the drawer front and the carcass outline, m
 _CLEARANCE = 0.005  # gap between the drawer box and the carcass inside, m

@@ -3,7 +3,7 @@
 Steps: resize the photos to the working size; structure from motion (`sfm`); a similarity into
 metres from a ChArUco board in the photos or from known camera centres (`alignment`); the object's
 pose X_WO takes the world frame W (the board's frame B, or the anchors' frame) to O; undistorted
-images and poses X_OC are written as a capture set (DESIGN.md) with `report.json` (`report`) and
+images and poses X_OC are written as a capture set (docs/DATASET_FORMAT.md) with `report.json` (`report`) and
 the sparse points in O (`points3D.ply`, metres).
 """
 
