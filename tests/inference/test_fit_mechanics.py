@@ -198,7 +198,7 @@ def test_cli_errors_exit_2_without_traceback(model_folder, capture, tmp_path):
     bad_model.mkdir()
     (bad_model / "config.json").write_text("{")
     cases = [
-        (_cli(capture.root, "--model", bad_model, "--out", tmp_path / "r.json"), "config.json: malformed JSON"),
+        (_cli(capture.root, "--model", bad_model, "--out", tmp_path / "r.json"), "malformed JSON"),
         (_cli(tmp_path / "nowhere", "--model", model_folder), "capture set folder not found"),
         (_cli(capture.root, "--model", model_folder, "--category", "drawer"), "closet model"),
     ]
