@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from tqdm import tqdm
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
@@ -32,7 +32,8 @@ from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, infer
 from nfr_drake.inference.metrics import keypoint_rmse_cm
-from nfr_drake.nfr.checkpoint import CONFIG_FILE, WEIGHTS_FILE
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_model_config, read_tensors
 from nfr_drake.nfr.latent import compose_z, q_to_z_art
 
 FITS_DIR = "fits"
@@ -108,8 +109,8 @@ def _pairs(fitted: FittedModel, dirs: list[Path], out: Path):
     names = fitted.keypoint_names
     zs, kps, owner, observed = [], [], [], []
     for i, d in enumerate(dirs):
-        fit = json.loads((out / FITS_DIR / f"{d.name}.json").read_text())
-        gt = json.loads((d / "gt.json").read_text())
+        fit = read_json(out / FITS_DIR / f"{d.name}.json", NfrDrakeError, "fit")
+        gt = read_json(d / "gt.json", NfrDrakeError, "ground truth")
         z = torch.tensor(fit["z"], dtype=torch.float32)
         grid = torch.tensor(gt["trajectory"]["q"], dtype=torch.float32)
         along = np.stack([np.asarray(gt["trajectory"]["keypoints"][n]) for n in names], 1)
@@ -180,11 +181,11 @@ def write_tuned_model(source: Path, fitted: FittedModel, out_model: Path, record
     if tmp.exists():
         shutil.rmtree(tmp)
     shutil.copytree(source, tmp, ignore=shutil.ignore_patterns("MODEL_CARD.md", "baseline"))
-    state = load_file(str(source / WEIGHTS_FILE))
+    state = read_tensors(source / WEIGHTS_FILE)
     for k, v in fitted.model.keypoint_head.state_dict().items():
         state[_HEAD_PREFIX + k] = v.detach().clone().contiguous()
     save_file(state, str(tmp / WEIGHTS_FILE))
-    config = json.loads((source / CONFIG_FILE).read_text())
+    config = read_model_config(source)
     config["keypoint_head_tuning"] = record
     (tmp / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
     if out_model.exists():

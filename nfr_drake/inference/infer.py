@@ -64,10 +64,17 @@ class FittedModel:
 
     def check_capture(self, capture: CaptureSet, category: str | None = None) -> None:
         """NfrDrakeError when the capture (its gt.json, or `category`) is of another category."""
-        claimed = category or (capture.gt or {}).get("category")
-        if claimed is not None and claimed != self.category:
-            raise NfrDrakeError(f"{capture.root}: a {claimed} capture, but {self.folder} is a "
-                                f"{self.category} model; use a {claimed} model")
+        check_category(self.folder, self.category, category or (capture.gt or {}).get("category"),
+                       str(capture.root), "capture")
+
+
+def check_category(model_folder: Path, model_category: str, claimed: str | None, where: str,
+                   thing: str) -> None:
+    """NfrDrakeError "WHERE: a CLAIMED THING, but MODEL_FOLDER is a MODEL_CATEGORY model" when
+    `claimed` (the category of what is perceived; None: unknown) is not the model's."""
+    if claimed is not None and claimed != model_category:
+        raise NfrDrakeError(f"{where}: a {claimed} {thing}, but {model_folder} is a "
+                            f"{model_category} model; use a {claimed} model")
 
 
 KeypointSource = Literal["head", "geometry"]

@@ -25,6 +25,8 @@ from nfr_drake.data.cameras import CameraDistribution
 from nfr_drake.data.capture import PinholeCamera
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import check_category
+from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, ArticulatedObject, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.systems.perception import AddNfrPerception
@@ -175,7 +177,10 @@ def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def run_scenario(scenario: Scenario) -> PipelineOutcome:
-    """Both phases; the replay (if asked for) draws the predicted and the true keypoint paths."""
+    """Both phases; the replay (if asked for) draws the predicted and the true keypoint paths.
+    NfrDrakeError first when the model is not of the scenario's category."""
+    check_category(Path(scenario.model), read_model_config(Path(scenario.model)).get("category"),
+                   scenario.category, "scenario", "object")
     obj = scenario.sample_object()
     predicted, seconds = perceive(scenario, obj)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
