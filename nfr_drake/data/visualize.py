@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-# RGB of each semantic class (DESIGN.md): background, carcass, moving part, handle.
+# RGB of each semantic class (docs/CONVENTIONS.md): background, carcass, moving part, handle.
 SEMANTIC_PALETTE = np.array([[0, 0, 0], [70, 110, 200], [240, 170, 40], [230, 40, 60]], np.uint8)
 
 

@@ -190,7 +190,7 @@ def infer_command(
     handle_detector: bool = True,
     threads: int = 2,
 ) -> None:
-    """Fit MODEL to the capture set CAPTURE and write the fit result (DESIGN.md format).
+    """Fit MODEL to the capture set CAPTURE and write the fit result (docs/CONVENTIONS.md).
 
     Args:
         capture: capture-set folder (transforms.json + images).

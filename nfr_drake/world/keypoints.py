@@ -96,7 +96,7 @@ class KeypointTrajectory:
 
     @staticmethod
     def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:
-        """From a fit result dict (DESIGN.md: "category", "q", "trajectory" in frame O)."""
+        """From a fit result dict (docs/CONVENTIONS.md: "category", "q", "trajectory" in frame O)."""
         try:
             traj = result["trajectory"]
             names = tuple(traj["keypoints"])
