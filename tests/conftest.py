@@ -6,6 +6,9 @@ fail, because the default PackageMap registers the remote `drake_models` package
 do so with package_map networking off and an empty download cache. We therefore also allow
 `package_map`; since this machine (and CI) cannot reach GitHub, any accidental use of
 `package://drake_models/...` still fails the test that makes it.
+
+Shared fixtures: a tiny rendered dataset, and a tiny closet model folder (random weights, fits in
+seconds) for the inference and evaluation tests.
 """
 
 import os
@@ -13,6 +16,26 @@ import os
 import pytest
 
 os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat:package_map")
+
+
+@pytest.fixture(scope="module")
+def model_folder(tmp_path_factory):
+    """A closet model folder: the tiny architecture, 3 training codes, random weights."""
+    import torch
+
+    from nfr_drake.nfr.checkpoint import write_model_folder
+    from nfr_drake.nfr.config import NFRModelConfig
+    from nfr_drake.nfr.model import NFRAutoDecoder
+
+    small = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                           pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                           keypoint_hidden=16)
+    folder = tmp_path_factory.mktemp("model") / "closet"
+    torch.manual_seed(0)
+    write_model_folder(folder, NFRAutoDecoder(small, num_objects=3),
+                       {"category": "closet",
+                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    return folder
 
 
 @pytest.fixture(scope="session")
