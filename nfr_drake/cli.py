@@ -27,6 +27,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
              "evaluate the neural field and the baseline on held-out capture sets"),
     "eval-pipeline": ("nfr_drake.eval.pipeline_eval:eval_pipeline_command",
                       "success rate of perception + planning + simulation on unseen objects"),
+    "explore": ("nfr_drake.eval.explore:explore_command",
+                "what a model has learned: interpolations, new articulations, new objects, a 3D page"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
     "train-handle-detector": ("nfr_drake.perception.handle_detector:train_detector_command",

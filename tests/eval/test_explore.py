@@ -1,0 +1,164 @@
+"""`nfr-drake explore`: paths between codes end on the two objects, sampled codes follow the
+training codes' distribution, the command writes its figures and an offline Meshcat page."""
+
+import base64
+import re
+
+import numpy as np
+import pytest
+import torch
+from headless_browser import CHROMIUM, JS_ERROR, screenshot
+from PIL import Image
+from pydrake.geometry import Meshcat
+
+from nfr_drake.cli import main
+from nfr_drake.data.captures import captures_command
+from nfr_drake.errors import ConfigError
+from nfr_drake.eval.explore import (
+    ExploredObject,
+    explore_command,
+    interpolation_path,
+    model_view,
+    object_html,
+    render,
+    sampled_objects,
+)
+from nfr_drake.inference.forward import keypoint_trajectory
+from nfr_drake.inference.infer import FittedModel
+from nfr_drake.inference.latent_space import CodeGaussian, farthest_code, interpolate_codes
+from nfr_drake.systems.replay import write_replay
+
+FILES = ("interpolation.png", "articulations.png", "samples.png", "object.html")
+
+
+@pytest.fixture(scope="module")
+def fitted(model_folder):
+    return FittedModel(model_folder)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("explore_caps")
+    captures_command("closet", n=1, out=root, views=3, size=32)
+    return root / "closet_000"
+
+
+def test_interpolate_codes_moves_z_obj_on_a_line_and_q_along_the_circle():
+    a, b = torch.tensor([1.0, -2.0, 0.5]), torch.tensor([3.0, 2.0, -0.5])
+    z_obj, q = interpolate_codes(a, 0.2, b, 0.9, np.array([0.0, 0.25, 1.0]))
+    assert torch.equal(z_obj[0], a) and torch.equal(z_obj[-1], b)
+    assert torch.allclose(z_obj[1], 0.75 * a + 0.25 * b)
+    np.testing.assert_allclose(q, [0.2, 0.375, 0.9])
+    with pytest.raises(ConfigError):
+        interpolate_codes(a, 0.2, b, 0.9, np.array([0.0, 1.5]))
+
+
+def test_farthest_code():
+    codes = torch.tensor([[0.0, 0.0], [1.0, 0.0], [-3.0, 1.0], [0.5, 0.5]])
+    assert farthest_code(codes, torch.tensor([0.5, 0.0])) == 2
+
+
+def test_interpolation_ends_are_the_two_objects(fitted):
+    generator = torch.Generator().manual_seed(1)
+    k = fitted.codes.shape[1]
+    a = ExploredObject("a", torch.randn(k, generator=generator), 0.1)
+    b = ExploredObject("b", torch.randn(k, generator=generator), 0.8)
+    path = interpolation_path(a, b, 5)
+    view = model_view(fitted, 24)
+    for end, obj in ((path[0], a), (path[-1], b)):
+        ours, theirs = render(fitted, end, view), render(fitted, obj, view)
+        assert np.array_equal(ours.rgb, theirs.rgb) and np.array_equal(ours.labels, theirs.labels)
+        assert np.array_equal(ours.depth, theirs.depth)
+        grid = np.linspace(0, 1, 5)
+        np.testing.assert_array_equal(keypoint_trajectory(fitted.model, end.z, grid),
+                                      keypoint_trajectory(fitted.model, obj.z, grid))
+    middle = render(fitted, path[2], view)
+    for obj in (a, b):
+        assert np.abs(middle.depth - render(fitted, obj, view).depth).max() > 1e-4
+    assert path[2].q == pytest.approx(0.45)
+
+
+def test_sampled_codes_follow_the_training_codes():
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(6, 6)) * 0.3
+    codes = torch.as_tensor(rng.normal(size=(4000, 6)) @ A.T + np.arange(6), dtype=torch.float32)
+    gaussian = CodeGaussian.fit(codes)
+    assert not gaussian.is_diagonal
+    drawn = gaussian.sample(40000, np.random.default_rng(1))
+    x = codes.double().numpy()
+    np.testing.assert_allclose(drawn.mean(0), x.mean(0), atol=0.02)
+    np.testing.assert_allclose(np.cov(drawn, rowvar=False), np.cov(x, rowvar=False), atol=0.02)
+
+
+def test_few_codes_give_a_diagonal_gaussian():
+    codes = torch.as_tensor(np.random.default_rng(2).normal(size=(5, 8)) * np.arange(1, 9))
+    gaussian = CodeGaussian.fit(codes)
+    assert gaussian.is_diagonal
+    np.testing.assert_allclose(np.diag(gaussian.cov), codes.numpy().var(0, ddof=1))
+    drawn = gaussian.sample(50000, np.random.default_rng(3))
+    np.testing.assert_allclose(drawn.std(0) / np.sqrt(np.diag(gaussian.cov)), 1.0, atol=0.03)
+
+
+def test_sampled_objects_report_their_nearest_training_code(fitted):
+    z_objs, nearest = sampled_objects(fitted, 3, seed=4)
+    assert len(z_objs) == 3 and nearest.shape == (3,)
+    expected = [float((fitted.codes - z).norm(dim=-1).min()) for z in z_objs]
+    np.testing.assert_allclose(nearest, expected, rtol=1e-5)
+
+
+def _meshcat_commands(html: str) -> list[bytes]:
+    """The scene commands a Meshcat static page embeds (base64 msgpack data URLs)."""
+    return [base64.b64decode(m) for m in
+            re.findall(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)", html)]
+
+
+def test_html_holds_the_point_cloud_and_the_trajectories_offline(fitted, tmp_path):
+    obj = ExploredObject("a", fitted.codes[1], 0.3)
+    html = tmp_path / "object.html"
+    points = object_html(fitted, obj, model_view(fitted, 24), html, cloud_size=24)
+    text = html.read_text()
+    # Nothing fetched over the network at load time: no external scripts, styles or images.
+    assert not re.search(r"<script[^>]+src=|<link|<img|src=[\"']https?:|url\(\s*[\"']?https?:", text)
+    commands = _meshcat_commands(text)
+    cloud = [c for c in commands if b"/drake/object/point_cloud" in c]
+    assert len(cloud) == 1 and b"Points" in cloud[0] and len(cloud[0]) >= 12 * points > 0
+    for name in fitted.keypoint_names:
+        assert any(f"/drake/object/keypoints/{name}/path".encode() in c for c in commands), name
+        assert any(f"/drake/object/keypoints/{name}/now".encode() in c for c in commands), name
+    if CHROMIUM is None:
+        pytest.skip("needs Chromium to render the page: apt-get install chromium")
+    image, log = screenshot(html, tmp_path)
+    assert not [line for line in log.splitlines() if JS_ERROR.search(line)]
+    empty, _ = screenshot(write_replay(Meshcat(), tmp_path / "empty.html"), tmp_path)
+    changed = np.any(np.abs(image.astype(int) - empty.astype(int)) > 12, axis=-1)
+    assert changed.mean() > 0.002, f"only {changed.mean():.2%} of the pixels show the scene"
+
+
+def test_command_writes_the_figures(model_folder, capture, tmp_path, capsys):
+    out = tmp_path / "explore"
+    explore_command(model_folder, out=out, capture=(capture,), steps=3, samples=2,
+                    sample_q=(0.0, 1.0), size=24)
+    for name in FILES:
+        assert (out / name).stat().st_size > 1000, name
+    for name in FILES[:3]:
+        width, height = Image.open(out / name).size
+        assert width > 3 * 24 and height > 2 * 24
+    printed = capsys.readouterr().out
+    assert "fitted closet_000" in printed and "training object" in printed
+
+
+@pytest.mark.parametrize("problem", ["model", "capture", "out", "captures", "steps"])
+def test_bad_inputs_exit_2_with_one_line(model_folder, capture, tmp_path, capsys, problem):
+    out = tmp_path / "out"
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    model = str(model_folder)
+    args = {"model": [str(tmp_path / "no_model"), "--out", str(out)],
+            "capture": [model, "--capture", str(tmp_path / "no_capture"), "--out", str(out)],
+            "out": [model, "--out", str(blocker / "explore")],
+            "captures": [model, *["--capture", str(capture)] * 3, "--out", str(out)],
+            "steps": [model, "--steps", "1", "--out", str(out)]}[problem]
+    assert main(["explore", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nfr-drake explore: error:") and "\n" not in err, err
+    assert not out.exists()  # checked before any work
