@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
-from nfr_drake.perception.intrinsics import PhotoCamera
 from nfr_drake.perception.photos import prepare_photos
 from nfr_drake.perception.sfm import SfmOptions, run_sfm
 from nfr_drake.perception.synthetic import SyntheticPhotoScene, orbit_poses, write_photo_folder
@@ -39,27 +38,27 @@ def shared_data_dir() -> Path:
     return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-def herz_jesu(root: Path) -> tuple[Path, PhotoCamera] | None:
+def herz_jesu(root: Path) -> tuple[Path, PinholeCamera] | None:
     """Herz-Jesu-P8's image folder and camera, or None when the shared data is absent."""
     folder = root / "real_photos" / "herz_jesu_p8"
     if not (folder / "cameras.json").is_file():
         return None
     first = next(iter(json.loads((folder / "cameras.json").read_text())["cameras"].values()))
     K = np.array(first["K"])
-    return folder / "images", PhotoCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], first["width"],
+    return folder / "images", PinholeCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], first["width"],
                                           first["height"])
 
 
-def synthetic(out: Path, n: int) -> tuple[Path, PhotoCamera]:
+def synthetic(out: Path, n: int) -> tuple[Path, PinholeCamera]:
     """n Drake-rendered photos (1024 x 768) and their camera."""
     camera = PinholeCamera.from_fov(1024, 768, np.deg2rad(50))
     closet = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 0, 0))
     scene = SyntheticPhotoScene(closet, 0.5, camera)
     write_photo_folder(out, scene, orbit_poses(n, np.array([0.4, 0.0, 0.35])))
-    return out, PhotoCamera(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+    return out, PinholeCamera(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
 
 
-def measure(photos: Path, camera: PhotoCamera, first_octave: int, work: Path) -> dict[str, float]:
+def measure(photos: Path, camera: PinholeCamera, first_octave: int, work: Path) -> dict[str, float]:
     """Seconds per stage of one SfM run on the photos resized to the working size."""
     images = prepare_photos(photos, work / "images", WORKING_SIZE)
     result = run_sfm(work / "images", [p.work_name for p in images], work,

@@ -18,8 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from nfr_drake.data.cameras import look_at
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.data.generate import generate_dataset
 from nfr_drake.data.render import ObjectRenderer

@@ -26,12 +26,12 @@ import cv2
 import matplotlib.pyplot as plt
 import numpy as np
 
-from nfr_drake.data.capture import PinholeCamera, read_capture_set
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.visualize import image_grid
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.perception.alignment import rotation_angle
 from nfr_drake.perception.charuco import CharucoBoardSpec, CharucoPoseEstimator
-from nfr_drake.perception.intrinsics import PhotoCamera
 from nfr_drake.perception.poses import Alignment, estimate_poses
 from nfr_drake.perception.synthetic import SyntheticPhotoScene, orbit_poses, write_photo_folder
 
@@ -71,7 +71,7 @@ print("wrote", out_dir / "tutorial_02_photos.png")
 
 # %%
 board = CharucoBoardSpec(squares=(5, 7), square_m=0.08, marker_m=0.06, dictionary="DICT_6X6_250")
-photo_camera = PhotoCamera.from_json(truth["camera"])
+photo_camera = PinholeCamera.from_json(truth["camera"])
 (work / "camera.json").write_text(json.dumps(truth["camera"]))
 estimator = CharucoPoseEstimator(board)
 bgr = cv2.imread(str(photos / names[2]))

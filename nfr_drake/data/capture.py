@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from nfr_drake.data.camera import DISTORTION_KEYS, PinholeCamera
 from nfr_drake.errors import CaptureSetError
 from nfr_drake.jsonio import read_json
 
@@ -32,60 +33,8 @@ GT_FILE = "gt.json"
 
 _OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
 _CAMERA_MODELS = {"PINHOLE": 0, "OPENCV": 4}
-_DISTORTION_KEYS = ("k1", "k2", "p1", "p2")
+_DISTORTION_KEYS = DISTORTION_KEYS[:4]  # nerfstudio's OPENCV model
 _RIGID_TOLERANCE = 1e-3
-
-
-@dataclass(frozen=True)
-class PinholeCamera:
-    """Pinhole intrinsics with optional OpenCV distortion.
-
-    fx, fy, cx, cy are in pixels, with the top-left pixel's centre at (0.5, 0.5); width and height
-    in pixels; distortion is (k1, k2, p1, p2) or None.
-    """
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-    distortion: tuple[float, float, float, float] | None = None
-
-    @classmethod
-    def from_fov(cls, width: int, height: int, fov_y_rad: float) -> PinholeCamera:
-        """A centred, square-pixel camera with the given vertical field of view."""
-        f = height / 2.0 / math.tan(fov_y_rad / 2.0)
-        return cls(f, f, width / 2.0, height / 2.0, width, height)
-
-    @property
-    def K(self) -> np.ndarray:
-        """3x3 intrinsic matrix in this class's pixel convention."""
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    @property
-    def fov_y(self) -> float:
-        """Vertical field of view, rad."""
-        return 2.0 * math.atan(self.height / 2.0 / self.fy)
-
-    def scaled(self, width: int, height: int) -> PinholeCamera:
-        """The same camera for an image resized to width x height."""
-        sx, sy = width / self.width, height / self.height
-        return PinholeCamera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height,
-                             self.distortion)
-
-    @classmethod
-    def from_json(cls, d: dict, source: str = "camera") -> PinholeCamera:
-        """From nerfstudio intrinsic keys (fl_x, fl_y, cx, cy, w, h, camera_model, k1..p2)."""
-        return _camera_from_json(d, None, "intrinsics", Path(source))
-
-    def to_json(self) -> dict:
-        d = {"fl_x": self.fx, "fl_y": self.fy, "cx": self.cx, "cy": self.cy,
-             "w": self.width, "h": self.height,
-             "camera_model": "OPENCV" if self.distortion else "PINHOLE"}
-        if self.distortion:
-            d.update(dict(zip(_DISTORTION_KEYS, self.distortion, strict=True)))
-        return d
 
 
 @dataclass(frozen=True)
@@ -165,7 +114,7 @@ def _camera_from_json(d: dict, base: PinholeCamera | None, where: str, path: Pat
     if model not in _CAMERA_MODELS:
         raise _fail(path, f"{where}: camera_model {model!r} is not supported "
                           f"(use one of {sorted(_CAMERA_MODELS)})")
-    distortion = None
+    distortion = ()
     if model == "OPENCV":
         base_dist = b.distortion if b and b.distortion else (None,) * 4
         distortion = tuple(float(get(k, bd)) for k, bd in zip(_DISTORTION_KEYS, base_dist,

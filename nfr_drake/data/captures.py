@@ -15,8 +15,9 @@ from typing import Literal
 import numpy as np
 from tqdm import tqdm
 
-from nfr_drake.data.cameras import CameraDistribution
-from nfr_drake.data.capture import PinholeCamera, write_capture_set
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.capture import write_capture_set
 from nfr_drake.data.render import ObjectRenderer, sample_lighting
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import (

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
     OBJECTS_DIR,

@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 from tqdm import tqdm
 
-from nfr_drake.data.cameras import CameraDistribution
+from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
     DatasetSpec,
@@ -40,7 +40,7 @@ def articulation_values(rng: np.random.Generator, count: int) -> np.ndarray:
 
 def render_object_arrays(spec: DatasetSpec, index: int):
     """Render object `index` of `spec`: (arrays, meta, sdf) ready for `write_object`."""
-    from nfr_drake.data.capture import PinholeCamera
+    from nfr_drake.data.camera import PinholeCamera
     from nfr_drake.data.render import ObjectRenderer, sample_lighting
     from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object, to_sdformat
 

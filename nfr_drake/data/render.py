@@ -28,7 +28,7 @@ from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.articulated import LABELS_PER_PART, MAX_FRONTS
 from nfr_drake.objects.plant import add_articulated_object, apply_semantic_labels, set_articulation
@@ -115,7 +115,7 @@ def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
     Subtracting half a pixel, as the documentation suggests, shifts every render by -0.5 px in u
     and v against the stated intrinsics (measured by
     tests/data/test_render.py::test_spheres_render_where_the_intrinsics_project_them)."""
-    if camera.distortion is not None:
+    if camera.distortion:
         raise ValueError("Drake renders undistorted pinhole images only")
     return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy)
 

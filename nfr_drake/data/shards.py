@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nfr_drake.data.cameras import CameraDistribution
+from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.errors import DatasetError
 
 FORMAT_NAME = "nfr-drake-dataset"

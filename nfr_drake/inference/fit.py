@@ -203,11 +203,9 @@ def frame_ray_directions(frame: CaptureFrame) -> np.ndarray:
     cam = frame.camera
     uv = pixel_centers(cam.height, cam.width, dtype=torch.float64)
     K = torch.from_numpy(cam.K)
-    if cam.distortion is not None:
-        K_cv = cam.K.copy()
-        K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
-        xy = cv2.undistortPoints((uv.numpy() - 0.5).reshape(-1, 1, 2), K_cv,
-                                 np.array(cam.distortion)).reshape(-1, 2)
+    if cam.distortion:
+        xy = cv2.undistortPoints((uv.numpy() - 0.5).reshape(-1, 1, 2), cam.K_opencv,
+                                 cam.dist_opencv).reshape(-1, 2)
         uv, K = torch.from_numpy(xy), torch.eye(3, dtype=torch.float64)  # normalised coordinates
     rays = pixel_rays(uv[None], K[None], torch.from_numpy(frame.X_OC)[None])
     return rays.directions[0].numpy()

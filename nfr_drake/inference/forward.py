@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nfr_drake.data.capture import CaptureFrame, PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.inference.fit import frame_ray_directions
 from nfr_drake.nfr.latent import q_to_z_art
 from nfr_drake.nfr.model import NFRModel

@@ -1,8 +1,7 @@
 """Perception from real photos: camera poses by structure from motion, metric alignment, point clouds.
 
-Modules, one role each:
-- `intrinsics`: the photos' camera model (pinhole + OpenCV distortion), COLMAP/OpenCV conversions,
-  undistortion.
+Modules, one role each (the camera model, with its COLMAP and OpenCV conversions and undistortion,
+is `nfr_drake.data.camera.PinholeCamera`):
 - `photos`: the photo folder: listing, reading, resizing to the working size.
 - `sfm`: pycolmap structure from motion (SIFT, exhaustive matching, incremental mapping).
 - `charuco`: ChArUco board detection and the board's pose in a photo.

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.perception.intrinsics import PhotoCamera
 
 MIN_CORNERS = 6
 """ChArUco corners a photo needs for a board pose (fewer give unreliable poses)."""
@@ -85,7 +85,7 @@ class CharucoPoseEstimator:
         p_B, uv = self.board.matchImagePoints(corners, ids)
         return p_B.reshape(-1, 3).astype(float), uv.reshape(-1, 2).astype(float) + 0.5
 
-    def estimate(self, image: np.ndarray, camera: PhotoCamera) -> BoardPose | None:
+    def estimate(self, image: np.ndarray, camera: PinholeCamera) -> BoardPose | None:
         """The board's pose in one image taken with `camera`, or None with too few corners.
 
         PnP: IPPE for a planar target, refined by Levenberg-Marquardt; distortion is modelled.

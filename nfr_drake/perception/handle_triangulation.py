@@ -88,13 +88,10 @@ def sighting(handle_map: HandleMap, frame: int, threshold: float = 0.5,
 def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Origin and unit direction in O of the ray through pixel uv of a frame."""
     cam = frame.camera
-    if cam.distortion is None:
+    if not cam.distortion:
         xy = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]
     else:
-        K_cv = cam.K.copy()
-        K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
-        xy = cv2.undistortPoints((uv - 0.5).reshape(1, 1, 2), K_cv,
-                                 np.array(cam.distortion)).reshape(2)
+        xy = cv2.undistortPoints((uv - 0.5).reshape(1, 1, 2), cam.K_opencv, cam.dist_opencv).reshape(2)
     d = frame.X_OC[:3, :3] @ np.array([xy[0], xy[1], 1.0])
     return frame.X_OC[:3, 3].copy(), d / np.linalg.norm(d)
 
@@ -115,10 +112,8 @@ def project(frame: CaptureFrame, p_O: np.ndarray) -> np.ndarray | None:
     if p_C[2] <= 1e-6:
         return None
     cam = frame.camera
-    dist = np.zeros(4) if cam.distortion is None else np.array(cam.distortion)
-    K_cv = cam.K.copy()
-    K_cv[:2, 2] -= 0.5  # OpenCV puts pixel centres at integer coordinates
-    proj = cv2.projectPoints(p_C.reshape(1, 3), np.zeros(3), np.zeros(3), K_cv, dist)[0]
+    proj = cv2.projectPoints(p_C.reshape(1, 3), np.zeros(3), np.zeros(3), cam.K_opencv,
+                             cam.dist_opencv)[0]
     return proj.reshape(2) + 0.5
 
 

@@ -20,7 +20,8 @@ import cv2
 import numpy as np
 import tyro
 
-from nfr_drake.data.capture import PinholeCamera, write_capture_set
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import write_capture_set
 from nfr_drake.errors import ConfigError
 from nfr_drake.perception.alignment import (
     AlignmentResult,
@@ -32,7 +33,6 @@ from nfr_drake.perception.alignment import (
     read_anchors,
 )
 from nfr_drake.perception.charuco import BoardNotFoundError, CharucoBoardSpec, CharucoPoseEstimator
-from nfr_drake.perception.intrinsics import PhotoCamera
 from nfr_drake.perception.photos import WorkingPhoto, prepare_photos
 from nfr_drake.perception.report import PoseReport
 from nfr_drake.perception.sfm import (
@@ -65,7 +65,7 @@ def _progress(message: str) -> None:
     print(f"[poses] {message}", file=sys.stderr, flush=True)
 
 
-def _working_camera(camera: PhotoCamera, photos: list[WorkingPhoto]) -> PhotoCamera:
+def _working_camera(camera: PinholeCamera, photos: list[WorkingPhoto]) -> PinholeCamera:
     """The known camera scaled to the working size; all photos must share its size (or aspect)."""
     sizes = sorted({p.original_size for p in photos})
     if len(sizes) > 1:
@@ -97,7 +97,7 @@ def _photos_with_board(estimator: CharucoPoseEstimator, image_dir: Path,
 
 
 def _board_poses(estimator: CharucoPoseEstimator, image_dir: Path, work_names: dict[str, str],
-                 cameras: dict[str, PhotoCamera]) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+                 cameras: dict[str, PinholeCamera]) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
     """X_BC and detection details for each registered photo that shows the board."""
     X_BCs, details = {}, {}
     for name, work_name in work_names.items():
@@ -134,7 +134,7 @@ def _check_request(alignment: Alignment, out: Path, max_size: int) -> None:
 
 def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_dir: Path,
            work_names: dict[str, str], X_RCs: dict[str, np.ndarray],
-           cameras: dict[str, PhotoCamera]) -> tuple[AlignmentResult | None, dict[str, dict]]:
+           cameras: dict[str, PinholeCamera]) -> tuple[AlignmentResult | None, dict[str, dict]]:
     """The similarity R -> W from the board (photos in `work_names`) or the anchors, and the
     board detections per photo; (None, {}) when unaligned."""
     if estimator is not None:
@@ -147,7 +147,7 @@ def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_d
     return None, {}
 
 
-def _undistorted_images(image_dir: Path, work_names: list[str], cameras: list[PhotoCamera]
+def _undistorted_images(image_dir: Path, work_names: list[str], cameras: list[PinholeCamera]
                         ) -> tuple[list[np.ndarray], list[PinholeCamera] | PinholeCamera]:
     """Undistorted RGB images (H, W, 3) and their pinhole camera(s): one if all are equal."""
     images, pinholes = [], []
@@ -159,7 +159,7 @@ def _undistorted_images(image_dir: Path, work_names: list[str], cameras: list[Ph
 
 
 def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
-                   camera: PhotoCamera | None = None, X_WO: np.ndarray | None = None,
+                   camera: PinholeCamera | None = None, X_WO: np.ndarray | None = None,
                    max_size: int = 1024, min_registered: int = 3,
                    sfm_options: SfmOptions = DEFAULT_SFM, work_dir: Path | None = None,
                    progress=_progress) -> PoseReport:
@@ -280,7 +280,7 @@ def poses_command(
         sfm: feature and mapping options.
     """
     X_WO = parse_object_pose(object_pose) if object_pose is not None else None
-    camera = PhotoCamera.from_json_file(intrinsics) if intrinsics else None
+    camera = PinholeCamera.from_json_file(intrinsics) if intrinsics else None
     alignment = Alignment(charuco=board if charuco else None,
                           anchors=read_anchors(anchors) if anchors else None,
                           allow_unaligned=allow_unaligned)

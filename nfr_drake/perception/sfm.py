@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.perception.intrinsics import PhotoCamera
 
 SELF_CALIBRATION_MODEL = "SIMPLE_RADIAL"
 
@@ -60,7 +60,7 @@ class SfmResult:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def _reader_options(camera: PhotoCamera | None, focal_prior: tuple[float, int, int] | None
+def _reader_options(camera: PinholeCamera | None, focal_prior: tuple[float, int, int] | None
                     ) -> pycolmap.ImageReaderOptions:
     if camera is None and focal_prior is not None:
         f, w, h = focal_prior
@@ -86,7 +86,7 @@ def _mapping_options(known_intrinsics: bool, options: SfmOptions) -> pycolmap.In
     return mapping
 
 
-def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
+def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PinholeCamera | None,
             options: SfmOptions | None = None,
             progress: Callable[[str], None] | None = print,
             focal_prior: tuple[float, int, int] | None = None) -> SfmResult:
@@ -111,7 +111,7 @@ def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Pho
         pycolmap.logging.minloglevel = previous_level
 
 
-def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PhotoCamera | None,
+def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PinholeCamera | None,
              options: SfmOptions, say: Callable[[str], None],
              focal_prior: tuple[float, int, int] | None) -> SfmResult:
     work_dir.mkdir(parents=True, exist_ok=True)
@@ -178,7 +178,7 @@ def camera_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.ndarra
     return poses
 
 
-def image_cameras(reconstruction: pycolmap.Reconstruction) -> dict[str, PhotoCamera]:
+def image_cameras(reconstruction: pycolmap.Reconstruction) -> dict[str, PinholeCamera]:
     """Image name -> the (possibly self-calibrated) camera of each registered image."""
-    return {image.name: PhotoCamera.from_colmap(reconstruction.cameras[image.camera_id])
+    return {image.name: PinholeCamera.from_colmap(reconstruction.cameras[image.camera_id])
             for image in reconstruction.images.values() if image.has_pose}

@@ -29,12 +29,12 @@ from pydrake.geometry import (
 )
 from pydrake.math import RigidTransform
 
-from nfr_drake.data.cameras import look_at
-from nfr_drake.data.capture import PinholeCamera, write_image
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
+from nfr_drake.data.capture import write_image
 from nfr_drake.data.render import Lighting, ObjectRenderer
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.perception.charuco import CharucoBoardSpec
-from nfr_drake.perception.intrinsics import PhotoCamera
 
 TRUTH_FILE = "truth.json"
 _PX_PER_SQUARE = 200
@@ -183,7 +183,7 @@ def orbit_poses(n: int, target_O: np.ndarray, distance_m: float = 2.0,
     return np.stack(poses)
 
 
-def apply_distortion(rgb: np.ndarray, camera: PhotoCamera) -> np.ndarray:
+def apply_distortion(rgb: np.ndarray, camera: PinholeCamera) -> np.ndarray:
     """The photo a lens with `camera`'s distortion would take, from a pinhole image (H, W, 3)
     with the same K. Each distorted pixel samples the pinhole image where its undistorted ray
     lands (bilinear); pixels whose ray leaves the pinhole image are black."""
@@ -205,7 +205,7 @@ def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray,
     object's keypoints at q (metres, in O).
     """
     c = scene.camera
-    camera = PhotoCamera(c.fx, c.fy, c.cx, c.cy, c.width, c.height, tuple(distortion))
+    camera = PinholeCamera(c.fx, c.fy, c.cx, c.cy, c.width, c.height, tuple(distortion))
     out.mkdir(parents=True, exist_ok=True)
     poses = {}
     for i, X_OC in enumerate(X_OCs):

@@ -35,7 +35,8 @@ from pydrake.multibody.tree import BodyIndex, ModelInstanceIndex
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 
-from nfr_drake.data.capture import CaptureFrame, CaptureSet, PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, KeypointSource, infer

@@ -21,8 +21,8 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from nfr_drake.data.cameras import CameraDistribution
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import check_category

@@ -7,14 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from nfr_drake.data.cameras import look_at
-from nfr_drake.data.capture import (
-    PinholeCamera,
-    opencv_from_opengl,
-    opengl_from_opencv,
-    read_capture_set,
-    write_capture_set,
-)
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
+from nfr_drake.data.capture import opencv_from_opengl, opengl_from_opencv, read_capture_set, write_capture_set
 from nfr_drake.errors import CaptureSetError
 
 

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from nfr_drake.data.cameras import CameraDistribution, look_at
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import CameraDistribution, look_at
 from nfr_drake.data.render import RENDERER_NAME, ObjectRenderer, drake_camera_info
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, SemanticClass, object_rng, sample_object
 

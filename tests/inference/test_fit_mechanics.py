@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from nfr_drake.data.cameras import look_at
-from nfr_drake.data.capture import CaptureFrame, PinholeCamera, read_capture_set
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
+from nfr_drake.data.capture import CaptureFrame, read_capture_set
 from nfr_drake.data.captures import captures_command
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import (

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from nfr_drake.data.cameras import look_at
+from nfr_drake.data.camera_placement import look_at
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.config import (
     LossConfig,

@@ -4,12 +4,12 @@ import cv2
 import numpy as np
 import pytest
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.perception.charuco import CharucoBoardSpec, CharucoPoseEstimator
-from nfr_drake.perception.intrinsics import PhotoCamera
 
 # From OpenCV's samples/data/aruco/tutorial_camera_charuco.yml (OpenCV pixel convention, so the
 # principal point moves by +0.5 into ours); see the data README.
-TUTORIAL_CAMERA = PhotoCamera(452.5107, 456.7671, 317.7030 + 0.5, 277.7516 + 0.5, 640, 480,
+TUTORIAL_CAMERA = PinholeCamera(452.5107, 456.7671, 317.7030 + 0.5, 277.7516 + 0.5, 640, 480,
                               (0.121369, -1.085466, 1.17868e-4, -4.62407e-4, 2.954259))
 PHOTOS = ["img_00.jpg", "img_01.jpg", "img_02.jpg", "img_03.jpg", "chocclusion_original.jpg"]
 

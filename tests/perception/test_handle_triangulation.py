@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nfr_drake.data.capture import CaptureFrame, PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.perception.handle_triangulation import HandleMap, sighting, triangulate_handle
 
 P_TRUE = np.array([0.25, -0.2, 0.5])
@@ -39,7 +40,7 @@ def _project(frame: CaptureFrame, p: np.ndarray) -> np.ndarray:
     p_C = X_CO[:3, :3] @ p + X_CO[:3, 3]
     cam = frame.camera
     x, y = p_C[:2] / p_C[2]
-    if cam.distortion is not None:
+    if cam.distortion:
         k1, k2, p1, p2 = cam.distortion
         r2 = x * x + y * y
         radial = 1 + k1 * r2 + k2 * r2 * r2

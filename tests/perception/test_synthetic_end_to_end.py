@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from nfr_drake.cli import main
-from nfr_drake.data.capture import PinholeCamera, read_capture_set, write_capture_set
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import read_capture_set, write_capture_set
 from nfr_drake.data.render import ObjectRenderer
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.perception.alignment import rotation_angle
 from nfr_drake.perception.charuco import CharucoBoardSpec
-from nfr_drake.perception.intrinsics import PhotoCamera
 from nfr_drake.perception.poses import Alignment, estimate_poses
 from nfr_drake.perception.synthetic import SyntheticPhotoScene, orbit_poses, write_photo_folder
 
@@ -39,7 +39,7 @@ def _run(photos, out, known_intrinsics: bool):
     folder, truth = photos
     b = truth["board"]
     board = CharucoBoardSpec(tuple(b["squares"]), b["square_m"], b["marker_m"], b["dictionary"])
-    camera = PhotoCamera.from_json(truth["camera"]) if known_intrinsics else None
+    camera = PinholeCamera.from_json(truth["camera"]) if known_intrinsics else None
     report = estimate_poses(folder, out, Alignment(charuco=board), camera,
                             X_WO=np.linalg.inv(np.array(truth["X_OB"])), progress=lambda _: None)
     return read_capture_set(out), report
@@ -74,7 +74,7 @@ def test_images_are_undistorted(known, scene, photos):
     """The written (undistorted, pinhole) image equals a pinhole render from the true pose."""
     capture, report = known
     frame = capture.frames[0]
-    assert frame.camera.distortion is None
+    assert frame.camera.distortion == ()
     truth = np.array(photos[1]["X_OC"][report.frames[f"images/{frame.image_path.name}"]])
     rendered = scene.render(truth).astype(float)
     written = frame.load_rgb().astype(float)

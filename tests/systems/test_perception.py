@@ -12,8 +12,8 @@ from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from nfr_drake.data.cameras import CameraDistribution
-from nfr_drake.data.capture import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.render import ObjectRenderer
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.nfr.checkpoint import write_model_folder

@@ -1,4 +1,4 @@
-"""The photo camera model: COLMAP and OpenCV conversions, undistortion, JSON files."""
+"""The camera model: COLMAP and OpenCV conversions, undistortion, JSON files."""
 
 import json
 
@@ -7,22 +7,22 @@ import numpy as np
 import pycolmap
 import pytest
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.errors import ConfigError
-from nfr_drake.perception.intrinsics import PhotoCamera
 
-CAMERA = PhotoCamera(452.5, 456.8, 318.2, 278.3, 640, 480, (0.12, -0.3, 1e-3, -5e-4, 0.2))
+CAMERA = PinholeCamera(452.5, 456.8, 318.2, 278.3, 640, 480, (0.12, -0.3, 1e-3, -5e-4, 0.2))
 
 
 @pytest.mark.parametrize("camera", [
-    PhotoCamera(500.0, 510.0, 320.0, 240.0, 640, 480),
-    PhotoCamera(500.0, 510.0, 320.0, 240.0, 640, 480, (0.1, -0.05, 1e-3, 2e-3)),
+    PinholeCamera(500.0, 510.0, 320.0, 240.0, 640, 480),
+    PinholeCamera(500.0, 510.0, 320.0, 240.0, 640, 480, (0.1, -0.05, 1e-3, 2e-3)),
     CAMERA,
 ])
 def test_colmap_round_trip(camera):
     model, params = camera.colmap_model()
     colmap = pycolmap.Camera.create_from_model_name(1, model, 500.0, camera.width, camera.height)
     colmap.params = params
-    back = PhotoCamera.from_colmap(colmap)
+    back = PinholeCamera.from_colmap(colmap)
     assert back.K == pytest.approx(camera.K)
     np.testing.assert_allclose(np.pad(back.distortion, (0, 8 - len(back.distortion))),
                                np.pad(camera.distortion, (0, 8 - len(camera.distortion))))
@@ -56,10 +56,10 @@ def test_undistort_moves_points_to_their_pinhole_projection():
 def test_json_file(tmp_path):
     path = tmp_path / "camera.json"
     path.write_text(json.dumps(CAMERA.to_json()))
-    assert PhotoCamera.from_json_file(path) == CAMERA
+    assert PinholeCamera.from_json_file(path) == CAMERA
     path.write_text(json.dumps({"fl_x": 500, "cx": 1}))
     with pytest.raises(ConfigError, match="fl_y"):
-        PhotoCamera.from_json_file(path)
+        PinholeCamera.from_json_file(path)
 
 
 def test_scaled():

@@ -1,36 +1,34 @@
-"""The camera model of a photo set: pinhole intrinsics plus OpenCV distortion coefficients.
+"""The camera model: pinhole intrinsics, OpenCV distortion and image size; its conversions.
 
-`PhotoCamera` is what the photos were taken with (distortion allowed, up to OpenCV's 8 rational
-coefficients); the capture set that `nfr-drake poses` writes holds undistorted images and plain
-`PinholeCamera`s. Pixel convention: COLMAP's and the capture set's, the top-left pixel's centre at
-(0.5, 0.5). OpenCV puts it at (0, 0); `K_opencv` converts.
+One class for every camera of the project: Drake's render cameras, capture-set frames, datasets,
+the photos `nfr-drake poses` reads and the cameras COLMAP calibrates. Pixel convention: COLMAP's
+and nerfstudio's, the top-left pixel's centre at (0.5, 0.5); OpenCV puts it at (0, 0) (`K_opencv`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from nfr_drake.data.capture import PinholeCamera
 from nfr_drake.errors import ConfigError
 from nfr_drake.jsonio import read_json
 
-# OpenCV's order of distortion coefficients; COLMAP's OPENCV model takes the first four and its
-# FULL_OPENCV model all eight.
 DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+"""OpenCV's order of distortion coefficients; COLMAP's OPENCV model takes the first four and its
+FULL_OPENCV model all eight, nerfstudio's OPENCV the first four."""
 
 
 @dataclass(frozen=True)
-class PhotoCamera:
-    """Intrinsics of photos as taken.
+class PinholeCamera:
+    """Pinhole intrinsics with optional OpenCV distortion.
 
     fx, fy, cx, cy in pixels (top-left pixel centre at (0.5, 0.5)); width, height in pixels;
     distortion: OpenCV coefficients (k1, k2, p1, p2, k3, k4, k5, k6), trailing ones may be left
-    out; empty or all zero means none.
+    out; () for none (a capture set's "OPENCV" camera holds the first four, even when zero).
     """
 
     fx: float
@@ -46,10 +44,22 @@ class PhotoCamera:
             raise ConfigError("camera: focal lengths and image size must be positive")
         if len(self.distortion) > len(DISTORTION_KEYS):
             raise ConfigError(f"camera: at most {len(DISTORTION_KEYS)} distortion coefficients")
+        object.__setattr__(self, "distortion", tuple(float(k) for k in self.distortion))
+
+    @classmethod
+    def from_fov(cls, width: int, height: int, fov_y_rad: float) -> PinholeCamera:
+        """A centred, square-pixel camera with the given vertical field of view."""
+        f = height / 2.0 / math.tan(fov_y_rad / 2.0)
+        return cls(f, f, width / 2.0, height / 2.0, width, height)
 
     @property
     def has_distortion(self) -> bool:
         return any(abs(k) > 0.0 for k in self.distortion)
+
+    @property
+    def fov_y(self) -> float:
+        """Vertical field of view, rad."""
+        return 2.0 * math.atan(self.height / 2.0 / self.fy)
 
     @property
     def K(self) -> np.ndarray:
@@ -70,15 +80,28 @@ class PhotoCamera:
         size = 4 if n <= 4 else 5 if n == 5 else 8
         return np.pad(np.asarray(self.distortion, float), (0, size - n))
 
-    def scaled(self, width: int, height: int) -> PhotoCamera:
-        """The same camera for the photos resized to width x height."""
+    def scaled(self, width: int, height: int) -> PinholeCamera:
+        """The same camera for an image resized to width x height."""
         sx, sy = width / self.width, height / self.height
-        return PhotoCamera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height,
-                           self.distortion)
+        return PinholeCamera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height,
+                             self.distortion)
 
-    def pinhole(self) -> PinholeCamera:
-        """The capture-set camera of this camera's undistorted images (same K and size)."""
-        return PinholeCamera(self.fx, self.fy, self.cx, self.cy, self.width, self.height)
+    def undistort(self, image: np.ndarray) -> tuple[np.ndarray, PinholeCamera]:
+        """Undistort an image (H, W[, C]) taken with this camera.
+
+        Returns the image resampled to the pinhole camera with the same K and size (bilinear), and
+        that camera. Pixels that fall outside the photo are black.
+        """
+        if image.shape[:2] != (self.height, self.width):
+            raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, camera is "
+                             f"{self.width}x{self.height}")
+        pinhole = replace(self, distortion=())
+        if not self.has_distortion:
+            return image, pinhole
+        K = self.K_opencv
+        map_x, map_y = cv2.initUndistortRectifyMap(K, self.dist_opencv, None, K,
+                                                   (self.width, self.height), cv2.CV_32FC1)
+        return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR), pinhole
 
     # COLMAP ---------------------------------------------------------------------------------
     def colmap_model(self) -> tuple[str, list[float]]:
@@ -91,7 +114,7 @@ class PhotoCamera:
         return "FULL_OPENCV", base + list(np.pad(self.distortion, (0, 8 - len(self.distortion))))
 
     @classmethod
-    def from_colmap(cls, camera) -> PhotoCamera:
+    def from_colmap(cls, camera) -> PinholeCamera:
         """From a `pycolmap.Camera` of a model OpenCV can express.
 
         Supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV.
@@ -110,21 +133,19 @@ class PhotoCamera:
             return cls(p[0], p[1], p[2], p[3], w, h, tuple(p[4:]))
         raise ConfigError(f"COLMAP camera model {name} has no OpenCV equivalent here")
 
-    # Files and images -----------------------------------------------------------------------
+    # JSON (nerfstudio's keys) -----------------------------------------------------------------
     @classmethod
-    def from_json_file(cls, path: str | Path) -> PhotoCamera:
-        """Read intrinsics from a JSON file with nerfstudio's keys.
-
-        Keys: `fl_x`, `fl_y`, `cx`, `cy`, `w`, `h` (pixel centres at +0.5, as in transforms.json)
-        and optionally `k1`, `k2`, `p1`, `p2`, `k3`, `k4`, `k5`, `k6`. A transforms.json works too.
-        """
+    def from_json_file(cls, path: str | Path) -> PinholeCamera:
+        """Read intrinsics from a JSON file with nerfstudio's keys (`from_json`); a
+        transforms.json with top-level intrinsics works too."""
         path = Path(path)
-        d = read_json(path, ConfigError, "intrinsics file")
-        return cls.from_json(d, str(path))
+        return cls.from_json(read_json(path, ConfigError, "intrinsics file"), str(path))
 
     @classmethod
-    def from_json(cls, d: dict, source: str = "intrinsics") -> PhotoCamera:
-        """From a dict with the keys of `from_json_file`; `source` names it in errors."""
+    def from_json(cls, d: dict, source: str = "intrinsics") -> PinholeCamera:
+        """From `fl_x`, `fl_y`, `cx`, `cy`, `w`, `h` (pixel centres at +0.5, as in transforms.json)
+        and optionally `k1`, `k2`, `p1`, `p2`, `k3`, `k4`, `k5`, `k6` (trailing zeros dropped;
+        `camera_model` is not read); `source` names the dict in errors."""
         if not isinstance(d, dict):
             raise ConfigError(f"{source}: expected a JSON object of intrinsics")
         required = ("fl_x", "fl_y", "cx", "cy", "w", "h")
@@ -140,24 +161,13 @@ class PhotoCamera:
                    tuple(float(k) for k in distortion[:used]))
 
     def to_json(self) -> dict:
-        """nerfstudio-style keys (with k3..k6 when used); `from_json_file` reads them back."""
+        """nerfstudio's keys with `camera_model`: PINHOLE without distortion, OPENCV with up to
+        four coefficients (written as k1 k2 p1 p2), FULL_OPENCV with more (all eight keys)."""
         d = {"fl_x": self.fx, "fl_y": self.fy, "cx": self.cx, "cy": self.cy,
              "w": self.width, "h": self.height}
-        d.update(dict(zip(DISTORTION_KEYS, self.distortion, strict=False)))
+        n = len(self.distortion)
+        d["camera_model"] = "PINHOLE" if n == 0 else "OPENCV" if n <= 4 else "FULL_OPENCV"
+        if n:
+            keys = DISTORTION_KEYS[:4] if n <= 4 else DISTORTION_KEYS
+            d.update(zip(keys, np.pad(self.distortion, (0, len(keys) - n)).tolist(), strict=True))
         return d
-
-    def undistort(self, image: np.ndarray) -> tuple[np.ndarray, PinholeCamera]:
-        """Undistort an image (H, W[, C]) taken with this camera.
-
-        Returns the image resampled to the pinhole camera with the same K and size (bilinear), and
-        that camera. Pixels that fall outside the photo are black.
-        """
-        if image.shape[:2] != (self.height, self.width):
-            raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, camera is "
-                             f"{self.width}x{self.height}")
-        if not self.has_distortion:
-            return image, self.pinhole()
-        K = self.K_opencv
-        map_x, map_y = cv2.initUndistortRectifyMap(K, self.dist_opencv, None, K,
-                                                   (self.width, self.height), cv2.CV_32FC1)
-        return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR), self.pinhole()
