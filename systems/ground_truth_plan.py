@@ -10,14 +10,12 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.math import RigidTransform, RollPitchYaw
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.systems.articulation import SimulationConfig
-from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.scene_objects import SceneObject, object_pose
 from nfr_drake.systems.task import run_task
 
 
@@ -39,7 +37,7 @@ class Scenario:
 def run(scenario: Scenario) -> bool:
     """Run the scenario, print the outcome line; True on success."""
     obj = sample_object(scenario.category, object_rng(SEED_DOMAIN_TRAIN, scenario.seed, 0))
-    X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, np.radians(scenario.object_yaw_deg)), scenario.object_xyz)
+    X_WO = object_pose(scenario.object_xyz, scenario.object_yaw_deg)
     outcome = run_task(SceneObject.from_articulated_object(obj, X_WO, scenario.start_q), scenario.target_q,
                        replay=Path(scenario.replay), planner_config=scenario.planner,
                        simulation_config=scenario.simulation)

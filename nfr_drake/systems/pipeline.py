@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -30,7 +30,7 @@ from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, ArticulatedObject, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.systems.perception import AddNfrPerception
-from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.scene_objects import SceneObject, object_pose
 from nfr_drake.systems.task import TaskOutcome, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
 
@@ -94,6 +94,7 @@ class Scenario:
             raise ConfigError(f"keypoints must be geometry or head, got {self.keypoints!r}")
         if self.views < 1 or self.image_size < 8:
             raise ConfigError("views must be >= 1 and image_size >= 8")
+        object_pose(self.object_xyz, self.object_yaw_deg)  # ConfigError for a non-finite pose
 
     @classmethod
     def load(cls, path: Path) -> "Scenario":
@@ -101,8 +102,7 @@ class Scenario:
 
     @property
     def X_WO(self) -> RigidTransform:
-        return RigidTransform(RollPitchYaw(0.0, 0.0, math.radians(self.object_yaw_deg)),
-                              np.asarray(self.object_xyz, float))
+        return object_pose(self.object_xyz, self.object_yaw_deg)
 
     def sample_object(self) -> ArticulatedObject:
         return sample_object(self.category, object_rng(SEED_DOMAIN_CAPTURE, self.seed, self.index),

@@ -6,13 +6,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
-import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
-
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlanningError
-from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.scene_objects import SceneObject, object_pose
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 
 
@@ -48,7 +45,7 @@ def plan_command(
 
     Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
     """
-    X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, np.radians(object_yaw_deg)), np.asarray(object_xyz))
+    X_WO = object_pose(object_xyz, object_yaw_deg)
     if (object is None) == (category is None):
         raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category")
     if object is not None:

@@ -12,19 +12,29 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Role
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
 
-from nfr_drake.errors import NfrDrakeError
+from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.world.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
 
 _Z = np.array([0.0, 0.0, 1.0])
 _HINGE_HALF_SPAN = 0.25  # hinge keypoints of a loaded model: this far along the axis from the handle's foot
+
+
+def object_pose(xyz, yaw_deg: float) -> RigidTransform:
+    """X_WO of an object standing on the floor: origin at `xyz` (3,) in W, m, turned `yaw_deg`
+    degrees about W's z. ConfigError unless these are three finite coordinates and a finite angle."""
+    p_WO = np.asarray(xyz, float)
+    if p_WO.shape != (3,) or not np.all(np.isfinite(p_WO)) or not np.isfinite(yaw_deg):
+        raise ConfigError(f"object pose: need three finite coordinates (m) and a finite yaw (deg), "
+                          f"got xyz {p_WO.tolist()} and yaw {yaw_deg}")
+    return RigidTransform(RollPitchYaw(0.0, 0.0, np.radians(yaw_deg)), p_WO)
 
 
 def set_joint_value(plant: MultibodyPlant, plant_context, joint, value: float) -> None:

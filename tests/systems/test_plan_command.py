@@ -72,3 +72,19 @@ def test_unloadable_model_says_what_to_do(tmp_path, capsys):
     assert main(["plan", "--object", str(path), "--joint", "hinge", "--handle-body", "handle"]) == 2
     err = capsys.readouterr().err
     assert "Drake could not load" in err and "convert" in err
+
+
+@pytest.mark.parametrize("pose", [["--object-xyz", "nan", "0", "0"], ["--object-yaw-deg", "inf"]])
+def test_a_non_finite_object_pose_exits_2(capsys, pose, tmp_path):
+    assert main(["plan", "--category", "closet", *pose, "--replay", str(tmp_path / "r.html")]) == 2
+    assert "object pose: need three finite coordinates" in capsys.readouterr().err
+
+
+def test_a_scenario_with_a_non_finite_pose_is_refused():
+    from nfr_drake.errors import ConfigError
+    from nfr_drake.systems.pipeline import Scenario
+
+    with pytest.raises(ConfigError, match="finite"):
+        Scenario(object_xyz=[0.0, float("nan"), 0.0])
+    with pytest.raises(ConfigError, match="finite"):
+        Scenario(object_yaw_deg=float("-inf"))
