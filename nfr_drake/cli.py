@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         result = tyro.cli(func, args=rest, prog=f"nfr-drake {name}")
     except NfrDrakeError as err:
         print(f"nfr-drake {name}: error: {err}", file=sys.stderr)
-        return 2
+        return err.exit_status
     except KeyboardInterrupt:
         print(f"nfr-drake {name}: interrupted", file=sys.stderr)
         return 130

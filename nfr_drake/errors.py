@@ -1,11 +1,22 @@
 """Errors that describe a user's mistake (bad input, bad file) rather than a bug.
 
-The CLI prints their message and exits with status 2, without a traceback.
+The CLI prints their message and exits with their `exit_status` (2), without a traceback.
 """
 
 
 class NfrDrakeError(Exception):
     """Base class of the errors the CLI reports as a one-line message and exit status 2."""
+
+    exit_status = 2
+
+
+class Interrupted(NfrDrakeError):
+    """A run stopped by a signal after saving what it had done: exit status 128 + signal number
+    (130 for SIGINT, 143 for SIGTERM), as a shell reports a process killed by that signal."""
+
+    def __init__(self, message: str, signum: int):
+        super().__init__(message)
+        self.exit_status = 128 + signum
 
 
 class CaptureSetError(NfrDrakeError):

@@ -108,10 +108,12 @@ def _sample_batch(data: RenderedDataset, rng: np.random.Generator, batch: int, v
 
 
 def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resume: bool = False,
-                   progress: bool = True) -> Path:
-    """Train (or resume) a baseline into `out`; returns `out`."""
+                   progress: bool = True, allow_incomplete: bool = False) -> Path:
+    """Train (or resume) a baseline into `out`; returns `out`. A dataset missing objects is
+    refused unless `allow_incomplete`."""
     torch.set_num_threads(config.threads)
     data = RenderedDataset(data_dir)
+    data.require_complete(allow_incomplete)
     joint_type = "revolute" if data.spec.category == "closet" else "prismatic"
     arch = BaselineConfig(data.spec.category, data.keypoint_names, joint_type)
     torch.manual_seed(config.seed)
@@ -167,7 +169,7 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
 
 def train_baseline_command(data: Path, out: Path, steps: int = 6000, batch: int = 8,
                            views: int = 5, lr: float = 1e-3, threads: int = 2,
-                           resume: bool = False) -> None:
+                           resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the paper's image-encoder baseline on a dataset from `nfr-drake generate`.
 
     Args:
@@ -179,7 +181,8 @@ def train_baseline_command(data: Path, out: Path, steps: int = 6000, batch: int 
         lr: learning rate.
         threads: torch CPU threads.
         resume: continue a killed run in OUT.
+        allow_incomplete: train on the objects on disk when the dataset misses some.
     """
     config = BaselineTrainConfig(steps=steps, batch=batch, views=views, lr=lr, threads=threads)
-    train_baseline(data, out, config, resume)
+    train_baseline(data, out, config, resume, allow_incomplete=allow_incomplete)
     print(f"baseline written to {out}")

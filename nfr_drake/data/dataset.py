@@ -7,6 +7,7 @@ larger than memory can be read, and a DataLoader's worker processes open their o
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -92,13 +93,16 @@ class RenderedDataset(torch.utils.data.Dataset):
     """All (object, articulation, view) images of a dataset folder written by `nfr-drake generate`.
 
     Only complete objects are listed; `objects` limits the dataset to its first n objects.
-    Item i is view i % V of articulation (i // V) % A of object i // (A V).
+    `missing` lists the indices below the declared count (dataset.json's, or `objects`) that are
+    not on disk. Item i is view i % V of articulation (i // V) % A of object i // (A V).
     """
 
     def __init__(self, root: str | Path, objects: int | None = None):
         self.root = Path(root)
         self.spec = read_spec(self.root)
         indices = completed_objects(self.root)
+        self.declared = self.spec.objects if objects is None else min(objects, self.spec.objects)
+        self.missing = sorted(set(range(self.declared)) - set(indices))
         if objects is not None:
             indices = indices[:objects]
         if not indices:
@@ -112,6 +116,19 @@ class RenderedDataset(torch.utils.data.Dataset):
     @property
     def num_objects(self) -> int:
         return len(self.records)
+
+    def require_complete(self, allow_incomplete: bool = False) -> None:
+        """DatasetError naming the missing objects when some of the declared ones are not on disk
+        (a `generate` killed or still running, a shard not copied in); with `allow_incomplete`,
+        one warning line on stderr with the counts instead."""
+        if not self.missing:
+            return
+        what = (f"{self.root}: {self.declared - len(self.missing)} of the {self.declared} objects "
+                f"are on disk (missing {_index_ranges(self.missing)})")
+        if not allow_incomplete:
+            raise DatasetError(f"{what}; complete it with `nfr-drake generate` and the same options, "
+                               "or pass --allow-incomplete to use the objects that are there")
+        print(f"warning: {what}; using {self.num_objects} objects", file=sys.stderr)
 
     def __len__(self) -> int:
         return self.num_objects * self.spec.articulations * self.spec.views
@@ -134,3 +151,16 @@ class RenderedDataset(torch.utils.data.Dataset):
             keypoints=torch.from_numpy(rec.keypoints[a]),
             object_index=torch.tensor(j),
         )
+
+
+def _index_ranges(indices: list[int], most: int = 4) -> str:
+    """Sorted object indices as "obj 3, 10-59": the first `most` runs, then how many more."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    text = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs[:most])
+    more = f" and {len(runs) - most} more runs" if len(runs) > most else ""
+    return f"obj {text}{more}"

@@ -11,7 +11,9 @@ RUN/curves.png               loss curves
 RUN/checkpoints/step_*/      resumable checkpoints (model + optimizer + trainer state)
 RUN/best/                    model folder (model.safetensors + config.json) with the best val PSNR
 ```
-`--resume` continues from the newest checkpoint. SIGTERM/SIGINT write a checkpoint before exit.
+`--resume` continues from the newest checkpoint. SIGTERM/SIGINT write a checkpoint, then the run
+ends with `Interrupted` (exit status 143/130), never as if it had completed. A dataset with fewer
+objects on disk than its dataset.json declares is refused unless `--allow-incomplete`.
 Data-parallel: `torchrun --nproc_per_node 2 -m nfr_drake.cli train ...` (gloo on CPU, NCCL on GPU).
 """
 
@@ -36,7 +38,7 @@ import tyro
 from tqdm import tqdm
 
 from nfr_drake.data.dataset import RenderedDataset
-from nfr_drake.errors import ConfigError
+from nfr_drake.errors import ConfigError, Interrupted
 from nfr_drake.nfr.checkpoint import (
     CheckpointError,
     init_from_model_folder,
@@ -180,10 +182,11 @@ def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[in
 
 
 class _StopFlag:
-    """Set by SIGTERM/SIGINT so the loop can write a checkpoint and exit cleanly."""
+    """Set by SIGTERM/SIGINT (`signum`) so the loop can write a checkpoint and exit cleanly."""
 
     def __init__(self):
         self.stop = False
+        self.signum = signal.SIGTERM
         self._old = {}
 
     def __enter__(self):
@@ -192,7 +195,7 @@ class _StopFlag:
         return self
 
     def _handler(self, signum, frame):
-        self.stop = True
+        self.stop, self.signum = True, signum
 
     def __exit__(self, *exc):
         for sig, old in self._old.items():
@@ -200,12 +203,13 @@ class _StopFlag:
 
 
 def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
-          command: str = "", init_from: Path | None = None) -> Path:
+          command: str = "", init_from: Path | None = None, allow_incomplete: bool = False) -> Path:
     """Train a neural field on a rendered dataset; returns RUN/best (the best model folder).
 
     `init_from`: a model folder to start from (fine-tuning), trained on this dataset or on its
     first objects (same spec, fewer objects, any image size); ignored when resuming a run that
-    has checkpoints.
+    has checkpoints. `allow_incomplete`: train on the objects on disk when some are missing.
+    Raises `Interrupted` after writing a checkpoint when SIGTERM/SIGINT stopped the run.
     """
     data_dir, run = Path(data_dir), Path(out)
     dist = init_distributed(config.device)
@@ -213,6 +217,7 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
     if device.type == "cpu":
         torch.set_num_threads(config.threads)
     data = RenderedDataset(data_dir, objects=config.objects)
+    data.require_complete(allow_incomplete)
     names = data.keypoint_names
     if config.model.num_keypoints != len(names):
         config = replace(config, model=replace(config.model, num_keypoints=len(names)))
@@ -350,13 +355,14 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
             if step % config.ckpt_every == 0 or step == config.optim.steps or stop:
                 save(step)
             if stop:
-                if dist.main:
-                    bar.write(f"stopped by signal at step {step}; resume with --resume")
                 break
     bar.close()
     if dist.world > 1:
         torch.distributed.barrier()
         torch.distributed.destroy_process_group()
+    if step < config.optim.steps:
+        raise Interrupted(f"interrupted at step {step} of {config.optim.steps} (checkpoint in "
+                          f"{run / 'checkpoints'}); rerun with --resume", flag.signum)
     return run / "best"
 
 
@@ -371,7 +377,8 @@ _DEFAULT_CONFIG = TrainConfig()
 
 def train_command(data: Path, out: Path,
                   config: Annotated[TrainConfig, tyro.conf.arg(name="")] = _DEFAULT_CONFIG,
-                  resume: bool = False, init_from: Path | None = None) -> int:
+                  resume: bool = False, init_from: Path | None = None,
+                  allow_incomplete: bool = False) -> int:
     """Train the neural field (auto-decoder) on a dataset written by `nfr-drake generate`.
 
     Args:
@@ -382,9 +389,12 @@ def train_command(data: Path, out: Path,
         init_from: start from this model folder (trained on this dataset or on its first
             objects; the architecture may add positional-encoding octaves) instead of a fresh
             initialisation.
+        allow_incomplete: train on the objects on disk when the dataset misses some (a killed
+            `generate`); without it such a dataset is refused.
     """
     command = " ".join(["nfr-drake", "train"] + [shlex.quote(a) for a in sys.argv[2:]])
-    best = train(data, out, config, resume=resume, command=command, init_from=init_from)
+    best = train(data, out, config, resume=resume, command=command, init_from=init_from,
+                 allow_incomplete=allow_incomplete)
     if int(os.environ.get("RANK", "0")) == 0:
         print(f"best model: {best}")
     return 0

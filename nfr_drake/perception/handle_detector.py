@@ -195,13 +195,14 @@ def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
 
 def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig,
                    model: HandleDetectorConfig = HandleDetectorConfig(), resume: bool = False,
-                   command: str = "") -> dict:
+                   command: str = "", allow_incomplete: bool = False) -> dict:
     """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
 
     Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
     objects are held out; the handle IoU and the median offset error (px, on handle pixels) on 64
     of their full images per dataset are reported.
     OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
+    A dataset missing objects is refused unless `allow_incomplete`.
     Returns the training record written into OUT/config.json.
     """
     if not data_dirs:
@@ -218,6 +219,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     sets = [RenderedDataset(d) for d in data_dirs]
+    for s in sets:
+        s.require_complete(allow_incomplete)
     categories = {s.spec.category for s in sets}
     if len(categories) != 1:
         raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
@@ -318,7 +321,7 @@ def train_detector_command(data: list[Path], out: Path,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
                            threads: int = DetectorTrainConfig.threads,
-                           resume: bool = False) -> None:
+                           resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
 
     Args:
@@ -330,11 +333,13 @@ def train_detector_command(data: list[Path], out: Path,
         lr: learning rate (cosine decay to 0).
         threads: torch CPU threads.
         resume: continue a killed run from OUT/checkpoint/.
+        allow_incomplete: train on the objects on disk when a dataset misses some.
     """
     config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
                                  threads=threads)
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
-    record = train_detector(list(data), out, config, resume=resume, command=command)
+    record = train_detector(list(data), out, config, resume=resume, command=command,
+                            allow_incomplete=allow_incomplete)
     print(f"handle detector written to {out}: held-out handle IoU, offset error "
           + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
                       for k, v in record["held_out_handle_iou"].items()))
