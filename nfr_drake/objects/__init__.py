@@ -18,11 +18,13 @@ from nfr_drake.objects.articulated import (
 )
 from nfr_drake.objects.closet import sample_closet
 from nfr_drake.objects.drawer import sample_drawer
+from nfr_drake.objects.furniture import sample_furniture
 from nfr_drake.objects.sdformat import to_sdformat
 
 CATEGORIES: dict[str, Callable[..., ArticulatedObject]] = {
     "closet": sample_closet,
     "drawer": sample_drawer,
+    "furniture": sample_furniture,
 }
 
 # Seed domains keep the random streams of training data, capture sets and anything else disjoint:
@@ -38,7 +40,7 @@ def object_rng(domain: int, seed: int, index: int) -> np.random.Generator:
 
 def sample_object(category: str, rng: np.random.Generator, name: str | None = None
                   ) -> ArticulatedObject:
-    """Draw one object of `category` ("closet" or "drawer")."""
+    """Draw one object of `category` ("closet", "drawer" or "furniture")."""
     if category not in CATEGORIES:
         raise NfrDrakeError(f"unknown category {category!r}; choose one of {sorted(CATEGORIES)}")
     return CATEGORIES[category](rng, name=name or category)

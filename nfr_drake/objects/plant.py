@@ -65,3 +65,34 @@ def apply_semantic_labels(plant: MultibodyPlant, scene_graph: SceneGraph,
             # Perception properties cannot be replaced in place: remove the role, assign anew.
             scene_graph.RemoveRole(source_id, geometry_id, Role.kPerception)
             scene_graph.AssignRole(source_id, geometry_id, props, RoleAssign.kNew)
+
+
+def self_penetrations(obj: ArticulatedObject, q: float | np.ndarray, tolerance: float = 5e-4
+                      ) -> list[tuple[str, str, float]]:
+    """Pairs of the object's collision geometries on different links that overlap at articulation q.
+
+    Unlike a simulation, the carcass is checked against every front too (MultibodyPlant filters
+    a joint's parent and child). Returns (geometry name, geometry name, depth in m) of every pair
+    deeper than `tolerance` (m).
+    """
+    from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    model = add_articulated_object(plant, obj)
+    plant.Finalize()
+    inspector = scene_graph.model_inspector()
+    link_sets = [GeometrySet(inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(b), Role.kProximity))
+                 for b in plant.GetBodyIndices(model)]
+    manager = scene_graph.collision_filter_manager()
+    for i, a in enumerate(link_sets):
+        for b in link_sets[i + 1:]:
+            manager.Apply(CollisionFilterDeclaration().AllowBetween(a, b))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    set_articulation(plant, plant.GetMyMutableContextFromRoot(context), obj, model, q)
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+    return [(inspector.GetName(p.id_A), inspector.GetName(p.id_B), float(p.depth))
+            for p in query.ComputePointPairPenetration() if p.depth > tolerance]

@@ -18,7 +18,7 @@ _CARCASS_MASS_KG = 20.0
 
 
 def _vec(v) -> str:
-    return " ".join(f"{float(x):.6g}" for x in v)
+    return " ".join(f"{float(x):.9g}" for x in v)
 
 
 def _geometry(part: Part) -> str:
@@ -64,7 +64,7 @@ def _front_elements(obj: ArticulatedObject, front: Front) -> str:
       <child>{front.link_name}</child>
       <axis>
         <xyz>{_vec(front.axis_O)}</xyz>
-        <limit><lower>0</lower><upper>{front.joint_upper:.6g}</upper>
+        <limit><lower>0</lower><upper>{front.joint_upper:.9g}</upper>
           <effort>{_JOINT_EFFORT}</effort><velocity>{_JOINT_VELOCITY}</velocity></limit>
         <dynamics><damping>{front.damping:.6g}</damping></dynamics>
       </axis>
