@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Annotated, Literal
@@ -32,6 +33,7 @@ from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
+from nfr_drake.paths import check_writable_file
 from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
 from nfr_drake.perception.handle_triangulation import (
     MIN_VIEWS,
@@ -77,6 +79,9 @@ def check_category(model_folder: Path, model_category: str, claimed: str | None,
                             f"{model_category} model; use a {claimed} model")
 
 
+MIN_FIT_VIEWS = 3
+"""Fewer views than this leave q and the object's shape poorly constrained: the fit warns."""
+
 KeypointSource = Literal["head", "geometry"]
 """Where keypoints come from: the keypoint head Gamma(z) (the paper), or the fitted field's
 rendered geometry where it shows them (`forward.geometric_keypoints`)."""
@@ -88,8 +93,13 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
+    The result's `extra["warnings"]` lists what makes it doubtful (too few views).
     """
     started = time.perf_counter()
+    warnings = []
+    if len(capture.frames) < MIN_FIT_VIEWS:
+        warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
+                        f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
     rays = observed_rays(capture, images)
     handle = None
@@ -118,7 +128,8 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
                "handle_sighting": _sighting_json(fitted, fit_config, handle),
                "sighted_start": outcome.sighted_start,
                "keypoint_source": keypoint_source,
-               "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist()})
+               "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist(),
+               "warnings": warnings})
     return result, outcome
 
 
@@ -211,6 +222,10 @@ def infer_command(
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
+    for option, path in (("--out", out), ("--report", report), ("--point-cloud", point_cloud),
+                         ("--handle-plot", handle_plot)):
+        if path is not None:
+            check_writable_file(path, option)
     cap = read_capture_set(capture)
     fitted = FittedModel(model)
     fitted.check_capture(cap, category)
@@ -225,6 +240,8 @@ def infer_command(
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
           f"({outcome.steps} steps, {restarts} starts; close look at the handle: {outcome.focus})"
           f" -> {out}")
+    for warning in result.extra["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
     if report is not None:
         seen = result.extra["handle_sighting"]
         figure = observed_vs_rendered(

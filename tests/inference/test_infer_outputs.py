@@ -1,0 +1,49 @@
+"""`infer` checks its outputs before fitting and flags a fit from too few views."""
+
+import json
+
+import pytest
+
+from nfr_drake.cli import main
+from nfr_drake.data.captures import captures_command
+from nfr_drake.inference import infer as infer_module
+
+
+def _capture(root, views):
+    captures_command("closet", n=1, out=root, views=views, size=16, seed=7)
+    return next(p for p in root.iterdir() if (p / "transforms.json").is_file())
+
+
+@pytest.fixture(scope="module")
+def one_view(tmp_path_factory):
+    return _capture(tmp_path_factory.mktemp("one_view"), 1)
+
+
+def _infer(capture, model, *args):
+    return main(["infer", str(capture), "--model", str(model), "--restarts", "1", "--max-steps",
+                 "2", "--focus-steps", "0", "--threads", "1", *map(str, args)])
+
+
+def test_one_view_warns_on_stderr_and_in_the_result(one_view, model_folder, tmp_path, capsys):
+    assert _infer(one_view, model_folder, "--out", tmp_path / "r.json") == 0
+    err = capsys.readouterr().err
+    assert "warning: " in err and "only 1 view(s)" in err
+    warnings = json.loads((tmp_path / "r.json").read_text())["extra"]["warnings"]
+    assert len(warnings) == 1 and "only 1 view(s)" in warnings[0]
+
+
+@pytest.mark.parametrize("option", ["--out", "--report", "--point-cloud", "--handle-plot"])
+def test_unwritable_outputs_fail_before_the_fit(one_view, model_folder, tmp_path, capsys,
+                                                monkeypatch, option):
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fitted before checking the outputs")
+
+    monkeypatch.setattr(infer_module, "infer", no_fit)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    outputs = {"--out": tmp_path / "r.json"}
+    for bad in (tmp_path, a_file / "x.png"):  # an existing folder; a path under a file
+        status = _infer(one_view, model_folder, *[x for k, v in {**outputs, option: bad}.items()
+                                                  for x in (k, v)])
+        err = capsys.readouterr().err
+        assert status == 2 and f"{option} {bad}" in err and err.count("\n") == 1
