@@ -20,6 +20,7 @@ from safetensors.torch import save_file
 from tqdm import tqdm
 
 from nfr_drake.baseline.model import BaselineConfig, ImageEncoderBaseline
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.jsonio import read_json
@@ -42,7 +43,7 @@ class BaselineTrainConfig:
         checkpoint_every: steps between checkpoints.
         log_every: steps between rows of metrics.csv.
         seed: seed of the sampler and the initial weights.
-        threads: torch CPU threads.
+        threads: torch CPU threads (None: the free cores, `nfr_drake.cpu.free_cores`).
     """
 
     steps: int = 6000
@@ -54,11 +55,11 @@ class BaselineTrainConfig:
     checkpoint_every: int = 500
     log_every: int = 50
     seed: int = 0
-    threads: int = 2
+    threads: int | None = None
 
     def __post_init__(self):
         if min(self.steps, self.batch, self.views, self.checkpoint_every, self.log_every,
-               self.threads) < 1:
+               1 if self.threads is None else self.threads) < 1:
             raise ConfigError("steps, batch, views, checkpoint_every, log_every, threads must be >= 1")
 
 
@@ -111,7 +112,7 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
                    progress: bool = True, allow_incomplete: bool = False) -> Path:
     """Train (or resume) a baseline into `out`; returns `out`. A dataset missing objects is
     refused unless `allow_incomplete`."""
-    torch.set_num_threads(config.threads)
+    set_torch_threads(config.threads)
     data = RenderedDataset(data_dir)
     data.require_complete(allow_incomplete)
     joint_type = "revolute" if data.spec.category == "closet" else "prismatic"
@@ -168,7 +169,7 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
 
 
 def train_baseline_command(data: Path, out: Path, steps: int = 6000, batch: int = 8,
-                           views: int = 5, lr: float = 1e-3, threads: int = 2,
+                           views: int = 5, lr: float = 1e-3, threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the paper's image-encoder baseline on a dataset from `nfr-drake generate`.
 
@@ -179,7 +180,7 @@ def train_baseline_command(data: Path, out: Path, steps: int = 6000, batch: int 
         batch: instances per step.
         views: views per instance.
         lr: learning rate.
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a killed run in OUT.
         allow_incomplete: train on the objects on disk when the dataset misses some.
     """

@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import torch
 from tqdm import tqdm
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 
@@ -79,7 +79,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           keypoints: Literal["geometry", "head"] = "head",
                           max_steps: int = 400, focus_steps: int = Scenario.focus_steps,
                           handle_detector: bool = Scenario.handle_detector,
-                          image_size: int = Scenario.image_size, threads: int = 1) -> None:
+                          image_size: int = Scenario.image_size,
+                          threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
     Args:
@@ -96,9 +97,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         focus_steps: steps of the fit's final close look at the handle (0: none).
         handle_detector: use the model's 2D handle detector, when it ships one.
         image_size: square image size of the ten perception cameras, pixels.
-        threads: torch CPU threads (more threads than free cores slows the fit many times over).
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     if q_target is None:
         q_target = 0.6 if category == "closet" else 1.0
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,

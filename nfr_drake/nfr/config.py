@@ -208,9 +208,10 @@ class TrainConfig:
     """Optimiser and schedule."""
     objects: int | None = None
     """Use only the first n complete objects of the dataset (None = all)."""
-    threads: int = 1
-    """torch intra-op threads per process (CPU). 1 by default: on a shared 2-core machine a second
-    OpenMP thread stalls whenever another process holds a core (docs/BENCHMARKS.md)."""
+    threads: int | None = None
+    """torch intra-op threads per process (CPU); None: the free cores shared by the processes
+    (`nfr_drake.cpu.free_cores`; a thread beyond them stalls whenever another process holds a
+    core, docs/BENCHMARKS.md)."""
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """'auto' = CUDA when available, else CPU."""
     seed: int = 0
@@ -229,7 +230,9 @@ class TrainConfig:
     """Training images rendered in full at each validation (fixed set)."""
 
     def __post_init__(self):
-        _positive(self, "threads", "log_every", "val_every", "ckpt_every", "keep_checkpoints",
+        if self.threads is not None:
+            _positive(self, "threads")
+        _positive(self, "log_every", "val_every", "ckpt_every", "keep_checkpoints",
                   "val_images")
         if self.objects is not None and self.objects < 1:
             raise ConfigError("TrainConfig.objects must be at least 1")

@@ -37,6 +37,7 @@ import torch
 import tyro
 from tqdm import tqdm
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError, Interrupted
 from nfr_drake.nfr.checkpoint import (
@@ -215,7 +216,7 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
     dist = init_distributed(config.device)
     device = select_device(config.device, dist)
     if device.type == "cpu":
-        torch.set_num_threads(config.threads)
+        set_torch_threads(config.threads, dist.world)
     data = RenderedDataset(data_dir, objects=config.objects)
     data.require_complete(allow_incomplete)
     names = data.keypoint_names

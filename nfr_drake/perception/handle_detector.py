@@ -29,6 +29,7 @@ from safetensors.torch import save_file
 from torch import nn
 from tqdm import tqdm
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.jsonio import read_json
@@ -111,10 +112,12 @@ class DetectorTrainConfig:
     offset_weight: float = 0.5
     checkpoint_every: int = 250
     seed: int = 0
-    threads: int = 1
+    threads: int | None = None
+    """torch CPU threads (None: the free cores, `nfr_drake.cpu.free_cores`)."""
 
     def __post_init__(self):
-        if min(self.steps, self.images_per_batch, self.checkpoint_every, self.threads) < 1:
+        if min(self.steps, self.images_per_batch, self.checkpoint_every,
+               1 if self.threads is None else self.threads) < 1:
             raise ConfigError("handle detector training: steps, batch, checkpoint_every and "
                               "threads must be >= 1")
         if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0 or self.offset_weight < 0:
@@ -215,7 +218,7 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
                               "--out")
     if ckpt_path.is_dir() and not resume:
         raise ConfigError(f"{out} already holds a checkpoint; pass --resume or another --out")
-    torch.set_num_threads(config.threads)
+    set_torch_threads(config.threads)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     sets = [RenderedDataset(d) for d in data_dirs]
@@ -236,7 +239,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     net = HandleDetector(model)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
-    options = json.loads(json.dumps({"model": asdict(model), "train": asdict(config)}))
+    train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
+    options = json.loads(json.dumps({"model": asdict(model), "train": train_options}))
     step, seconds, losses = 0, 0.0, []
     if resume and ckpt_path.is_dir():
         saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
@@ -320,7 +324,7 @@ def train_detector_command(data: list[Path], out: Path,
                            batch: int = DetectorTrainConfig.images_per_batch,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
-                           threads: int = DetectorTrainConfig.threads,
+                           threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
 
@@ -331,7 +335,7 @@ def train_detector_command(data: list[Path], out: Path,
         batch: crops per dataset per step.
         crop: crop size, px.
         lr: learning rate (cosine decay to 0).
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a killed run from OUT/checkpoint/.
         allow_incomplete: train on the objects on disk when a dataset misses some.
     """

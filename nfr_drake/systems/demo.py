@@ -4,15 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
-
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.systems.pipeline import Scenario, run_scenario
 
 
 def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: int = 0,
                  q_target: float = 0.6, views: int = 10, image_size: int = Scenario.image_size,
                  max_steps: int = 400,
-                 replay: Path = Path("out/demo/open_closet.html"), threads: int = 1) -> int:
+                 replay: Path = Path("out/demo/open_closet.html"),
+                 threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation.
 
@@ -29,9 +29,10 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
         image_size: their square image size, pixels.
         max_steps: fit steps at most.
         replay: HTML replay to write.
-        threads: torch CPU threads for the fit.
+        threads: torch CPU threads for the fit (default: the free cores,
+            `nfr_drake.cpu.free_cores`).
     """
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
                         q_target=q_target, views=views,
                         image_size=image_size, max_steps=max_steps, replay=str(replay))
