@@ -4,7 +4,8 @@ above its semantic classes and its part indices (one colour per front, in canoni
     python scripts/furniture_sheet.py --pieces 24 --seed 0 --size 160 \
         --out docs/images/contact_sheet_furniture.png
 
-Pieces are drawn with `object_rng(SEED_DOMAIN_TRAIN, seed, i)`, i = 0..pieces-1; the lighting of
+Pieces are drawn with `object_rng(SEED_DOMAIN_TRAIN, seed, i)`, i = 0..pieces-1 (as
+`sample_object("furniture", ...)` draws them unless `--kinds` fixes the kinds); the lighting of
 each piece is random (`sample_lighting`), the camera looks at it from the front-left or right.
 """
 
@@ -17,15 +18,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
-from nfr_drake.data.capture import PinholeCamera
 from nfr_drake.data.render import ObjectRenderer, sample_lighting
-from nfr_drake.data.visualize import colorize_labels
-from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-
-# One colour per front index (canonical order); black where no front.
-PART_PALETTE = np.array([[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48],
-                         [145, 30, 180], [70, 240, 240], [240, 50, 230], [0, 0, 0]], np.uint8)
+from nfr_drake.data.visualize import colorize_labels, colorize_parts
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng
+from nfr_drake.objects.furniture import sample_furniture
 
 
 def piece_views(obj, size: int, rng: np.random.Generator) -> list[np.ndarray]:
@@ -44,7 +42,7 @@ def piece_views(obj, size: int, rng: np.random.Generator) -> list[np.ndarray]:
     one = np.zeros(obj.num_fronts)
     one[obj.num_fronts // 2] = 1.0
     views = [renderer.render(q, X_OC) for q in (0.0, 0.5, one)]
-    return ([v.rgb for v in views], colorize_labels(views[2].label), PART_PALETTE[views[2].part])
+    return ([v.rgb for v in views], colorize_labels(views[2].label), colorize_parts(views[2].part))
 
 
 def main() -> None:
@@ -53,11 +51,14 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--size", type=int, default=160)
     parser.add_argument("--per-row", type=int, default=3, help="pieces per row of the sheet")
+    parser.add_argument("--kinds", nargs="*", default=None,
+                        help="furniture kinds to cycle through (default: a random kind per piece)")
     parser.add_argument("--out", type=Path, default=Path("docs/images/contact_sheet_furniture.png"))
     args = parser.parse_args()
     cells = []
     for i in range(args.pieces):
-        obj = sample_object("furniture", object_rng(SEED_DOMAIN_TRAIN, args.seed, i))
+        kind = args.kinds[i % len(args.kinds)] if args.kinds else None
+        obj = sample_furniture(object_rng(SEED_DOMAIN_TRAIN, args.seed, i), name="furniture", kind=kind)
         rgbs, label, part = piece_views(obj, args.size, np.random.default_rng([args.seed, i]))
         cells.append(rgbs + [np.concatenate([label[::2, ::2], part[::2, ::2]], axis=0)
                              .repeat(1, 0)[:, :, :]])

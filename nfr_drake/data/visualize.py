@@ -15,6 +15,16 @@ def colorize_labels(label: np.ndarray) -> np.ndarray:
     return SEMANTIC_PALETTE[np.clip(label, 0, len(SEMANTIC_PALETTE) - 1)]
 
 
+# RGB of each front index (docs/FURNITURE.md), 0 to 7; black where no front (-1).
+PART_PALETTE = np.array([[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48],
+                         [145, 30, 180], [70, 240, 240], [240, 50, 230], [0, 0, 0]], np.uint8)
+
+
+def colorize_parts(part: np.ndarray) -> np.ndarray:
+    """Part-index image (H, W) of ints in [-1, 7] (-1: no front) -> uint8 RGB (H, W, 3)."""
+    return PART_PALETTE[np.where(part < 0, len(PART_PALETTE) - 1, np.clip(part, 0, len(PART_PALETTE) - 2))]
+
+
 def image_grid(rows: list[list[np.ndarray]], pad: int = 2, fill: int = 255) -> np.ndarray:
     """Tile uint8 RGB images (each (h, w, 3), equal sizes) into one image, rows of equal length."""
     h, w = rows[0][0].shape[:2]

@@ -201,8 +201,10 @@ def sample_furniture(rng: np.random.Generator, ranges: FurnitureRanges | None = 
     t, gap = s.u(*ranges.panel_thickness), s.u(*ranges.gap)
     front_t = s.u(0.04, 0.07) if kind == "fridge" else s.u(*ranges.front_thickness)
     if kind == "fridge":
-        carcass = (_material(s, ("metal", "paint"), (0.85, 0.97)) if s.u(0, 1) < 0.5
-                   else Material((0.93, 0.93, 0.92, 1.0)))
+        # Brushed steel, or white, grey or black enamel.
+        grey = s.pick((s.u(0.85, 0.96), s.u(0.55, 0.75), s.u(0.08, 0.2)), p=(0.6, 0.2, 0.2))
+        carcass = (Material((1.0, 1.0, 1.0, 1.0), texture_uri("metal", int(s.rng.integers(TEXTURE_POOL))))
+                   if s.u(0, 1) < 0.4 else Material((grey, grey, grey, 1.0)))
         front_mat, frame = carcass, 0.0
     else:
         carcass = _material(s)

@@ -39,7 +39,7 @@ def _hsv(h: float, s: float, v: float) -> np.ndarray:
 
 
 def texture_image(kind: TextureKind, seed: int) -> np.ndarray:
-    """The texture of (kind, seed): uint8 RGB, shape (256, 256, 3); rows run along the grain."""
+    """The texture of (kind, seed): uint8 RGB, shape (256, 256, 3); wood grain runs along the rows."""
     rng = np.random.default_rng([hash_kind(kind), seed])
     n = _SIZE
     if kind == "wood":
@@ -71,14 +71,12 @@ def hash_kind(kind: TextureKind) -> int:
     return TEXTURE_KINDS.index(kind) + 1
 
 
-def texture_uri(kind: TextureKind, seed: int, transpose: bool = False) -> str:
-    """A file:// URI of the (kind, seed) texture, written on first use; `transpose` turns the grain."""
-    path = texture_dir() / f"{kind}_{seed:08d}{'_t' if transpose else ''}.png"
+def texture_uri(kind: TextureKind, seed: int) -> str:
+    """A file:// URI of the (kind, seed) texture, written on first use."""
+    path = texture_dir() / f"{kind}_{seed:08d}.png"
     if not path.is_file():
         path.parent.mkdir(parents=True, exist_ok=True)
         image = texture_image(kind, seed)
-        if transpose:
-            image = image.transpose(1, 0, 2).copy()
         tmp = path.with_suffix(f".{os.getpid()}.tmp.png")
         cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
         tmp.replace(path)

@@ -6,8 +6,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
-from nfr_drake.data.capture import PinholeCamera
 from nfr_drake.data.render import ObjectRenderer
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, SemanticClass, object_rng, sample_object, to_sdformat
 from nfr_drake.objects.articulated import MAX_FRONTS
@@ -158,3 +158,19 @@ def test_rendered_part_indices_belong_to_their_fronts():
             u, v = camera.fx * p_C[0] / p_C[2] + camera.cx, camera.fy * p_C[1] / p_C[2] + camera.cy
             window = view.part[int(v) - 1:int(v) + 2, int(u) - 1:int(u) + 2]
             assert k in window, (obj.params["kind"], k)
+
+
+def test_textures_are_pngs_made_once_from_kind_and_seed(tmp_path, monkeypatch):
+    import cv2
+
+    from nfr_drake.objects.textures import TEXTURE_KINDS, texture_image, texture_uri
+
+    monkeypatch.setenv("NFR_DRAKE_TEXTURE_DIR", str(tmp_path))
+    for kind in TEXTURE_KINDS:
+        uri = texture_uri(kind, 3)
+        path = tmp_path / f"{kind}_00000003.png"
+        assert uri == path.resolve().as_uri() and path.is_file()
+        image = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+        np.testing.assert_array_equal(image, texture_image(kind, 3))
+        assert image.std() > 1.0  # a pattern, not a flat colour
+    assert not np.array_equal(texture_image("wood", 3), texture_image("wood", 4))
