@@ -9,7 +9,7 @@ Four products, from the training codes of a model folder or from codes fitted to
 - `object.html`: a self-contained Meshcat page of one object: its labelled point cloud at its q
   and its keypoint trajectories over q, to turn around in a browser (offline).
 
-All renders come from one camera per model, looking at the middle of the mean object's keypoints.
+All renders come from one camera per model, framing the mean object (`model_view`).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import torch
 import tyro
 from tqdm import tqdm
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
 from nfr_drake.data.capture import CaptureFrame, read_capture_set
@@ -45,7 +46,11 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 
 VIEW_AZIMUTH_DEG = 30.0
 VIEW_ELEVATION_DEG = 20.0
-VIEW_DISTANCE_M = 1.6
+FOV_Y_DEG = 50.0
+VIEW_FILL = 0.85
+"""Share of the image height that the mean object's bounding sphere spans in the figures."""
+PROBE_DISTANCE_M = 2.2
+"""Distance of the low-resolution view that measures the mean object (`model_view`)."""
 TRAJECTORY_POINTS = 21
 """Points of the q grid over [0, 1] of keypoint trajectories."""
 
@@ -80,17 +85,33 @@ class View:
         return None if uv is None else uv - 0.5
 
 
-def model_view(fitted: FittedModel, size: int = 128, azimuth_deg: float = VIEW_AZIMUTH_DEG,
-               distance_m: float = VIEW_DISTANCE_M) -> View:
-    """A camera in front of the model's mean object (azimuth towards +y, elevation above the
-    floor), looking at the middle of its keypoints at q = 0 with x, y = 0 (the carcass centre)."""
-    mean = ExploredObject("mean object", fitted.z_obj_mean, 0.0)
-    height = float(keypoint_trajectory(fitted.model, mean.z, np.array([0.0]))[0][:, 2].mean())
-    target = np.array([0.0, 0.0, height])
+def orbit_view(p_OT: np.ndarray, distance_m: float, azimuth_deg: float, size: int) -> View:
+    """A square camera (vertical field of view FOV_Y_DEG) looking at p_OT (3,) from `distance_m`,
+    at `azimuth_deg` around +z from the front (+x of O, positive towards +y) and
+    VIEW_ELEVATION_DEG above the horizontal."""
     az, el = math.radians(azimuth_deg), math.radians(VIEW_ELEVATION_DEG)
     direction = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-    return View(PinholeCamera.from_fov(size, size, math.radians(50.0)),
-                look_at(target + distance_m * direction, target), target)
+    return View(PinholeCamera.from_fov(size, size, math.radians(FOV_Y_DEG)),
+                look_at(p_OT + distance_m * direction, p_OT), np.asarray(p_OT, float))
+
+
+def model_view(fitted: FittedModel, size: int = 128, azimuth_deg: float = VIEW_AZIMUTH_DEG) -> View:
+    """The camera of a model's figures: it looks at the centre of the mean object's surface
+    (z_obj the mean training code, at q = 0 and 0.5, as the field renders it; the 2nd to 98th
+    percentile box of its points) from the distance at which the box's bounding sphere spans
+    VIEW_FILL of the image height."""
+    mean = fitted.z_obj_mean
+    probe = orbit_view(np.array(fitted.model.config.bound_center), PROBE_DISTANCE_M, azimuth_deg, 32)
+    points = np.concatenate([
+        semantic_point_cloud(fitted.model, ExploredObject("mean", mean, q).z, q,
+                             [(probe.camera, probe.X_OC)])[0] for q in (0.0, 0.5)])
+    if len(points) == 0:  # a field that renders nothing: the probe's view
+        return orbit_view(probe.p_OT, PROBE_DISTANCE_M, azimuth_deg, size)
+    lo, hi = np.percentile(points, [2.0, 98.0], axis=0)  # stray surface points left out
+    centre = (lo + hi) / 2.0
+    radius = float(np.linalg.norm(hi - lo)) / 2.0
+    distance = radius / math.sin(VIEW_FILL * math.radians(FOV_Y_DEG) / 2.0)
+    return orbit_view(centre, distance, azimuth_deg, size)
 
 
 def training_object(fitted: FittedModel, index: int, q: float) -> ExploredObject:
@@ -98,11 +119,12 @@ def training_object(fitted: FittedModel, index: int, q: float) -> ExploredObject
 
 
 def fitted_object(fitted: FittedModel, capture: Path) -> ExploredObject:
-    """The code the shipped fit defaults (`FitConfig.budget()`) find for a capture set."""
+    """The code the shipped fit defaults (`FitConfig()`) find for a capture set."""
     cap = read_capture_set(capture)
     fitted.check_capture(cap)
-    _, outcome = infer(fitted, cap, FitConfig.budget(), np.linspace(0.0, 1.0, TRAJECTORY_POINTS))
-    return ExploredObject(f"fitted {cap.root.name}", outcome.z[2:].detach(), outcome.q)
+    _, outcome = infer(fitted, cap, FitConfig(), np.linspace(0.0, 1.0, TRAJECTORY_POINTS))
+    truth = "" if cap.gt is None else f" (true q {float(cap.gt['q']):.2f})"
+    return ExploredObject(f"fitted {cap.root.name}{truth}", outcome.z[2:].detach(), outcome.q)
 
 
 def interpolation_path(a: ExploredObject, b: ExploredObject, steps: int) -> list[ExploredObject]:
@@ -235,17 +257,22 @@ def object_html(fitted: FittedModel, obj: ExploredObject, view: View, path: Path
     from pydrake.geometry import Meshcat, Rgba
     from pydrake.perception import BaseField, Fields, PointCloud
 
-    around = [model_view(fitted, cloud_size, az) for az in np.linspace(-60.0, 60.0, cloud_views)]
+    distance = float(np.linalg.norm(view.X_OC[:3, 3] - view.p_OT))
+    around = [orbit_view(view.p_OT, distance, az, cloud_size)
+              for az in np.linspace(-60.0, 60.0, cloud_views)]
     points, classes = semantic_point_cloud(fitted.model, obj.z, obj.q,
                                            [(v.camera, v.X_OC) for v in around])
     cloud = PointCloud(len(points), Fields(BaseField.kXYZs | BaseField.kRGBs))
     cloud.mutable_xyzs()[:] = points.T
-    cloud.mutable_rgbs()[:] = SEMANTIC_PALETTE[classes].T
+    # Meshcat's viewer treats vertex colours as linear and encodes them to sRGB: pass the
+    # palette's linear values so that the page shows the palette itself.
+    linear = np.round(255.0 * (SEMANTIC_PALETTE / 255.0) ** 2.2).astype(np.uint8)
+    cloud.mutable_rgbs()[:] = linear[classes].T
     grid = np.linspace(0.0, 1.0, TRAJECTORY_POINTS)
     trajectory = KeypointTrajectory(fitted.category, grid, fitted.keypoint_names,
                                     keypoint_trajectory(fitted.model, obj.z, grid), obj.q)
     meshcat = Meshcat()
-    meshcat.SetObject("object/point_cloud", cloud, 0.008, Rgba(1.0, 1.0, 1.0, 1.0))
+    meshcat.SetObject("object/point_cloud", cloud, 0.01, Rgba(1.0, 1.0, 1.0, 1.0))
     draw_keypoint_trajectory(meshcat, trajectory, "object/keypoints")
     frame_camera(meshcat, view.p_OT, view.X_OC[:3, 3])
     write_replay(meshcat, path)
@@ -272,7 +299,7 @@ def explore_command(
     samples: int = 6,
     sample_q: tuple[float, ...] = (0.0, 0.5, 1.0),
     size: int = 128,
-    threads: int = 1,
+    threads: int | None = None,
 ) -> None:
     """Write the figures of what MODEL has learned into OUT: interpolation.png, articulations.png,
     samples.png and object.html.
@@ -290,7 +317,7 @@ def explore_command(
         samples: new objects drawn from the Gaussian of the training codes.
         sample_q: articulations at which the new objects are rendered.
         size: rendered image size, pixels (square).
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     if len(capture) > 2:
         raise ConfigError(f"--capture: at most two capture sets, got {len(capture)}")
@@ -298,7 +325,7 @@ def explore_command(
         raise ConfigError("--steps must be >= 2, --samples >= 1, --size >= 8, --sample-q not empty")
     if not all(0.0 <= q <= 1.0 for q in (*q_ends, *sample_q)):
         raise ConfigError("--q-ends and --sample-q must lie in [0, 1]")
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     fitted = FittedModel(model)
     for c in capture:
         fitted.check_capture(read_capture_set(c))
