@@ -1,6 +1,7 @@
 """The user's docs hold together: every relative link and image in README.md, docs/*.md and the
-model cards points to a file that exists (and an in-page anchor to a heading of that page), and
-the repository cites its own pages, not a design note kept outside it."""
+model cards points to a file that exists (and an in-page anchor to a heading of that page), the
+repository cites its own pages, not a design note kept outside it, and the pages speak of the
+project, not of who worked on it when."""
 
 import re
 from pathlib import Path
@@ -49,6 +50,14 @@ def test_no_page_or_source_cites_design_md():
                *(ROOT / "benchmarks").glob("*.py"), *(ROOT / "systems").glob("*.py")]
     citing = [str(p.relative_to(ROOT)) for p in sources if "DESIGN.md" in p.read_text()]
     assert not citing, f"cite docs/CONVENTIONS.md instead of DESIGN.md: {citing}"
+
+
+def test_the_docs_speak_of_the_project_only():
+    """Results and history belong to the project; who worked when is for commit messages."""
+    naming = [f"{p.relative_to(ROOT)}:{i}" for p in DOCS
+              for i, line in enumerate(p.read_text().splitlines(), 1)
+              if re.search(r"\bsessions?\b|\bhelper-\d+\b", line, flags=re.I)]
+    assert not naming, f"pages that speak of sessions or helpers: {naming}"
 
 
 def test_the_checker_finds_links_and_anchors():
