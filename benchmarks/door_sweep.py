@@ -17,7 +17,8 @@ from datetime import date
 import numpy as np
 import torch
 
-from nfr_drake.systems.pipeline import Scenario, perceive
+from nfr_drake.systems.pipeline import perceive
+from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 

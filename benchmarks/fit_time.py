@@ -39,8 +39,9 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig.budget(args.restarts, args.max_steps, focus_steps=args.focus_steps,
-                              sightings=not args.no_handle_detector)
+    config = FitConfig(restarts=args.restarts, max_steps=args.max_steps,
+                       explore_steps=min(FitConfig.explore_steps, args.max_steps),
+                       focus_steps=args.focus_steps, handle_detector=not args.no_handle_detector)
     print(f"{date.today()}, {platform.machine()}, {os.cpu_count()} CPUs, {args.threads} threads, "
           f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}, "
           f"close look {args.focus_steps} steps, handle detector "

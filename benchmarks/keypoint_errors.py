@@ -45,7 +45,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig.budget(sightings=not args.no_handle_detector)
+    config = FitConfig(handle_detector=not args.no_handle_detector)
     errors: dict[str, list[np.ndarray]] = {}
     top_errors = []
     dirs = capture_dirs(args.captures)[:args.limit]

@@ -1,4 +1,5 @@
-"""Run one scenario of the pipeline (perception with the neural field, planning, simulation).
+"""Run one scenario: perception with the neural field (or the object's true keypoints), planning,
+simulation.
 
 Usage: python systems/run_scenario.py systems/open_closet.yaml [--replay out/x.html]
 Exit status 0 when the simulated task succeeds, 1 when it fails, 2 on bad input.
@@ -11,7 +12,8 @@ import sys
 from pathlib import Path
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.systems.pipeline import Scenario, run_scenario
+from nfr_drake.systems.pipeline import run_scenario
+from nfr_drake.systems.scenario import Scenario
 
 
 def main() -> int:

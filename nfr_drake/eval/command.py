@@ -79,11 +79,7 @@ def eval_command(
     model: Path | None = None,
     baseline: Path | None = None,
     limit: int | None = None,
-    restarts: int = 4,
-    max_steps: int = 400,
-    detail_fraction: float = FitConfig.detail_fraction,
-    focus_steps: int = FitConfig.focus_steps,
-    handle_detector: bool = True,
+    fit: FitConfig = FitConfig(),
     example_plots: int = 2,
     threads: int = 2,
 ) -> None:
@@ -99,20 +95,14 @@ def eval_command(
         model: neural-field model folder.
         baseline: image-encoder baseline folder.
         limit: use only the first n captures of each set.
-        restarts: neural-field fit starts.
-        max_steps: neural-field fit steps at most.
-        detail_fraction: share of the fit's rays drawn where the photos have edges.
-        focus_steps: steps of the fit's final close look at the handle (0: none).
-        handle_detector: use the model's 2D handle detector, when it ships one.
+        fit: options of the neural field's fit.
         example_plots: handle-path plots per set.
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
     methods: dict[str, Method] = {}
     if model is not None:
-        config = FitConfig.budget(restarts, max_steps, detail_fraction, focus_steps,
-                                  handle_detector)
-        methods.update(neural_field_methods(model, config))
+        methods.update(neural_field_methods(model, fit))
     if baseline is not None:
         methods["baseline"] = baseline_method(baseline)
     if not methods:

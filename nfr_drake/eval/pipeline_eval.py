@@ -16,7 +16,10 @@ import numpy as np
 from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
-from nfr_drake.systems.pipeline import Scenario, run_scenario
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.systems.pipeline import run_scenario
+from nfr_drake.systems.scenario import Scenario
+from nfr_drake.systems.task import OPEN_TARGET
 
 
 @dataclass
@@ -77,9 +80,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
-                          max_steps: int = 400, focus_steps: int = Scenario.focus_steps,
-                          handle_detector: bool = Scenario.handle_detector,
-                          image_size: int = Scenario.image_size,
+                          fit: FitConfig = FitConfig(), image_size: int = Scenario.image_size,
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
@@ -93,19 +94,15 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target: articulation to reach (default: 0.6 for closets, as in the ground-truth
             planning evaluation, 1.0 for drawers).
         keypoints: keypoint source ("geometry" or "head").
-        max_steps: fit steps at most.
-        focus_steps: steps of the fit's final close look at the handle (0: none).
-        handle_detector: use the model's 2D handle detector, when it ships one.
+        fit: options of the fit.
         image_size: square image size of the ten perception cameras, pixels.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
     if q_target is None:
-        q_target = 0.6 if category == "closet" else 1.0
+        q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
-                    q_target=q_target, keypoints=keypoints, max_steps=max_steps,
-                    focus_steps=focus_steps, handle_detector=handle_detector,
-                    image_size=image_size)
+                    q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size)
     done = set()
     if csv_path.exists():
         with open(csv_path) as f:

@@ -31,10 +31,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import Annotated
 
 import cv2
 import numpy as np
 import torch
+import tyro
 
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.errors import ConfigError
@@ -46,70 +48,60 @@ from nfr_drake.nfr.rays import Rays, pixel_centers, pixel_rays
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Options of the auto-decoding fit.
+    """Options of the auto-decoding fit, shared by `infer`, `eval`, `eval-pipeline`, `demo`,
+    `tune-head` and the scenario YAML (`fit:`). On the command line each option is `--fit.NAME`;
+    the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
 
-    Attributes:
-        restarts: codes explored in parallel; start i has q = (i + 0.5) / restarts.
-        explore_steps: Adam steps of the exploration phase (all starts).
-        max_steps: Adam steps at most, exploration included.
-        explore_rays: random pixels (over all views) per exploration step, shared by the starts.
-        rays_per_step: random pixels per refinement step.
-        lr: Adam learning rate of z.
-        latent_weight: weight of the Gaussian prior on z_obj (training's value keeps codes where the
-            networks have seen them).
-        patience: refinement steps without an improvement of `min_improvement` that end the fit.
-        min_improvement: relative improvement of the smoothed loss that counts as progress.
-        eval_rays: fixed rays on which the starts are compared and the final loss is measured.
-        detail_fraction: share of each step's rays drawn in proportion to the observed image's
-            gradient magnitude (edges: a door's outline, a handle a few pixels wide), the rest
-            uniformly; the small parts that decide q and the hinge side weigh more in the loss.
-        seed: seed of ray sampling.
-        focus_steps: Adam steps of the final close look at the focus part (0: none).
-        focus_radius_m: rays passing within this distance of the part take part in it, m.
-        focus_lr: Adam learning rate of the close look (smaller than `lr`: z is near already).
-        focus_agreement_m: the close look is kept only when the keypoint head and the rendered
-            segmentation then place the part within this distance of each other, m.
-        sighting_weight: weight of the `PartSighting` term, w log(1 + d^2 / s^2) for the keypoint
-            head's part at distance d from the sighted point (0: the sighting is ignored).
-        sighting_scale_m: s of that term, m: about the sighting's accuracy; beyond it the term
-            grows only logarithmically, so a wrong sighting cannot drag the fit far.
-        sighting_codes: with a sighting and the training codes, the exploration's winner meets a
-            second start: its z_art with the mean of the `sighting_codes` training z_obj whose
-            part the head puts nearest the sighting at the winner's q (0: no second start); the
-            two explore for half of `explore_steps` (within `max_steps`).
-    """
-
-    restarts: int = 4
+    restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
+    """Codes explored in parallel; start i has q = (i + 0.5) / restarts; the lowest image loss wins."""
     explore_steps: int = 120
-    max_steps: int = 400
+    """Adam steps of the exploration phase (all starts), at most `max_steps`."""
+    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 400
+    """Adam steps at most, exploration included."""
     explore_rays: int = 128
+    """Random pixels (over all views) per exploration step, shared by the starts."""
     rays_per_step: int = 256
+    """Random pixels per refinement step."""
     lr: float = 1e-2
+    """Adam learning rate of z."""
     latent_weight: float = 1e-3
+    """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
+    seen them)."""
     patience: int = 60
+    """Refinement steps without an improvement of `min_improvement` that end the fit."""
     min_improvement: float = 0.01
+    """Relative improvement of the smoothed loss that counts as progress."""
     eval_rays: int = 4096
-    detail_fraction: float = 0.5
+    """Fixed rays on which the starts are compared and the final loss is measured."""
+    detail_fraction: Annotated[float, tyro.conf.arg(aliases=("--detail-fraction",))] = 0.5
+    """Share of each step's rays drawn in proportion to the observed image's gradient magnitude
+    (edges: a door's outline, a handle a few pixels wide), the rest uniformly; the small parts that
+    decide q and the hinge side weigh more in the loss."""
     seed: int = 0
-    focus_steps: int = 150
+    """Seed of ray sampling."""
+    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 150
+    """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
+    """Rays passing within this distance of the part take part in the close look, m."""
     focus_lr: float = 5e-3
+    """Adam learning rate of the close look (smaller than `lr`: z is near already)."""
     focus_agreement_m: float = 0.05
+    """The close look is kept only when the keypoint head and the rendered segmentation then place
+    the part within this distance of each other, m."""
+    handle_detector: Annotated[bool, tyro.conf.arg(aliases=("--handle-detector",))] = True
+    """Use the model's 2D handle detector, when it ships one: the handle it sights in the views,
+    triangulated, joins the fit as a `PartSighting`."""
     sighting_weight: float = 2e-3
+    """Weight w of the sighting term, w log(1 + d^2 / s^2) for the keypoint head's part at distance
+    d from the sighted point (0: the sighting is ignored)."""
     sighting_scale_m: float = 0.015
+    """s of the sighting term, m: about the sighting's accuracy; beyond it the term grows only
+    logarithmically, so a wrong sighting cannot drag the fit far."""
     sighting_codes: int = 16
-
-    @classmethod
-    def budget(cls, restarts: int = 4, max_steps: int = 400,
-               detail_fraction: float = detail_fraction,
-               focus_steps: int = focus_steps, sightings: bool = True) -> FitConfig:
-        """Defaults with another number of starts and steps (exploration capped by max_steps),
-        another share of edge-weighted rays, another length of the close look, and sightings
-        (the handle detector's) used or ignored."""
-        return cls(restarts=restarts, max_steps=max_steps,
-                   explore_steps=min(cls.explore_steps, max_steps), detail_fraction=detail_fraction,
-                   focus_steps=focus_steps,
-                   sighting_weight=cls.sighting_weight if sightings else 0.0)
+    """With a sighting and the training codes, the exploration's winner meets a second start: its
+    z_art with the mean of the `sighting_codes` training z_obj whose part the head puts nearest the
+    sighting at the winner's q (0: no second start); the two explore for half of `explore_steps`
+    (within `max_steps`)."""
 
     def __post_init__(self):
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
@@ -117,7 +109,8 @@ class FitConfig:
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
         if not 0 <= self.explore_steps <= self.max_steps:
-            raise ConfigError("FitConfig.explore_steps must lie in [0, max_steps]")
+            raise ConfigError(f"FitConfig.explore_steps ({self.explore_steps}) must lie in "
+                              f"[0, max_steps ({self.max_steps})]")
         if not 0.0 <= self.detail_fraction <= 1.0:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
@@ -129,6 +122,11 @@ class FitConfig:
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
                               "focus_agreement_m > 0")
+
+    @property
+    def uses_sightings(self) -> bool:
+        """Whether a handle detector's sighting, when there is one, takes part in the fit."""
+        return self.handle_detector and self.sighting_weight > 0
 
 
 @dataclass(frozen=True)

@@ -65,10 +65,13 @@ class HeadTuningConfig:
 _worker_model: FittedModel | None = None
 
 
-def _start_worker(model_dir: Path, threads: int) -> None:
-    global _worker_model
+_worker_fit: FitConfig = FitConfig()
+
+
+def _start_worker(model_dir: Path, threads: int, fit: FitConfig) -> None:
+    global _worker_model, _worker_fit
     torch.set_num_threads(threads)
-    _worker_model = FittedModel(model_dir)
+    _worker_model, _worker_fit = FittedModel(model_dir), fit
 
 
 def _fit_one(job: tuple[Path, Path]) -> str:
@@ -76,14 +79,14 @@ def _fit_one(job: tuple[Path, Path]) -> str:
     capture_dir, out_file = job
     capture = read_capture_set(capture_dir)
     _worker_model.check_capture(capture)
-    result, _ = infer(_worker_model, capture, FitConfig(), np.array([0.0]))
+    result, _ = infer(_worker_model, capture, _worker_fit, np.array([0.0]))
     tmp = out_file.with_suffix(".tmp")
     tmp.write_text(json.dumps({"capture": capture_dir.name, "q": result.q, "z": result.z.tolist()}))
     tmp.replace(out_file)
     return capture_dir.name
 
 
-def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1,
+def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1, fit: FitConfig = FitConfig(),
                  threads: int = 1) -> list[Path]:
     """Fit every capture set under `captures` that has no fit in OUT/fits yet; returns the
     capture folders (all of them, fitted now or before)."""
@@ -96,7 +99,7 @@ def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1,
     fits.mkdir(parents=True, exist_ok=True)
     todo = [(d, fits / f"{d.name}.json") for d in dirs if not (fits / f"{d.name}.json").is_file()]
     if todo:
-        with get_context("spawn").Pool(workers, _start_worker, (model_dir, threads)) as pool:
+        with get_context("spawn").Pool(workers, _start_worker, (model_dir, threads, fit)) as pool:
             for _ in tqdm(pool.imap_unordered(_fit_one, todo), total=len(todo),
                           desc="fit captures", unit="capture"):
                 pass
@@ -196,6 +199,7 @@ def write_tuned_model(source: Path, fitted: FittedModel, out_model: Path, record
 def tune_head_command(model: Path, captures: Path, out: Path,
                       steps: int = HeadTuningConfig.steps, lr: float = HeadTuningConfig.lr,
                       distill_weight: float = HeadTuningConfig.distill_weight,
+                      fit: FitConfig = FitConfig(),
                       workers: int = 1, threads: int = 1) -> None:
     """Fit capture sets of unseen objects, then tune the keypoint head on the fitted codes.
 
@@ -207,12 +211,13 @@ def tune_head_command(model: Path, captures: Path, out: Path,
         steps: Adam steps of the head.
         lr: learning rate.
         distill_weight: weight of keeping the head's keypoints on the training codes.
+        fit: options of the fits of the captures (fits already in OUT/fits are kept as they are).
         workers: fitting processes.
         threads: torch threads per fitting process.
     """
     out = Path(out)
     started = time.perf_counter()
-    dirs = fit_captures(Path(model), Path(captures), out, workers, threads)
+    dirs = fit_captures(Path(model), Path(captures), out, workers, fit, threads)
     fitted = FittedModel(Path(model))
     torch.set_num_threads(threads)
     record = tune_head(fitted, dirs, out, HeadTuningConfig(steps=steps, lr=lr,

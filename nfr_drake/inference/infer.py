@@ -103,7 +103,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     images = capture.load_images() if images is None else images
     rays = observed_rays(capture, images)
     handle = None
-    if fitted.handle_detector is not None and fit_config.sighting_weight > 0:
+    if fitted.handle_detector is not None and fit_config.uses_sightings:
         handle = locate_handle(fitted.handle_detector.detect(images), capture.frames)
     sighting = None if handle is None else PartSighting(
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
@@ -138,7 +138,7 @@ def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedH
     """What the handle detector contributed, for the result's `extra`."""
     if fitted.handle_detector is None:
         return {"used": False, "why": "the model ships no handle detector"}
-    if config.sighting_weight == 0:
+    if not config.uses_sightings:
         return {"used": False, "why": "turned off"}
     if handle is None:
         return {"used": False, "why": f"fewer than {MIN_VIEWS} views agree on a handle"}
@@ -193,12 +193,9 @@ def infer_command(
     point_cloud: Path | None = None,
     handle_plot: Path | None = None,
     category: str | None = None,
-    restarts: int = 4,
-    max_steps: int = 400,
+    fit: FitConfig = FitConfig(),
     trajectory_points: int = 21,
     keypoints: KeypointSource = "head",
-    focus_steps: int = FitConfig.focus_steps,
-    handle_detector: bool = True,
     threads: int = 2,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (docs/CONVENTIONS.md).
@@ -212,13 +209,10 @@ def infer_command(
         point_cloud: optional PLY: semantically labelled points of the object at the fitted q.
         handle_plot: optional PNG: predicted handle path over q against gt.json's (needs gt.json).
         category: the capture's category, checked against the model's (gt.json's when omitted).
-        restarts: fits started at evenly spread q; the lowest image loss wins.
-        max_steps: optimiser steps at most per fit.
+        fit: options of the fit.
         trajectory_points: points of the forward-simulated q grid over [0, 1].
         keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
             axis read from the fitted field's rendered segmentation, the head for the rest).
-        focus_steps: steps of the fit's final close look at the handle (0: none).
-        handle_detector: use the model's 2D handle detector (MODEL/handle_detector), if any.
         threads: torch CPU threads.
     """
     torch.set_num_threads(threads)
@@ -231,14 +225,12 @@ def infer_command(
     fitted.check_capture(cap, category)
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
-    result, outcome = infer(fitted, cap, FitConfig.budget(restarts, max_steps,
-                                                          focus_steps=focus_steps,
-                                                          sightings=handle_detector),
-                            np.linspace(0.0, 1.0, trajectory_points), keypoint_source=keypoints)
+    result, outcome = infer(fitted, cap, fit, np.linspace(0.0, 1.0, trajectory_points),
+                            keypoint_source=keypoints)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
-          f"({outcome.steps} steps, {restarts} starts; close look at the handle: {outcome.focus})"
+          f"({outcome.steps} steps, {fit.restarts} starts; close look at the handle: {outcome.focus})"
           f" -> {out}")
     for warning in result.extra["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
@@ -246,7 +238,7 @@ def infer_command(
         seen = result.extra["handle_sighting"]
         figure = observed_vs_rendered(
             fitted.model, outcome.z, outcome.q, cap,
-            detector=fitted.handle_detector if handle_detector else None,
+            detector=fitted.handle_detector if fit.handle_detector else None,
             sighted_p_O=seen.get("p_O"), handle_p_O=result.keypoints.get("handle"))
         report.parent.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(report), cv2.cvtColor(np.repeat(np.repeat(figure, 2, 0), 2, 1),

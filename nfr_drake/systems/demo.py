@@ -5,12 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from nfr_drake.cpu import set_torch_threads
-from nfr_drake.systems.pipeline import Scenario, run_scenario
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.systems.pipeline import run_scenario
+from nfr_drake.systems.scenario import Scenario
 
 
 def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: int = 0,
                  q_target: float = 0.6, views: int = 10, image_size: int = Scenario.image_size,
-                 max_steps: int = 400,
+                 fit: FitConfig = FitConfig(),
                  replay: Path = Path("out/demo/open_closet.html"),
                  threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
@@ -27,7 +29,7 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
             every closet size; see docs/EVALUATION.md).
         views: perception cameras.
         image_size: their square image size, pixels.
-        max_steps: fit steps at most.
+        fit: options of the fit.
         replay: HTML replay to write.
         threads: torch CPU threads for the fit (default: the free cores,
             `nfr_drake.cpu.free_cores`).
@@ -35,7 +37,7 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
     set_torch_threads(threads)
     scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
                         q_target=q_target, views=views,
-                        image_size=image_size, max_steps=max_steps, replay=str(replay))
+                        image_size=image_size, fit=fit, replay=str(replay))
     outcome = run_scenario(scenario)
     print(outcome.report())
     return 0 if outcome.task.success else 1

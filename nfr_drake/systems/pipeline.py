@@ -5,17 +5,16 @@ around it; initialising the simulator runs the fit once, giving the keypoint tra
 Phase 2 (action): the planner uses that trajectory alone; the arm is simulated on the true object
 and an HTML replay shows the predicted (planned-with) and the true keypoint paths.
 
-A `Scenario` is a dataclass loaded from YAML with `yaml_load_typed` (see `systems/*.yaml`); this
-module keeps real (not postponed) annotations, which `yaml_load_typed` needs to read field types.
+With ground-truth keypoints (`Scenario.keypoints`) phase 1 is skipped: the planner reads the
+object's own keypoints.
 """
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.yaml import yaml_load_typed
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
@@ -23,96 +22,22 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution
-from nfr_drake.errors import ConfigError
-from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
-from nfr_drake.objects import SEED_DOMAIN_CAPTURE, ArticulatedObject, object_rng, sample_object
+from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.systems.perception import AddNfrPerception
-from nfr_drake.systems.scene_objects import SceneObject, object_pose
+from nfr_drake.systems.scenario import Scenario
+from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import TaskOutcome, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @dataclass
-class Scenario:
-    """One run of the pipeline.
-
-    Attributes:
-        category: "closet" or "drawer".
-        model: neural-field model folder of that category.
-        seed: capture seed; the object is `object_rng(SEED_DOMAIN_CAPTURE, seed, index)`, never a
-            training object.
-        index: object index within the seed.
-        q_start: the object's articulation when photographed, in [0, 1].
-        q_target: the articulation to reach (1 opens, 0 closes).
-        object_xyz: position of the object frame O in W, m.
-        object_yaw_deg: rotation of O about W's z, degrees.
-        views: perception cameras.
-        image_size: square image size of the perception cameras, pixels. 128 by default: the
-            models were trained on 64 px images, but the fit takes any resolution, and with the
-            shipped models 128 px opens more objects (docs/EVALUATION.md, "The whole pipeline").
-        fov_y_deg: their vertical field of view, degrees.
-        distance_m: their distance range to the object centre, m.
-        restarts: fit starts.
-        max_steps: fit steps at most.
-        focus_steps: steps of the fit's final close look at the handle (0: none).
-        handle_detector: use the model's 2D handle detector, when it ships one.
-        keypoints: "head" (the keypoint head, as in the paper; the better of the two on unseen
-            objects, docs/EVALUATION.md) or "geometry" (handle and hinge axis read from the
-            fitted field's segmentation).
-        replay: HTML replay to write ("" for none).
-    """
-
-    category: str = "closet"
-    model: str = "models/closet"
-    seed: int = 100
-    index: int = 0
-    q_start: float = 0.0
-    q_target: float = 1.0
-    object_xyz: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    object_yaw_deg: float = 0.0
-    views: int = 10
-    image_size: int = 128
-    fov_y_deg: float = 50.0
-    distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
-    restarts: int = 4
-    max_steps: int = 400
-    focus_steps: int = FitConfig.focus_steps
-    handle_detector: bool = True
-    keypoints: str = "head"
-    replay: str = ""
-
-    def __post_init__(self):
-        if self.category not in ("closet", "drawer"):
-            raise ConfigError(f"category must be closet or drawer, got {self.category!r}")
-        for name in ("q_start", "q_target"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ConfigError(f"{name} must lie in [0, 1]")
-        if self.keypoints not in ("geometry", "head"):
-            raise ConfigError(f"keypoints must be geometry or head, got {self.keypoints!r}")
-        if self.views < 1 or self.image_size < 8:
-            raise ConfigError("views must be >= 1 and image_size >= 8")
-        object_pose(self.object_xyz, self.object_yaw_deg)  # ConfigError for a non-finite pose
-
-    @classmethod
-    def load(cls, path: Path) -> "Scenario":
-        return yaml_load_typed(schema=cls, filename=str(path))
-
-    @property
-    def X_WO(self) -> RigidTransform:
-        return object_pose(self.object_xyz, self.object_yaw_deg)
-
-    def sample_object(self) -> ArticulatedObject:
-        return sample_object(self.category, object_rng(SEED_DOMAIN_CAPTURE, self.seed, self.index),
-                             name=f"{self.category}_{self.seed}_{self.index}")
-
-
-@dataclass
 class PipelineOutcome:
     """q_estimate / q_true in [0, 1]; keypoint_rmse_cm at the observed state; handle_path_rmse_cm
-    over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task."""
+    over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task.
+    Without perception (ground-truth keypoints, `perceived` False) the prediction is the truth."""
 
     q_estimate: float
     q_true: float
@@ -122,13 +47,14 @@ class PipelineOutcome:
     predicted: KeypointTrajectory
     truth: KeypointTrajectory
     task: TaskOutcome
+    perceived: bool = True
 
     def report(self) -> str:
         task = self.task
         lines = [f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); keypoint error "
                  f"{self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]; fit "
-                 f"{self.perception_seconds:.1f} s"]
+                 f"{self.perception_seconds:.1f} s"] if self.perceived else []
         if task.plan is None:
             lines.append(f"FAILURE: planning failed: {task.planning_error}")
         else:
@@ -156,11 +82,7 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
     camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
                                     math.radians(scenario.fov_y_deg))
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
-                                  X_WCs, camera,
-                                  FitConfig.budget(scenario.restarts, scenario.max_steps,
-                                                   focus_steps=scenario.focus_steps,
-                                                   sightings=scenario.handle_detector),
-                                  keypoint_source=scenario.keypoints)
+                                  X_WCs, camera, scenario.fit, keypoint_source=scenario.keypoints)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
@@ -177,19 +99,29 @@ def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def run_scenario(scenario: Scenario) -> PipelineOutcome:
-    """Both phases; the replay (if asked for) draws the predicted and the true keypoint paths.
-    NfrDrakeError first when the model is not of the scenario's category."""
-    check_category(Path(scenario.model), read_model_config(Path(scenario.model)).get("category"),
-                   scenario.category, "scenario", "object")
+    """Both phases (the first only when the scenario perceives); the replay (if asked for) draws
+    the keypoint paths the planner used and, with perception, the true ones. NfrDrakeError first
+    when the model is not of the scenario's category."""
+    if scenario.perceives:
+        check_category(Path(scenario.model), read_model_config(Path(scenario.model)).get("category"),
+                       scenario.category, "scenario", "object")
     obj = scenario.sample_object()
+    scene_object = SceneObject.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
+    replay = Path(scenario.replay) if scenario.replay else None
+    configs = {"planner_config": scenario.planner, "simulation_config": scenario.simulation}
+    if not scenario.perceives:
+        task = run_task(scene_object, scenario.q_target, replay=replay, **configs)
+        return PipelineOutcome(q_estimate=scenario.q_start, q_true=scenario.q_start,
+                               keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
+                               predicted=task.keypoints, truth=task.keypoints, task=task,
+                               perceived=False)
     predicted, seconds = perceive(scenario, obj)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid
-    scene_object = SceneObject.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
-    task = run_task(scene_object, scenario.q_target, keypoints=predicted,
-                    replay=Path(scenario.replay) if scenario.replay else None, reference=truth)
+    task = run_task(scene_object, scenario.q_target, keypoints=predicted, replay=replay,
+                    reference=truth, **configs)
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start,
         keypoint_rmse_cm=_rmse_cm(now(predicted), now(truth)),

@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nfr_drake.systems.pipeline import Scenario, perceive
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.systems.pipeline import perceive
+from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 MODELS = Path(__file__).parents[2] / "models"
@@ -27,7 +29,7 @@ def _needs(category: str) -> Path:
 
 def test_perception_on_a_fixed_unseen_drawer_is_close_to_ground_truth():
     scenario = Scenario(category="drawer", model=str(_needs("drawer")), seed=100, index=3,
-                        q_start=0.4, views=8, max_steps=300)
+                        q_start=0.4, views=8, fit=FitConfig(max_steps=300))
     obj = scenario.sample_object()
     predicted, seconds = perceive(scenario, obj)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
@@ -61,7 +63,7 @@ def test_pipeline_evaluation_writes_one_row_per_object_and_resumes(tmp_path, cap
 
     model, csv_path = _needs("drawer"), tmp_path / "pipeline.csv"
     for _ in range(2):  # the second call finds the row and runs nothing
-        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, max_steps=120)
+        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, fit=FitConfig(max_steps=120))
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 1 and rows[0]["index"] == "0" and rows[0]["planned"] == "True"
     assert 0.0 <= float(rows[0]["handle_error_cm"]) < 50.0

@@ -82,7 +82,7 @@ def test_a_non_finite_object_pose_exits_2(capsys, pose, tmp_path):
 
 def test_a_scenario_with_a_non_finite_pose_is_refused():
     from nfr_drake.errors import ConfigError
-    from nfr_drake.systems.pipeline import Scenario
+    from nfr_drake.systems.scenario import Scenario
 
     with pytest.raises(ConfigError, match="finite"):
         Scenario(object_xyz=[0.0, float("nan"), 0.0])

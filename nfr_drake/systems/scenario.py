@@ -1,0 +1,132 @@
+"""A scenario: one task in simulation, as a dataclass a user edits in YAML (`systems/*.yaml`).
+
+Loaded with Drake's `yaml_load_typed` (`Scenario.load`); fields left out keep their defaults. This
+module keeps real (not postponed) annotations, which `yaml_load_typed` needs to read field types.
+"""
+
+import typing
+from dataclasses import asdict, dataclass, field, fields, make_dataclass
+from pathlib import Path
+
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.math import RigidTransform
+
+from nfr_drake.errors import ConfigError
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.objects import (
+    SEED_DOMAIN_CAPTURE,
+    SEED_DOMAIN_TRAIN,
+    ArticulatedObject,
+    object_rng,
+    sample_object,
+)
+from nfr_drake.planning.planner import PlannerConfig
+from nfr_drake.systems.articulation import SimulationConfig
+from nfr_drake.systems.scene_objects import object_pose
+
+OBJECT_DOMAINS = {"capture": SEED_DOMAIN_CAPTURE, "train": SEED_DOMAIN_TRAIN}
+KEYPOINT_SOURCES = ("head", "geometry", "ground_truth")
+
+
+@dataclass
+class Scenario:
+    """One task: an object, where it stands, the articulation to reach and where the planner's
+    keypoints come from."""
+
+    category: str = "closet"
+    """"closet" or "drawer"."""
+    objects: str = "capture"
+    """Which objects: "capture" (unseen ones, `object_rng(SEED_DOMAIN_CAPTURE, seed, index)`, never
+    a training object) or "train" (`object_rng(SEED_DOMAIN_TRAIN, seed, index)`)."""
+    seed: int = 100
+    """Seed of the object."""
+    index: int = 0
+    """Object index within the seed."""
+    q_start: float = 0.0
+    """The object's articulation at the start (when photographed), in [0, 1]."""
+    q_target: float = 1.0
+    """The articulation to reach, in [0, 1] (1 opens, 0 closes)."""
+    object_xyz: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    """Position of the object frame O in W, m."""
+    object_yaw_deg: float = 0.0
+    """Rotation of O about W's z, degrees."""
+    keypoints: str = "head"
+    """Where the planner's keypoints come from: the neural field fitted to photos of Drake cameras,
+    "head" (its keypoint head, as in the paper; the better of the two on unseen objects,
+    docs/EVALUATION.md) or "geometry" (handle and hinge axis read from the fitted field's
+    segmentation); or "ground_truth" (the object's own model: no cameras, no fit)."""
+    model: str = "models/closet"
+    """Neural-field model folder of the category (not read with ground-truth keypoints)."""
+    views: int = 10
+    """Perception cameras."""
+    image_size: int = 128
+    """Square image size of the perception cameras, pixels. 128 by default: the models were
+    trained on 64 px images, but the fit takes any resolution, and with the shipped models 128 px
+    opens more objects (docs/EVALUATION.md, "The whole pipeline")."""
+    fov_y_deg: float = 50.0
+    """Vertical field of view of the perception cameras, degrees."""
+    distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
+    """Distance range of the perception cameras to the object centre, m."""
+    fit: FitConfig = field(default_factory=FitConfig)
+    """Options of the neural field's fit."""
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    """Options of the planner."""
+    simulation: SimulationConfig = field(default_factory=SimulationConfig)
+    """Options of the simulation."""
+    replay: str = ""
+    """HTML replay to write ("" for none)."""
+
+    def __post_init__(self):
+        if self.category not in ("closet", "drawer"):
+            raise ConfigError(f"category must be closet or drawer, got {self.category!r}")
+        if self.objects not in OBJECT_DOMAINS:
+            raise ConfigError(f"objects must be one of {sorted(OBJECT_DOMAINS)}, got {self.objects!r}")
+        for name in ("q_start", "q_target"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(f"{name} must lie in [0, 1]")
+        if self.keypoints not in KEYPOINT_SOURCES:
+            raise ConfigError(f"keypoints must be one of {', '.join(KEYPOINT_SOURCES)}, "
+                              f"got {self.keypoints!r}")
+        if self.views < 1 or self.image_size < 8:
+            raise ConfigError("views must be >= 1 and image_size >= 8")
+        object_pose(self.object_xyz, self.object_yaw_deg)  # ConfigError for a non-finite pose
+
+    @classmethod
+    def load(cls, path: Path) -> "Scenario":
+        """The scenario in a YAML file, read with `yaml_load_typed` (unknown keys are errors)."""
+        loaded = yaml_load_typed(schema=_ScenarioFile, filename=str(path))
+        values = {f.name: getattr(loaded, f.name) for f in fields(cls)}
+        values["fit"] = FitConfig(**asdict(loaded.fit))
+        return cls(**values)
+
+    @property
+    def perceives(self) -> bool:
+        """Whether the keypoints come from the neural field (cameras and a fit)."""
+        return self.keypoints != "ground_truth"
+
+    @property
+    def X_WO(self) -> RigidTransform:
+        return object_pose(self.object_xyz, self.object_yaw_deg)
+
+    def sample_object(self) -> ArticulatedObject:
+        return sample_object(self.category,
+                             object_rng(OBJECT_DOMAINS[self.objects], self.seed, self.index),
+                             name=f"{self.category}_{self.seed}_{self.index}")
+
+
+def _thawed(cls: type) -> type:
+    """A mutable dataclass with the fields, types and defaults of the frozen dataclass `cls`:
+    `yaml_load_typed` fills a dataclass by setting its attributes one by one."""
+    hints = typing.get_type_hints(cls)
+    return make_dataclass(cls.__name__, [(f.name, hints[f.name], field(default=f.default))
+                                         for f in fields(cls)])
+
+
+_FitConfigFields = _thawed(FitConfig)
+
+
+@dataclass
+class _ScenarioFile(Scenario):
+    """`Scenario` as `yaml_load_typed` reads it; `Scenario.load` turns `fit` into a `FitConfig`."""
+
+    fit: _FitConfigFields = field(default_factory=_FitConfigFields)
