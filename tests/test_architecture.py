@@ -2,8 +2,8 @@
 
 Floors, lowest first (docs/ARCHITECTURE.md):
 
-0. `nfr_drake` (the package's `__init__`), `errors`, `jsonio`: helpers every floor may use;
-   `jsonio` imports `errors`.
+0. `nfr_drake` (the package's `__init__`), `errors`, `jsonio`, `cpu`, `paths`, `parsing`: helpers
+   every floor may use; `jsonio`, `paths` and `parsing` import `errors`.
 1. `objects`: articulated object categories.
 2. `world`: what planning, simulation and replays share: the robot model, keypoint trajectories,
    obstacle boxes, planned motions.
@@ -32,7 +32,7 @@ import nfr_drake
 PACKAGE_DIR = Path(nfr_drake.__file__).resolve().parent
 
 FLOORS: list[tuple[str, ...]] = [
-    ("nfr_drake", "errors", "jsonio"),
+    ("nfr_drake", "errors", "jsonio", "cpu", "paths", "parsing"),
     ("objects",),
     ("world",),
     ("data",),
@@ -43,7 +43,8 @@ FLOORS: list[tuple[str, ...]] = [
     ("eval",),
     ("cli",),
 ]
-SAME_FLOOR_ALLOWED = {("jsonio", "errors"), ("inference", "perception")}
+SAME_FLOOR_ALLOWED = {("jsonio", "errors"), ("paths", "errors"), ("parsing", "errors"),
+                      ("inference", "perception")}
 """(importer, imported) pairs of different units on one floor that may import each other."""
 
 FLOOR_OF = {unit: level for level, units in enumerate(FLOORS) for unit in units}

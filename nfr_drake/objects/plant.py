@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 from pydrake.geometry import PerceptionProperties, RenderLabel, Role, RoleAssign, SceneGraph
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
 from nfr_drake.objects.articulated import ArticulatedObject, render_label_value
 from nfr_drake.objects.sdformat import to_sdformat
+from nfr_drake.parsing import make_parser
 
 
 def add_articulated_object(
@@ -23,7 +23,7 @@ def add_articulated_object(
 
     Must be called before `plant.Finalize()`.
     """
-    parser = Parser(plant)
+    parser = make_parser(plant)
     if model_name is not None:
         parser.SetAutoRenaming(False)
     sdf = to_sdformat(obj)
