@@ -1,4 +1,4 @@
-"""Capture sets: posed photos in nerfstudio's `transforms.json` format (DESIGN.md), read and written.
+"""Capture sets: posed photos in nerfstudio's `transforms.json` (docs/DATASET_FORMAT.md), read and written.
 
 A capture set is a folder with `transforms.json` and the images it names; synthetic ones may carry
 `gt.json` (ground truth). This is the one interchange format between pose estimation, Drake
