@@ -1,8 +1,11 @@
 """Success rate and planning time of `nfr-drake plan` with ground-truth keypoints on sampled objects.
 
     python benchmarks/planning_eval.py --count 50 --csv out/planning_eval.csv
+    python benchmarks/planning_eval.py --categories furniture --count 100 --csv out/planning_furniture.csv
 
-Resumable (rows already in the CSV are kept). Prints a markdown table for docs/EVALUATION.md.
+Furniture: piece i opened at one random part (drawn from the piece's stream), the others shut.
+Resumable (rows already in the CSV are kept). Prints markdown tables for docs/EVALUATION.md: by
+category, and for furniture by part type and by kind.
 """
 
 from __future__ import annotations
@@ -38,13 +41,23 @@ def main(count: int = 50, seed: int = 7, csv: Path = Path("out/planning_eval.csv
     print(f"date: {datetime.date.today()}, machine: {_cpu()}, {os.cpu_count()} cores, "
           f"python {sys.version.split()[0]}")
     print(f"load average at the end: {os.getloadavg()[0]:.1f}")
-    print("| category | objects | target q | planned | success | median planning s | p90 planning s "
-          "| median planning CPU s |")
-    print("|---|---|---|---|---|---|---|---|")
-    targets = {"closet": closet_target, "drawer": drawer_target}
-    for name, s in summarise(rows).items():
-        print(f"| {name} | {s['count']} | {targets.get(name, '')} | {s['planned']:.0%} | "
-              f"{s['success']:.0%} | {s['median_s']:.2f} | {s['p90_s']:.2f} | {s['median_cpu_s']:.2f} |")
+    tables = [("category", rows)]
+    furniture = [r for r in rows if r["category"] == "furniture"]
+    if furniture:
+        tables += [("part_type", furniture), ("kind", furniture)]
+    for by, selected in tables:
+        print(f"\n| {by} | objects | planned | success | median planning s | p90 planning s "
+              "| median planning CPU s |")
+        print("|---|---|---|---|---|---|---|")
+        for name, s in summarise(selected, by).items():
+            print(f"| {name} | {s['count']} | {s['planned']:.0%} | {s['success']:.0%} | "
+                  f"{s['median_s']:.2f} | {s['p90_s']:.2f} | {s['median_cpu_s']:.2f} |")
+    failed = [r for r in furniture if r["success"] != "True"]
+    if failed:
+        print("\nfailed furniture parts (index, kind, part, type, handle height m, error):")
+        for r in failed:
+            print(f"  {r['index']} {r['kind']} part {r['part']} {r['part_type']} {r['handle_height']} "
+                  f"{r['error'][:160] or 'simulated motion failed'}")
 
 
 if __name__ == "__main__":

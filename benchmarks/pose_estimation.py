@@ -1,13 +1,22 @@
-"""Pose-estimation speed: seconds per image for SIFT extraction, exhaustive matching and incremental
-mapping (pycolmap, CPU) at a working size of 1024 px.
+"""Pose estimation: accuracy against plain pycolmap on real photos, and speed per stage.
 
-Usage: python benchmarks/pose_estimation.py [--repeats 3] [--synthetic-photos 12]
-Photo sets: Herz-Jesu-P8 from the shared data (`$NFR_DRAKE_SHARED_DATA` or ../shared/data beside
-the repository; skipped when absent) with its known intrinsics, and Drake-rendered photos of a
-closet in a textured room (1024 x 768, known intrinsics). SIFT runs with first octave -1 (COLMAP's
-default: the image is upsampled once) and 0. Prints a markdown table for docs/BENCHMARKS.md; each
-figure is the median over the repeats. Matching is exhaustive, so its cost per image grows with
-the number of images (n - 1 pairs per image).
+Usage: python benchmarks/pose_estimation.py [--threads 2]
+       python benchmarks/pose_estimation.py --speed [--repeats 3] [--synthetic-photos 12]
+
+Accuracy (default): Herz-Jesu-P8 from the shared data (`$NFR_DRAKE_SHARED_DATA` or ../shared/data
+beside the repository), self-calibrated, anchors = the true camera centres. Side by side in one
+run: plain pycolmap (`extract_features`, `match_exhaustive`, `incremental_mapping` with their
+default options, one SIMPLE_RADIAL camera for all photos, then `align_reconstruction_to_locations`
+to the anchors) and `estimate_poses` (what `nfr-drake poses --anchors` runs) with its defaults and
+with one option changed at a time (the first of those is the old default: a camera per photo, the
+principal point at the image centre). Camera centre errors (mm) and rotation errors (deg) against
+the ground truth, mean reprojection error, wall time. Prints a markdown table for
+docs/POSE_ESTIMATION.md.
+
+Speed (--speed): seconds per image for SIFT extraction, exhaustive matching and incremental mapping
+at a working size of 1024 px with known intrinsics, on Herz-Jesu-P8 and on Drake-rendered photos of
+a closet in a textured room (1024 x 768); SIFT first octave -1 (COLMAP's default: the image is
+upsampled once) and 0; each figure the median over the repeats (docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -18,15 +27,21 @@ import os
 import platform
 import statistics
 import tempfile
-from datetime import date
+import time
+from dataclasses import replace
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+import pycolmap
 
 from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import read_capture_set
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
+from nfr_drake.perception.alignment import rotation_angle
 from nfr_drake.perception.photos import prepare_photos
-from nfr_drake.perception.sfm import SfmOptions, run_sfm
+from nfr_drake.perception.poses import Alignment, estimate_poses
+from nfr_drake.perception.sfm import SfmOptions, camera_poses, run_sfm
 from nfr_drake.perception.synthetic import SyntheticPhotoScene, orbit_poses, write_photo_folder
 
 WORKING_SIZE = 1024
@@ -38,66 +53,162 @@ def shared_data_dir() -> Path:
     return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-def herz_jesu(root: Path) -> tuple[Path, PinholeCamera] | None:
-    """Herz-Jesu-P8's image folder and camera, or None when the shared data is absent."""
+def herz_jesu(root: Path) -> tuple[Path, dict] | None:
+    """Herz-Jesu-P8's image folder and ground-truth cameras by photo name, or None when absent."""
     folder = root / "real_photos" / "herz_jesu_p8"
     if not (folder / "cameras.json").is_file():
         return None
-    first = next(iter(json.loads((folder / "cameras.json").read_text())["cameras"].values()))
+    return folder / "images", json.loads((folder / "cameras.json").read_text())["cameras"]
+
+
+def truth_camera(truth: dict) -> PinholeCamera:
+    """The true camera of Herz-Jesu-P8 (all photos share it)."""
+    first = next(iter(truth.values()))
     K = np.array(first["K"])
-    return folder / "images", PinholeCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], first["width"],
-                                          first["height"])
+    return PinholeCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], first["width"], first["height"])
 
 
+# Accuracy -------------------------------------------------------------------------------------
+def pose_errors(X_WCs: dict[str, np.ndarray], truth: dict) -> dict[str, float]:
+    """Mean and max camera-centre error (mm) and mean rotation error (deg) of poses X_WC (4x4,
+    OpenCV axes, metres) by photo name against the ground truth."""
+    centre_mm = [1000 * np.linalg.norm(X[:3, 3] - truth[n]["center_world"]) for n, X in X_WCs.items()]
+    rotation_deg = [np.degrees(rotation_angle(np.array(truth[n]["R_world_from_cam"]).T @ X[:3, :3]))
+                    for n, X in X_WCs.items()]
+    return {"registered": len(X_WCs), "mean_mm": float(np.mean(centre_mm)),
+            "max_mm": float(np.max(centre_mm)), "rotation_deg": float(np.mean(rotation_deg))}
+
+
+def plain_pycolmap(images: Path, truth: dict, work: Path, threads: int) -> dict[str, float]:
+    """pycolmap with its default options on the photos as they are, one camera for all, aligned
+    by `align_reconstruction_to_locations` to the true camera centres."""
+    start = time.perf_counter()
+    work.mkdir(parents=True)
+    database = work / "database.db"
+    pycolmap.extract_features(database, images, camera_mode=pycolmap.CameraMode.SINGLE,
+                              extraction_options=pycolmap.FeatureExtractionOptions(num_threads=threads),
+                              device=pycolmap.Device.cpu)
+    pycolmap.match_exhaustive(database, matching_options=pycolmap.FeatureMatchingOptions(
+        num_threads=threads), device=pycolmap.Device.cpu)
+    models = pycolmap.incremental_mapping(database, images, work,
+                                          pycolmap.IncrementalPipelineOptions(num_threads=threads))
+    rec = max(models.values(), key=lambda r: r.num_reg_images())
+    names = sorted(image.name for image in rec.images.values() if image.has_pose)
+    sim = pycolmap.align_reconstruction_to_locations(
+        rec, names, np.array([truth[n]["center_world"] for n in names]), 3, pycolmap.RANSACOptions())
+    rec.transform(sim)
+    seconds = time.perf_counter() - start
+    return {**pose_errors(camera_poses(rec), truth),
+            "reprojection_px": rec.compute_mean_reprojection_error(), "seconds": seconds}
+
+
+def project(images: Path, truth: dict, out: Path, options: dict) -> dict[str, float]:
+    """`estimate_poses` with the true centres as anchors; `options` are its keyword arguments."""
+    anchors = {n: np.array(c["center_world"]) for n, c in truth.items()}
+    report = estimate_poses(images, out, Alignment(anchors=anchors), progress=lambda _: None,
+                            **options)
+    X_WCs = {frame.source_photo: frame.X_OC for frame in read_capture_set(out).frames}
+    return {**pose_errors(X_WCs, truth), "reprojection_px": report.mean_reprojection_error_px,
+            "seconds": report.seconds["total"]}
+
+
+def accuracy(threads: int, tmp: Path) -> None:
+    found = herz_jesu(shared_data_dir())
+    if found is None:
+        print(f"Herz-Jesu-P8 not found under {shared_data_dir()} (set NFR_DRAKE_SHARED_DATA)")
+        return
+    images, truth = found
+    sfm = SfmOptions(num_threads=threads)
+    variants = [
+        ("`nfr-drake poses` (defaults)", {}),
+        ("old default: a camera per photo, principal point fixed (`--sfm.camera-per-image "
+         "--sfm.no-refine-principal-point`)",
+         {"sfm_options": replace(sfm, camera_per_image=True, refine_principal_point=False)}),
+        ("one camera, principal point fixed (`--sfm.no-refine-principal-point`)",
+         {"sfm_options": replace(sfm, refine_principal_point=False)}),
+        ("a camera per photo, principal point refined (`--sfm.camera-per-image`)",
+         {"sfm_options": replace(sfm, camera_per_image=True)}),
+        ("SIFT first octave 0 (`--sfm.first-octave 0`)", {"sfm_options": replace(sfm, first_octave=0)}),
+        ("photos at 768 px (`--max-size 768`)", {"max_size": 768}),
+        ("known intrinsics (`--intrinsics`, reference)", {"camera": truth_camera(truth)}),
+    ]
+    print("Herz-Jesu-P8, 8 photos (1024 x 683), anchors = true camera centres; errors against the "
+          "ground truth after each method's alignment\n")
+    print("| method | registered | centre error mean / max (mm) | rotation error mean (deg) "
+          "| reprojection (px) | time (s) |")
+    print("|---|---|---|---|---|---|")
+
+    def row(label: str, r: dict[str, float]) -> None:
+        print(f"| {label} | {r['registered']}/{len(truth)} | {r['mean_mm']:.1f} / {r['max_mm']:.1f} "
+              f"| {r['rotation_deg']:.2f} | {r['reprojection_px']:.3f} | {r['seconds']:.0f} |",
+              flush=True)
+
+    pycolmap.logging.minloglevel = 1  # COLMAP's warnings and errors only, as in `run_sfm`
+    row("plain pycolmap: default options, SIMPLE_RADIAL, one camera, "
+        "`align_reconstruction_to_locations`", plain_pycolmap(images, truth, tmp / "plain", threads))
+    for i, (label, options) in enumerate(variants):
+        row(label, project(images, truth, tmp / f"project_{i}", {"sfm_options": sfm, **options}))
+
+
+# Speed ----------------------------------------------------------------------------------------
 def synthetic(out: Path, n: int) -> tuple[Path, PinholeCamera]:
     """n Drake-rendered photos (1024 x 768) and their camera."""
     camera = PinholeCamera.from_fov(1024, 768, np.deg2rad(50))
     closet = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 0, 0))
     scene = SyntheticPhotoScene(closet, 0.5, camera)
     write_photo_folder(out, scene, orbit_poses(n, np.array([0.4, 0.0, 0.35])))
-    return out, PinholeCamera(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+    return out, camera
 
 
-def measure(photos: Path, camera: PinholeCamera, first_octave: int, work: Path) -> dict[str, float]:
+def measure(photos: Path, camera: PinholeCamera, first_octave: int, work: Path,
+            threads: int) -> dict[str, float]:
     """Seconds per stage of one SfM run on the photos resized to the working size."""
     images = prepare_photos(photos, work / "images", WORKING_SIZE)
-    result = run_sfm(work / "images", [p.work_name for p in images], work,
-                     camera.scaled(*images[0].size), SfmOptions(first_octave=first_octave),
-                     progress=None)
+    result = run_sfm(work / "images", {p.work_name: p.size for p in images}, work,
+                     camera.scaled(*images[0].size),
+                     SfmOptions(first_octave=first_octave, num_threads=threads), progress=None)
     result.seconds["registered"] = result.reconstruction.num_reg_images()
     return result.seconds
 
 
+def speed(repeats: int, synthetic_photos: int, threads: int, tmp: Path) -> None:
+    sets = []
+    real = herz_jesu(shared_data_dir())
+    if real is not None:
+        sets.append(("Herz-Jesu-P8 (1024 x 683)", real[0], truth_camera(real[1])))
+    else:
+        print(f"(Herz-Jesu-P8 not found under {shared_data_dir()}: skipped)")
+    sets.append(("synthetic closet room (1024 x 768)", *synthetic(tmp / "synthetic", synthetic_photos)))
+    print("| photos | images | SIFT first octave | extraction s/img | matching s/img "
+          "| mapping s/img | total s | registered |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label, photos, camera in sets:
+        n = len([p for p in photos.iterdir() if p.suffix in (".jpg", ".png")])
+        for octave in (-1, 0):
+            runs = [measure(photos, camera, octave, tmp / f"work_{label[:5]}_{octave}_{i}", threads)
+                    for i in range(repeats)]
+            median = {k: statistics.median(r[k] for r in runs) for k in (*STAGES, "registered")}
+            per_image = " | ".join(f"{median[k] / n:.2f}" for k in STAGES)
+            total = sum(median[k] for k in STAGES)
+            print(f"| {label} | {n} | {octave} | {per_image} | {total:.1f} "
+                  f"| {int(median['registered'])}/{n} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--synthetic-photos", type=int, default=12)
+    parser.add_argument("--speed", action="store_true", help="time the SfM stages instead")
+    parser.add_argument("--repeats", type=int, default=3, help="--speed: runs per configuration")
+    parser.add_argument("--synthetic-photos", type=int, default=12, help="--speed: rendered photos")
+    parser.add_argument("--threads", type=int, default=2, help="CPU threads of COLMAP")
     args = parser.parse_args()
-    print(f"{date.today()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"load average before: {os.getloadavg()[0]:.2f}")
+    print(f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {platform.machine()}, "
+          f"{os.cpu_count()} CPUs, no GPU used, pycolmap {pycolmap.__version__}, "
+          f"{args.threads} COLMAP threads, load average before: {os.getloadavg()[0]:.2f}\n")
     with tempfile.TemporaryDirectory(prefix="nfr_bench_poses_") as tmp:
-        tmp = Path(tmp)
-        sets = []
-        real = herz_jesu(shared_data_dir())
-        if real is not None:
-            sets.append(("Herz-Jesu-P8 (1024 x 683)", *real))
+        if args.speed:
+            speed(args.repeats, args.synthetic_photos, args.threads, Path(tmp))
         else:
-            print(f"(Herz-Jesu-P8 not found under {shared_data_dir()}: skipped)")
-        sets.append(("synthetic closet room (1024 x 768)",
-                     *synthetic(tmp / "synthetic", args.synthetic_photos)))
-        print("| photos | images | SIFT first octave | extraction s/img | matching s/img "
-              "| mapping s/img | total s | registered |")
-        print("|---|---|---|---|---|---|---|---|")
-        for label, photos, camera in sets:
-            n = len([p for p in photos.iterdir() if p.suffix in (".jpg", ".png")])
-            for octave in (-1, 0):
-                runs = [measure(photos, camera, octave, tmp / f"work_{octave}_{i}")
-                        for i in range(args.repeats)]
-                median = {k: statistics.median(r[k] for r in runs) for k in (*STAGES, "registered")}
-                per_image = " | ".join(f"{median[k] / n:.2f}" for k in STAGES)
-                total = sum(median[k] for k in STAGES)
-                print(f"| {label} | {n} | {octave} | {per_image} | {total:.1f} "
-                      f"| {int(median['registered'])}/{n} |", flush=True)
+            accuracy(args.threads, Path(tmp))
 
 
 if __name__ == "__main__":

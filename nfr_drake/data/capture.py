@@ -39,11 +39,13 @@ _RIGID_TOLERANCE = 1e-3
 
 @dataclass(frozen=True)
 class CaptureFrame:
-    """One posed image: its absolute path, camera pose X_OC (4x4, OpenCV axes) and intrinsics."""
+    """One posed image: its absolute path, camera pose X_OC (4x4, OpenCV axes) and intrinsics;
+    source_photo: file name of the photo it was made from (`nfr-drake poses`), else None."""
 
     image_path: Path
     X_OC: np.ndarray
     camera: PinholeCamera
+    source_photo: str | None = None
 
     def load_rgb(self) -> np.ndarray:
         """The image as uint8 RGB, shape (height, width, 3)."""
@@ -181,7 +183,10 @@ def read_capture_set(root: str | os.PathLike, check_images: bool = True) -> Capt
             if (w, h) != (camera.width, camera.height):
                 raise _fail(image_path, f"image is {w}x{h} but {tpath} says "
                                         f"{camera.width}x{camera.height}")
-        frames.append(CaptureFrame(image_path, X_OC, camera))
+        source = fj.get("source_photo")
+        if source is not None and not isinstance(source, str):
+            raise _fail(tpath, f"{where}: 'source_photo' must be a file name")
+        frames.append(CaptureFrame(image_path, X_OC, camera, source))
     gt_path = root / GT_FILE
     gt = _read_json(gt_path) if gt_path.exists() else None
     extra = {k: v for k, v in data.items() if k != "frames" and k not in base_keys()}
@@ -219,6 +224,7 @@ def write_capture_set(
     cameras: list[PinholeCamera] | PinholeCamera,
     gt: dict | None = None,
     extra_files: dict[str, np.ndarray | str] | None = None,
+    source_photos: list[str] | None = None,
 ) -> Path:
     """Write a capture set atomically: into a temporary folder renamed to `root` when complete.
 
@@ -228,14 +234,17 @@ def write_capture_set(
         cameras: one camera for all frames, or one per frame.
         gt: ground truth written as gt.json.
         extra_files: more files, relative path -> uint8 image array (written as PNG) or text.
+        source_photos: file name of the photo each frame was made from, written as the frame's
+            `source_photo`.
     Raises FileExistsError if `root` exists.
     """
     root = Path(root)
     if root.exists():
         raise FileExistsError(f"{root} already exists")
     per_frame = isinstance(cameras, list)
-    if len(images) != len(X_OCs) or (per_frame and len(cameras) != len(images)):
-        raise ValueError("images, poses and cameras must have the same length")
+    if len(images) != len(X_OCs) or (per_frame and len(cameras) != len(images)) or (
+            source_photos is not None and len(source_photos) != len(images)):
+        raise ValueError("images, poses, cameras and source photos must have the same length")
     tmp = root.with_name(f".{root.name}.tmp-{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     frames = []
@@ -245,6 +254,8 @@ def write_capture_set(
         frame = {"file_path": rel, "transform_matrix": opengl_from_opencv(X_OC).tolist()}
         if per_frame:
             frame.update(cameras[i].to_json())
+        if source_photos is not None:
+            frame["source_photo"] = source_photos[i]
         frames.append(frame)
     doc = {} if per_frame else cameras.to_json()
     doc["frames"] = frames

@@ -1,4 +1,8 @@
-"""Planning with ground-truth keypoints over sampled objects: success rate and planning time."""
+"""Planning with ground-truth keypoints over sampled objects: success rate and planning time.
+
+A piece of furniture is opened at one part (door or drawer) drawn from its own random stream after
+the piece, the other parts shut; closets and drawers have one part.
+"""
 
 from __future__ import annotations
 
@@ -9,19 +13,21 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform
 
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.scene_objects import SceneObject, random_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 
-FIELDS = ("category", "seed", "index", "width", "height", "q_target", "planned", "success",
-          "planning_seconds", "planning_cpu_seconds", "q_final", "joint_error", "max_drift",
-          "max_constraint_force", "error")
+FIELDS = ("category", "seed", "index", "kind", "part", "part_type", "handle_height", "width", "height",
+          "q_target", "planned", "success", "base_height", "planning_seconds", "planning_cpu_seconds",
+          "q_final", "joint_error", "max_drift", "max_constraint_force", "error")
 
 
 @dataclass(frozen=True)
 class PlanningEvalConfig:
     """Which objects: `count` per category, object i drawn from object_rng(SEED_DOMAIN_TRAIN, seed, i),
-    each opened from q = 0 to its category's target."""
+    each opened from q = 0 to its target (the closet target for doors, the drawer target for
+    drawers, furniture included)."""
 
     count: int = 50
     seed: int = 7
@@ -30,15 +36,23 @@ class PlanningEvalConfig:
     drawer_target: float = OPEN_TARGET["drawer"]
 
 
-def evaluate_one(category: str, seed: int, index: int, q_target: float) -> dict:
-    """Open one sampled object from q = 0 to `q_target`; one CSV row."""
-    obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, index))
-    outcome = run_task(SceneObject.from_articulated_object(obj, RigidTransform(), 0.0), q_target)
+def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float]) -> dict:
+    """Open one sampled object (a random part of it) from q = 0 to the target of its part's joint
+    (`targets` by SceneObject category, "closet" or "drawer"); one CSV row."""
+    rng = object_rng(SEED_DOMAIN_TRAIN, seed, index)
+    obj = sample_object(category, rng)
+    part = random_part(obj, rng)
+    scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0, part=part)
+    q_target = targets[scene_object.category]
+    outcome = run_task(scene_object, q_target)
     sim = outcome.simulation
-    return dict(category=category, seed=seed, index=index, width=round(obj.params["width"], 4),
-                height=round(obj.params["height"], 4), q_target=q_target,
-                planned=outcome.plan is not None,
-                success=outcome.success, planning_seconds=round(outcome.planning_seconds, 3),
+    return dict(category=category, seed=seed, index=index, kind=obj.params.get("kind", category),
+                part=part, part_type=obj.front(part).kind,
+                handle_height=round(float(scene_object.ground_truth.point("handle", 0.0)[2]), 4),
+                width=round(obj.params["width"], 4), height=round(obj.params["height"], 4),
+                q_target=q_target, planned=outcome.plan is not None, success=outcome.success,
+                base_height=round(float(outcome.plan.X_WB.translation()[2]), 3) if outcome.plan else "",
+                planning_seconds=round(outcome.planning_seconds, 3),
                 planning_cpu_seconds=round(outcome.plan.seconds["cpu"], 3) if outcome.plan else "",
                 q_final=round(sim.q_final, 4) if sim else "",
                 joint_error=round(sim.joint_error, 4) if sim else "",
@@ -48,9 +62,18 @@ def evaluate_one(category: str, seed: int, index: int, q_target: float) -> dict:
 
 
 def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
-    """Run (or resume: rows already in `csv_path` are kept) and return all rows."""
+    """Run (or resume: rows already in `csv_path` are kept) and return all rows.
+
+    A CSV written with other columns (an older version of this evaluation) is refused."""
     csv_path = Path(csv_path)
-    rows = list(csv.DictReader(csv_path.open())) if csv_path.is_file() else []
+    rows = []
+    if csv_path.is_file():
+        with csv_path.open() as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            if rows and tuple(reader.fieldnames or ()) != FIELDS:
+                raise NfrDrakeError(f"{csv_path} has the columns {reader.fieldnames}, not {list(FIELDS)}; "
+                                    "give another --csv")
     done = {(r["category"], int(r["seed"]), int(r["index"])) for r in rows}
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     with csv_path.open("a", newline="") as f:
@@ -61,20 +84,20 @@ def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
             for i in range(config.count):
                 if (category, config.seed, i) in done:
                     continue
-                target = config.closet_target if category == "closet" else config.drawer_target
-                row = evaluate_one(category, config.seed, i, target)
+                targets = {"closet": config.closet_target, "drawer": config.drawer_target}
+                row = evaluate_one(category, config.seed, i, targets)
                 writer.writerow(row)
                 f.flush()
                 rows.append({k: str(v) for k, v in row.items()})
     return rows
 
 
-def summarise(rows: list[dict]) -> dict[str, dict[str, float]]:
-    """Per category and overall: count, success rate, planned rate, median and p90 planning wall time,
-    median planning CPU time."""
+def summarise(rows: list[dict], by: str = "category") -> dict[str, dict[str, float]]:
+    """Per value of the column `by` (e.g. "category", "kind", "part_type") and overall: count,
+    success rate, planned rate, median and p90 planning wall time, median planning CPU time."""
     out = {}
-    for name in sorted({r["category"] for r in rows}) + ["all"]:
-        sel = [r for r in rows if name == "all" or r["category"] == name]
+    for name in sorted({r[by] for r in rows}) + ["all"]:
+        sel = [r for r in rows if name == "all" or r[by] == name]
         planned = [float(r["planning_seconds"]) for r in sel if r["planned"] == "True"]
         cpu = [float(r["planning_cpu_seconds"]) for r in sel if r["planned"] == "True"]
         out[name] = dict(count=len(sel), success=np.mean([r["success"] == "True" for r in sel]),

@@ -3,7 +3,8 @@
 A similarity S_WR maps a point as p_W = s R_WR p_R + p_WR and a camera pose X_RC to X_WC (the
 rotation is composed, the position mapped; the camera's axes keep unit length). Two estimators:
 - `align_to_centres`: known camera centres p_WC (anchors), Umeyama's least squares; at least three
-  anchors that are not nearly collinear (a line leaves the rotation about it undetermined).
+  anchors that are not nearly collinear (a line leaves the rotation about it undetermined), and
+  refused when the anchors do not fit the cameras (they belong to other photos).
 - `align_to_camera_poses`: known camera poses X_WC (e.g. from a ChArUco board in each photo); the
   rotation is averaged over the photos, so two photos suffice and a straight camera path is fine.
 Both return residuals per image. `parse_object_pose` reads X_WO, which takes frame W to frame O.
@@ -11,6 +12,7 @@ Both return residuals per image. `parse_object_pose` reads X_WO, which takes fra
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import dataclass
@@ -25,6 +27,13 @@ MIN_ANCHORS = 3
 COLLINEARITY_RATIO = 0.02
 """Anchors are refused as collinear when their spread across the best-fit line (second singular
 value of the centred positions) is below this fraction of their spread along it."""
+
+
+MAX_ANCHOR_RESIDUAL = 0.05
+"""Anchors are refused when their RMS residual after the best similarity exceeds this fraction of
+their spread (RMS distance from their centroid). Anchors of the right photos leave a fraction of a
+per cent (SfM's own error; Herz-Jesu-P8: 0.1 %), anchors of the wrong photos a sizeable part of the
+spread (Herz-Jesu-P8: two neighbours swapped 23 %, all shuffled 80-100 %)."""
 
 
 class AlignmentError(NfrDrakeError):
@@ -123,11 +132,13 @@ def umeyama(p_R: np.ndarray, p_W: np.ndarray) -> Similarity:
     return Similarity(scale, R, mu_W - scale * R @ mu_R)
 
 
-def align_to_centres(X_RCs: dict[str, np.ndarray], p_WCs: dict[str, np.ndarray]) -> AlignmentResult:
+def align_to_centres(X_RCs: dict[str, np.ndarray], p_WCs: dict[str, np.ndarray],
+                     max_residual: float = MAX_ANCHOR_RESIDUAL) -> AlignmentResult:
     """Similarity from reconstructed poses X_RC to known camera centres p_WC (metres), by name.
 
     Anchors of unregistered images are ignored. Raises AlignmentError for fewer than three usable
-    anchors or nearly collinear ones.
+    anchors, nearly collinear ones, or an RMS residual above `max_residual` times the anchors'
+    spread (RMS distance from their centroid).
     """
     names = sorted(set(X_RCs) & set(p_WCs))
     p_W = np.array([p_WCs[n] for n in names], float).reshape(-1, 3)
@@ -135,7 +146,18 @@ def align_to_centres(X_RCs: dict[str, np.ndarray], p_WCs: dict[str, np.ndarray])
     p_R = np.array([X_RCs[n][:3, 3] for n in names])
     S = umeyama(p_R, p_W)
     residuals = np.linalg.norm(S.apply(p_R) - p_W, axis=1)
-    return AlignmentResult("anchors", S, dict(zip(names, residuals.tolist(), strict=True)), {})
+    result = AlignmentResult("anchors", S, dict(zip(names, residuals.tolist(), strict=True)), {})
+    spread = float(np.sqrt(((p_W - p_W.mean(axis=0)) ** 2).sum(axis=1).mean()))
+    if result.rms_position_m > max_residual * spread:
+        worst = sorted(result.position_residuals_m.items(), key=lambda item: -item[1])[:3]
+        raise AlignmentError(
+            f"the anchors do not fit the reconstructed cameras: RMS residual "
+            f"{result.rms_position_m:.3g} m after the best similarity, "
+            f"{100 * result.rms_position_m / spread:.0f} % of the anchors' spread ({spread:.3g} m; "
+            f"limit {100 * max_residual:g} %), largest "
+            + ", ".join(f"{n} {r:.3g} m" for n, r in worst)
+            + "; the anchors probably belong to other photos (check the file names)")
+    return result
 
 
 def align_to_camera_poses(X_RCs: dict[str, np.ndarray], X_WCs: dict[str, np.ndarray],
@@ -165,17 +187,39 @@ def align_to_camera_poses(X_RCs: dict[str, np.ndarray], X_WCs: dict[str, np.ndar
     return AlignmentResult(method, S, pos, rot)
 
 
+def _is_number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _key_lines(text: str, key: str) -> list[int]:
+    """Line numbers (from 1) where `key` appears as an object key in the JSON `text`."""
+    pattern = re.escape(json.dumps(key, ensure_ascii=False)) + r"\s*:"
+    return [text.count("\n", 0, m.start()) + 1 for m in re.finditer(pattern, text)]
+
+
 def read_anchors(path: Path) -> dict[str, np.ndarray]:
-    """Read `{"image_name.jpg": [x, y, z], ...}` (camera centres in W, metres)."""
+    """Read `{"photo.jpg": [x, y, z], ...}` (camera centres in W, metres).
+
+    Raises AlignmentError with one line naming the file, the line of the entry and the problem:
+    missing or malformed file, not an object, an entry that is not three finite numbers, a photo
+    named twice.
+    """
+    path = Path(path)
     data = read_json(path, AlignmentError, "anchors file")
     if not isinstance(data, dict) or not data:
-        raise AlignmentError(f"{path}: expected an object {{image name: [x, y, z]}}")
+        raise AlignmentError(f"{path}: expected an object {{photo file name: [x, y, z]}}")
+    text = path.read_text()
     anchors = {}
     for name, value in data.items():
-        p = np.asarray(value, dtype=float) if isinstance(value, list) else np.empty(0)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise AlignmentError(f"{path}: anchor {name!r} must be [x, y, z] in metres")
-        anchors[name] = p
+        lines = _key_lines(text, name)
+        where = f"{path}, line {lines[-1]}" if lines else str(path)
+        if len(lines) > 1:
+            raise AlignmentError(f"{where}: photo {name!r} has {len(lines)} anchors (lines "
+                                 f"{', '.join(map(str, lines))}); give one")
+        if not isinstance(value, list) or len(value) != 3 or not all(map(_is_number, value)):
+            raise AlignmentError(f"{where}: the anchor of {name!r} is {json.dumps(value)}; expected "
+                                 "[x, y, z], three numbers in metres")
+        anchors[name] = np.array(value, float)
     return anchors
 
 

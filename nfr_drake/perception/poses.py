@@ -24,6 +24,8 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import write_capture_set
 from nfr_drake.errors import ConfigError
 from nfr_drake.perception.alignment import (
+    MAX_ANCHOR_RESIDUAL,
+    AlignmentError,
     AlignmentResult,
     Similarity,
     align_to_camera_poses,
@@ -59,6 +61,8 @@ class Alignment:
     charuco: CharucoBoardSpec | None = None
     anchors: dict[str, np.ndarray] | None = None
     allow_unaligned: bool = False
+    max_anchor_residual: float = MAX_ANCHOR_RESIDUAL
+    """Refuse anchors whose RMS residual after alignment exceeds this fraction of their spread."""
 
 
 def _progress(message: str) -> None:
@@ -119,6 +123,30 @@ def _ply_text(points: np.ndarray, colors: np.ndarray) -> str:
     return "\n".join(header + rows) + "\n"
 
 
+def _check_anchor_names(anchors: dict[str, np.ndarray], photos_dir: Path,
+                        photos: list[WorkingPhoto]) -> None:
+    """Every anchor must name a photo of the folder (a typo or another folder's anchors would
+    otherwise silently leave the alignment fewer anchors than the file holds)."""
+    missing = sorted(set(anchors) - {p.name for p in photos})
+    if missing:
+        raise AlignmentError(
+            f"{len(missing)} of {len(anchors)} anchors name photos that are not in {photos_dir}: "
+            f"{', '.join(missing[:10])}{' ...' if len(missing) > 10 else ''} (anchors are keyed by "
+            f"photo file name, e.g. {photos[0].name!r}); remove them or fix the names")
+
+
+def _focal_priors(photos_dir: Path, photos: list[WorkingPhoto]) -> dict[tuple[int, int], float]:
+    """Working size -> EXIF focal length (px at that size) of the first photo of that size that
+    has one."""
+    priors = {}
+    for photo in photos:
+        if photo.size not in priors:
+            focal = exif_focal_prior(photos_dir / photo.name, *photo.size)
+            if focal is not None:
+                priors[photo.size] = focal
+    return priors
+
+
 def _check_request(alignment: Alignment, out: Path, max_size: int) -> None:
     if alignment.charuco is not None and alignment.anchors is not None:
         raise ConfigError("align with either a ChArUco board or anchors, not both")
@@ -143,7 +171,7 @@ def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_d
             raise BoardNotFoundError(_board_message(estimator, len(X_BCs), "registered photo(s)"))
         return align_to_camera_poses(X_RCs, X_BCs, "charuco"), details
     if alignment.anchors is not None:
-        return align_to_centres(X_RCs, alignment.anchors), {}
+        return align_to_centres(X_RCs, alignment.anchors, alignment.max_anchor_residual), {}
     return None, {}
 
 
@@ -188,15 +216,14 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         # Cheap checks before the costly reconstruction.
         with_board = _photos_with_board(estimator, image_dir, photos) if estimator else []
         if alignment.anchors is not None:
-            known = sorted(set(alignment.anchors) & set(work_name))
-            check_not_collinear(np.array([alignment.anchors[n] for n in known]).reshape(-1, 3), known)
+            _check_anchor_names(alignment.anchors, photos_dir, photos)
+            names = sorted(alignment.anchors)
+            check_not_collinear(np.array([alignment.anchors[n] for n in names]), names)
 
         work_camera = _working_camera(camera, photos) if camera else None
-        focal_prior = None
-        if camera is None and len({p.size for p in photos}) == 1:
-            focal_prior = exif_focal_prior(photos_dir / photos[0].name, *photos[0].size)
-        sfm = run_sfm(image_dir, [p.work_name for p in photos], work, work_camera, sfm_options,
-                      progress, focal_prior)
+        focal_priors = _focal_priors(photos_dir, photos) if camera is None else {}
+        sfm = run_sfm(image_dir, {p.work_name: p.size for p in photos}, work, work_camera,
+                      sfm_options, progress, focal_priors)
         rec = sfm.reconstruction
         photo_name = {p.work_name: p.name for p in photos}
         X_RCs = {photo_name[n]: X for n, X in camera_poses(rec).items()}
@@ -233,13 +260,14 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
             points3D=len(points), num_models=sfm.num_models,
             calibration="known" if camera else "self-calibrated" + (
-                " from the EXIF focal length" if focal_prior else ""),
+                " from the EXIF focal length" if focal_priors else ""),
             alignment=aligned, frame=frame,
             frames={f"images/frame_{i:03d}.png": n for i, n in enumerate(registered)},
             cameras={n: cameras[n].to_json() for n in registered}, board_poses=board_details,
             seconds={**sfm.seconds, "total": time.perf_counter() - start})
         write_capture_set(out, images, X_OCs, pinholes,
-                          extra_files={REPORT_FILE: report.dumps(), POINTS_FILE: _ply_text(p_O, colors)})
+                          extra_files={REPORT_FILE: report.dumps(), POINTS_FILE: _ply_text(p_O, colors)},
+                          source_photos=registered)
     return report
 
 
@@ -251,6 +279,7 @@ def poses_command(
     charuco: bool = False,
     board: CharucoBoardSpec = DEFAULT_BOARD,
     anchors: Path | None = None,
+    max_anchor_residual: float = MAX_ANCHOR_RESIDUAL,
     object_pose: str | None = None,
     min_registered: int = 3,
     allow_unaligned: bool = False,
@@ -269,7 +298,10 @@ def poses_command(
             W is then the board frame.
         board: the board's geometry.
         anchors: JSON {"photo.jpg": [x, y, z], ...}: known camera centres in W, metres (3 or
-            more, not on a line).
+            more, not on a line), keyed by the photos' file names.
+        max_anchor_residual: refuse the anchors (they probably belong to other photos) when their
+            RMS residual after alignment exceeds this fraction of their spread (RMS distance from
+            their centroid).
         object_pose: X_WO, the object frame in W: "x y z roll pitch yaw" (metres, radians; write
             --object-pose="-0.1 ..." for a leading minus) or a JSON file with a 4x4 matrix.
             Default: O = W.
@@ -283,7 +315,7 @@ def poses_command(
     camera = PinholeCamera.from_json_file(intrinsics) if intrinsics else None
     alignment = Alignment(charuco=board if charuco else None,
                           anchors=read_anchors(anchors) if anchors else None,
-                          allow_unaligned=allow_unaligned)
+                          allow_unaligned=allow_unaligned, max_anchor_residual=max_anchor_residual)
     report = estimate_poses(photos_dir, out, alignment, camera, X_WO, max_size, min_registered,
                             sfm, work_dir)
     print(report.summary())

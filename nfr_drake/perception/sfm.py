@@ -2,8 +2,12 @@
 
 `run_sfm` turns a folder of (resized) photos into a `pycolmap.Reconstruction` in its own
 arbitrary frame R and scale. Camera poses come out as `cam_from_world` (COLMAP: X_CR, OpenCV
-axes); `camera_poses` turns them into X_RC. Known intrinsics are held fixed; without them each
-camera is self-calibrated with COLMAP's SIMPLE_RADIAL model (f, cx, cy, k).
+axes); `camera_poses` turns them into X_RC. Known intrinsics are held fixed. Without them the
+photos of one size share one camera, self-calibrated with COLMAP's SIMPLE_RADIAL model
+(f, cx, cy, k): its focal length and distortion during mapping, then its principal point in a
+final bundle adjustment. (COLMAP on its own gives every photo without EXIF data a camera of its
+own, and keeps principal points at the image centre: on Herz-Jesu-P8 that doubles the worst camera
+centre error, docs/POSE_ESTIMATION.md.)
 """
 
 from __future__ import annotations
@@ -20,6 +24,12 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.errors import NfrDrakeError
 
 SELF_CALIBRATION_MODEL = "SIMPLE_RADIAL"
+MIN_IMAGES_FOR_PRINCIPAL_POINT = 4
+"""A self-calibrated camera gets its principal point refined only when this many registered images
+share it: one image cannot tell a principal-point shift from a rotation."""
+MAX_PRINCIPAL_POINT_SHIFT = 0.05
+"""A refined principal point farther than this fraction of the image size from the centre (real
+lenses are within a few per cent) means the photos do not constrain it: the refinement is dropped."""
 
 
 class ReconstructionError(NfrDrakeError):
@@ -42,6 +52,13 @@ class SfmOptions:
     """Random seed of RANSAC and the mapper (runs with several threads may still differ slightly)."""
     num_threads: int = -1
     """CPU threads; -1 uses all cores."""
+    camera_per_image: bool = False
+    """Self-calibration: a camera of its own for every photo (COLMAP's default for photos without
+    EXIF data; less exact, since every photo then fits its own focal length and distortion)
+    instead of one camera per image size."""
+    refine_principal_point: bool = True
+    """Self-calibration: refine the principal point of each shared camera in a final bundle
+    adjustment (otherwise it stays at the image centre)."""
     verbose: bool = False
     """Show COLMAP's own log lines (otherwise only its warnings and errors)."""
 
@@ -60,12 +77,12 @@ class SfmResult:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def _reader_options(camera: PinholeCamera | None, focal_prior: tuple[float, int, int] | None
+def _reader_options(camera: PinholeCamera | None, size: tuple[int, int], focal_prior: float | None
                     ) -> pycolmap.ImageReaderOptions:
     if camera is None and focal_prior is not None:
-        f, w, h = focal_prior
+        w, h = size
         return pycolmap.ImageReaderOptions(camera_model=SELF_CALIBRATION_MODEL,
-                                           camera_params=f"{f:.17g},{w / 2},{h / 2},0")
+                                           camera_params=f"{focal_prior:.17g},{w / 2},{h / 2},0")
     if camera is None:
         return pycolmap.ImageReaderOptions(camera_model=SELF_CALIBRATION_MODEL)
     model, params = camera.colmap_model()
@@ -86,17 +103,19 @@ def _mapping_options(known_intrinsics: bool, options: SfmOptions) -> pycolmap.In
     return mapping
 
 
-def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PinholeCamera | None,
-            options: SfmOptions | None = None,
+def run_sfm(image_dir: Path, image_sizes: dict[str, tuple[int, int]], work_dir: Path,
+            camera: PinholeCamera | None, options: SfmOptions | None = None,
             progress: Callable[[str], None] | None = print,
-            focal_prior: tuple[float, int, int] | None = None) -> SfmResult:
-    """Reconstruct cameras and sparse points from the images `image_names` in `image_dir`.
+            focal_priors: dict[tuple[int, int], float] | None = None) -> SfmResult:
+    """Reconstruct cameras and sparse points from the images in `image_dir`.
 
     Args:
+        image_sizes: image file name -> (width, height) in pixels, of the images to use.
         camera: intrinsics of every image (all must have its size), held fixed; None to
-            self-calibrate one SIMPLE_RADIAL camera per image size.
-        focal_prior: (focal length px, width, height) to start self-calibration from, for images
-            of that size (e.g. from the photos' EXIF); default COLMAP's 1.2 x the longer side.
+            self-calibrate one SIMPLE_RADIAL camera per image size (per image with
+            `options.camera_per_image`).
+        focal_priors: (width, height) -> focal length (px) to start self-calibrating the images
+            of that size from (e.g. from the photos' EXIF); default COLMAP's 1.2 x the longer side.
         work_dir: receives `database.db` and the mapper's `sparse/` models.
         progress: called with one line per stage; None for silence.
     Raises ReconstructionError when no model is found.
@@ -105,32 +124,74 @@ def run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Pin
     previous_level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 0 if options.verbose else 1
     try:
-        return _run_sfm(image_dir, image_names, work_dir, camera, options,
-                        progress or (lambda _: None), focal_prior)
+        return _run_sfm(image_dir, image_sizes, work_dir, camera, options,
+                        progress or (lambda _: None), focal_priors or {})
     finally:
         pycolmap.logging.minloglevel = previous_level
 
 
-def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: PinholeCamera | None,
-             options: SfmOptions, say: Callable[[str], None],
-             focal_prior: tuple[float, int, int] | None) -> SfmResult:
+def _extract(database: Path, image_dir: Path, image_sizes: dict[str, tuple[int, int]],
+             camera: PinholeCamera | None, options: SfmOptions,
+             focal_priors: dict[tuple[int, int], float]) -> None:
+    """SIFT features of every image into `database`, with one camera per image size (a fresh
+    camera for each call of COLMAP's extractor in its single-camera mode) or per image."""
+    extraction = pycolmap.FeatureExtractionOptions(num_threads=options.num_threads)
+    extraction.sift.max_num_features = options.max_num_features
+    extraction.sift.first_octave = options.first_octave
+    per_image = camera is None and options.camera_per_image
+    for size in sorted(set(image_sizes.values())):
+        pycolmap.extract_features(
+            database, image_dir, image_names=[n for n, s in image_sizes.items() if s == size],
+            camera_mode=pycolmap.CameraMode.PER_IMAGE if per_image else pycolmap.CameraMode.SINGLE,
+            reader_options=_reader_options(camera, size, focal_priors.get(size)),
+            extraction_options=extraction, device=pycolmap.Device.cpu)
+
+
+def _refine_principal_points(reconstruction: pycolmap.Reconstruction, options: SfmOptions
+                             ) -> pycolmap.Reconstruction:
+    """A global bundle adjustment that also refines the principal point of every camera that at
+    least MIN_IMAGES_FOR_PRINCIPAL_POINT registered images share; the input when no camera
+    qualifies or a principal point leaves MAX_PRINCIPAL_POINT_SHIFT of the image centre."""
+    users: dict[int, int] = {}
+    for image in reconstruction.images.values():
+        if image.has_pose:
+            users[image.camera_id] = users.get(image.camera_id, 0) + 1
+    shared = {c for c, n in users.items() if n >= MIN_IMAGES_FOR_PRINCIPAL_POINT}
+    if not shared:
+        return reconstruction
+    refined = pycolmap.Reconstruction(reconstruction)
+    ba = pycolmap.BundleAdjustmentOptions(refine_principal_point=True, print_summary=False)
+    ba.ceres.solver_options.num_threads = options.num_threads
+    config = pycolmap.BundleAdjustmentConfig()
+    for image in refined.images.values():
+        if image.has_pose:
+            config.add_image(image.image_id)
+    for camera_id in users.keys() - shared:
+        config.set_constant_cam_intrinsics(camera_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    pycolmap.create_default_bundle_adjuster(ba, config, refined).solve()
+    for camera_id in shared:
+        camera = refined.cameras[camera_id]
+        shift = np.abs([camera.principal_point_x - camera.width / 2,
+                        camera.principal_point_y - camera.height / 2])
+        if np.any(shift > MAX_PRINCIPAL_POINT_SHIFT * np.array([camera.width, camera.height])):
+            return reconstruction
+    return refined
+
+
+def _run_sfm(image_dir: Path, image_sizes: dict[str, tuple[int, int]], work_dir: Path,
+             camera: PinholeCamera | None, options: SfmOptions, say: Callable[[str], None],
+             focal_priors: dict[tuple[int, int], float]) -> SfmResult:
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "database.db"
     database.unlink(missing_ok=True)
     pycolmap.set_random_seed(options.seed)
     seconds = {}
 
-    n = len(image_names)
+    n = len(image_sizes)
     say(f"extracting SIFT features from {n} images (CPU)")
     start = time.perf_counter()
-    extraction = pycolmap.FeatureExtractionOptions(num_threads=options.num_threads)
-    extraction.sift.max_num_features = options.max_num_features
-    extraction.sift.first_octave = options.first_octave
-    pycolmap.extract_features(
-        database, image_dir, image_names=image_names,
-        camera_mode=pycolmap.CameraMode.SINGLE if camera or focal_prior else pycolmap.CameraMode.AUTO,
-        reader_options=_reader_options(camera, focal_prior), extraction_options=extraction,
-        device=pycolmap.Device.cpu)
+    _extract(database, image_dir, image_sizes, camera, options, focal_priors)
     seconds["extraction"] = time.perf_counter() - start
 
     say(f"matching all {n * (n - 1) // 2} image pairs (exhaustive, CPU)")
@@ -146,24 +207,26 @@ def _run_sfm(image_dir: Path, image_names: list[str], work_dir: Path, camera: Pi
     sparse.mkdir(exist_ok=True)
     models = pycolmap.incremental_mapping(database, image_dir, sparse,
                                           _mapping_options(camera is not None, options))
-    seconds["mapping"] = time.perf_counter() - start
     if not models:
         raise ReconstructionError(
             f"no model found from {n} photos: too few matching features between them (photos need "
             "overlap, texture and a camera that moves between shots)")
     best = max(models.values(), key=lambda r: r.num_reg_images())
+    if camera is None and options.refine_principal_point:
+        best = _refine_principal_points(best, options)
+    seconds["mapping"] = time.perf_counter() - start
     say(f"registered {best.num_reg_images()} of {n} images, {best.num_points3D()} points, "
         f"mean reprojection error {best.compute_mean_reprojection_error():.3f} px")
     return SfmResult(best, len(models), seconds)
 
 
-def exif_focal_prior(photo: Path, width: int, height: int) -> tuple[float, int, int] | None:
+def exif_focal_prior(photo: Path, width: int, height: int) -> float | None:
     """The focal length (px) of a photo's EXIF data (focal length with the sensor size, or the
-    35 mm equivalent), scaled to width x height, as `run_sfm`'s focal_prior; None without EXIF."""
+    35 mm equivalent), scaled to width x height, for `run_sfm`'s focal_priors; None without EXIF."""
     exif = pycolmap.infer_camera_from_image(photo)
     if not exif.has_prior_focal_length:
         return None
-    return exif.mean_focal_length() * max(width, height) / max(exif.width, exif.height), width, height
+    return exif.mean_focal_length() * max(width, height) / max(exif.width, exif.height)
 
 
 def camera_poses(reconstruction: pycolmap.Reconstruction) -> dict[str, np.ndarray]:

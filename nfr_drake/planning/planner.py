@@ -8,8 +8,10 @@ evenly spaced in q; then `end_stop_overshoot` past full opening), ending at rest
 normalised times of these knots and the duration come from the chained IK: each segment gets the
 time its joints need at the velocity limits, the approach at least
 `pregrasp_distance / approach_speed`, the handle at most `handle_speed`. Only the keypoint
-trajectory is used; obstacles are the floor and the keypoint-derived carcass box, and until the
-grasp an open door's panel.
+trajectory is used, with obstacle boxes: the floor and the keypoint-derived carcass box, or a true
+model's own collision geometry (`nfr_drake.world.obstacles`), and until the grasp an open door's
+panel. The base stands on the floor or, for a high handle path, on a lift column the planner raises
+(`PlannerConfig.max_lift`).
 """
 
 import time
@@ -36,8 +38,9 @@ from nfr_drake.planning.grasp import (
 )
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.world.keypoints import KeypointTrajectory
-from nfr_drake.world.plan import HandleWaypoint, PlanResult
-from nfr_drake.world.robot import NUM_ARM_JOINTS, Q_HOME
+from nfr_drake.world.obstacles import distance_to_box
+from nfr_drake.world.plan import HandleWaypoint, ObstacleBox, PlanResult
+from nfr_drake.world.robot import NUM_ARM_JOINTS, PEDESTAL_HALF_WIDTH, Q_HOME
 
 _SPEED_MARGIN = 1.5  # peak over mean joint speed allowed for in the knot timing
 _IK_ITERATIONS = 60  # a reachable stage converges in far fewer; fail fast on the rest
@@ -49,6 +52,8 @@ _PREFERRED_DISTANCE = 0.62  # base to handle-path centroid, m (most chained IKs 
 _BASE_CLEARANCE = 0.25  # base axis to the moving part's sweep, m
 _WRIST_OFFSET = 0.21  # tool point to the wrist centre, back along the approach, m
 _MIN_WRIST_RADIUS = 0.2  # wrist centres closer to the base axis than this cramp the arm, m
+_COLUMN_RADIUS = PEDESTAL_HALF_WIDTH * np.sqrt(2.0)  # the lift column's (and base plate's) reach, m
+_OBSTACLE_RANGE = 1.3  # obstacles farther than this from the shoulder are out of the arm's reach, m
 
 
 class PlanningError(NfrDrakeError):
@@ -87,6 +92,12 @@ class PlannerConfig:
     min_duration: float = 2.0
     max_duration: float = 15.0
     max_base_candidates: int = 12
+    max_lift: float = 1.0
+    """Highest base above the floor, m: the arm stands on a lift column (as on a mobile manipulator;
+    a pedestal in simulation). 0 keeps it on the floor."""
+    lift_reach: float = 0.9
+    """The base is raised only as far as puts the handle path's highest point at most this far
+    above it, m; lower paths keep the base on the floor."""
     end_stop_overshoot: float = 0.03
     """When the target is full opening (q = 1), the handle path goes on this far past the predicted
     end along its tangent, m, so that the object's own stop ends the motion: a predicted travel a few
@@ -102,6 +113,8 @@ class PlannerConfig:
             raise NfrDrakeError("planner: num_waypoints must be at least 2")
         if self.end_stop_overshoot < 0.0:
             raise NfrDrakeError("planner: end_stop_overshoot must not be negative")
+        if self.max_lift < 0.0:
+            raise NfrDrakeError("planner: max_lift must not be negative")
 
 
 def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np.ndarray:
@@ -118,25 +131,39 @@ def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np
     return np.array(pts)
 
 
-def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], max_count: int
-                     ) -> list[RigidTransform]:
-    """Robot base poses on the floor facing the handle path, most reachable first.
+def _base_height(waypoints: list[HandleWaypoint], cfg: PlannerConfig) -> float:
+    """Height of the base above the floor, m: the least that puts the highest handle waypoint at most
+    `lift_reach` above it, within [0, max_lift]."""
+    top = max(w.p_WH[2] for w in waypoints)
+    return float(np.clip(top - cfg.lift_reach, 0.0, cfg.max_lift))
+
+
+def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], obstacles: list[ObstacleBox],
+                     cfg: PlannerConfig) -> list[RigidTransform]:
+    """Robot base poses facing the handle path, at `_base_height`, most reachable first.
 
     Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
-    part's sweep by `_BASE_CLEARANCE` and the wrist centre of every waypoint (`_WRIST_OFFSET` back
-    along the approach) is within `_WRIST_REACH` of the shoulder and `_MIN_WRIST_RADIUS` off the base
-    axis. Ranked by closeness to `_PREFERRED_DISTANCE`
-    from the centroid (nearer bases cramp the arm), then by the farthest wrist reach.
+    part's sweep by `_BASE_CLEARANCE`, its column (floor to shoulder) clears every obstacle by
+    `_COLUMN_RADIUS` (the planner's collision checks ignore the base link and the column, which are
+    welded to the world as the obstacles are), and the wrist centre of every waypoint (`_WRIST_OFFSET`
+    back along the approach) is within `_WRIST_REACH` of the shoulder and `_MIN_WRIST_RADIUS` off the
+    base axis. Ranked by closeness to `_PREFERRED_DISTANCE` from the centroid (nearer bases cramp the
+    arm), then by the farthest wrist reach.
     """
     p = np.array([w.p_WH for w in waypoints])
     wrists = p - _WRIST_OFFSET * np.array([w.approach_W for w in waypoints])
     swept = _swept_points(kt, waypoints)
     c = p.mean(axis=0)
+    z_B = _base_height(waypoints, cfg)
+    column = np.linspace(0.0, z_B + _SHOULDER_HEIGHT, 8)
     scored = []
     for rho in np.arange(0.3, 1.01, 0.1):
         for phi in np.radians(np.arange(0.0, 360.0, 15.0)):
-            p_WB = np.array([c[0] + rho * np.cos(phi), c[1] + rho * np.sin(phi), 0.0])
+            p_WB = np.array([c[0] + rho * np.cos(phi), c[1] + rho * np.sin(phi), z_B])
             if np.min(np.linalg.norm((swept - p_WB)[:, :2], axis=1)) < _BASE_CLEARANCE:
+                continue
+            axis = np.column_stack([np.full(8, p_WB[0]), np.full(8, p_WB[1]), column])
+            if any(distance_to_box(box, axis).min() < _COLUMN_RADIUS for box in obstacles):
                 continue
             reach = np.linalg.norm(wrists - (p_WB + [0, 0, _SHOULDER_HEIGHT]), axis=1)
             radius = np.linalg.norm((wrists - p_WB)[:, :2], axis=1)
@@ -146,7 +173,13 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ma
             score = abs(rho - _PREFERRED_DISTANCE) + 0.1 * reach.max()
             scored.append((score, RigidTransform(RollPitchYaw(0, 0, yaw), p_WB)))
     scored.sort(key=lambda item: item[0])
-    return [X for _, X in scored[:max_count]]
+    return [X for _, X in scored[:cfg.max_base_candidates]]
+
+
+def _within_reach(obstacles: list[ObstacleBox], X_WB: RigidTransform) -> list[ObstacleBox]:
+    """The obstacles within `_OBSTACLE_RANGE` of the shoulder of a base at X_WB."""
+    shoulder = X_WB @ np.array([0.0, 0.0, _SHOULDER_HEIGHT])
+    return [box for box in obstacles if distance_to_box(box, shoulder[None])[0] <= _OBSTACLE_RANGE]
 
 
 @dataclass
@@ -325,11 +358,13 @@ def _optimise_at(scenes: _Scenes, stages: list[_Stage], s_knots: np.ndarray, q_k
 
 
 def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray = Q_HOME,
-                      config: PlannerConfig | None = None) -> PlanResult:
+                      config: PlannerConfig | None = None,
+                      obstacles: list[ObstacleBox] | None = None) -> PlanResult:
     """Plan grasping the handle and moving it from `kt.q_current` to `q_target`.
 
-    q_start: the arm's joint positions at t = 0, rad, shape (7,). Raises PlanningError naming the
-    constraints that failed.
+    q_start: the arm's joint positions at t = 0, rad, shape (7,). obstacles: boxes in W that stay
+    put (a true model's geometry without the moving part); None: the keypoint-derived carcass box.
+    Raises PlanningError naming the constraints that failed.
     """
     config = config or PlannerConfig()
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -341,11 +376,12 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         end = waypoints[-1]
         onward = config.end_stop_overshoot * handle_tangent(kt, 1.0)
         waypoints.append(replace(end, p_WH=end.p_WH + onward))
-    obstacles, door = [carcass_box(kt)], door_panel_box(kt)
+    obstacles, door = list(obstacles) if obstacles is not None else [carcass_box(kt)], door_panel_box(kt)
     failures = []
-    for X_WB in _base_candidates(kt, waypoints, config.max_base_candidates):
-        follow = build_planning_scene(X_WB, obstacles)
-        scenes = _Scenes(build_planning_scene(X_WB, [*obstacles, door]) if door else follow, follow)
+    for X_WB in _base_candidates(kt, waypoints, obstacles, config):
+        near = _within_reach(obstacles, X_WB)
+        follow = build_planning_scene(X_WB, near)
+        scenes = _Scenes(build_planning_scene(X_WB, [*near, door]) if door else follow, follow)
         for flip in (True, False):
             stages = _stages(waypoints, config, flip)
             sols, failed = _chained_ik(scenes, stages, q_start, config)
@@ -362,5 +398,6 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
                               {"placement": t1 - t0, "trajopt": t2 - t1, "total": t2 - t0,
                                "cpu": time.process_time() - cpu0})
     summary = "; ".join(dict.fromkeys(failures)) or (
-        "no robot base position both reaches every handle waypoint and clears the moving part's sweep")
+        "no robot base position both reaches every handle waypoint (the base raised at most "
+        f"{config.max_lift:.2f} m) and clears the moving part's sweep and the obstacles")
     raise PlanningError(f"no feasible motion from q={kt.q_current:.2f} to q={q_target:.2f}: {summary}")

@@ -1,6 +1,7 @@
-"""The planner's world: the arm at a base pose, the floor and keypoint-derived obstacle boxes.
+"""The planner's world: the arm at a base pose (on a pedestal if raised), the floor, obstacle boxes.
 
-It never holds the object's model: obstacles come from `grasp.carcass_box` (keypoints only).
+It never holds the object's model: obstacles are boxes, from keypoints (`grasp.carcass_box`) or,
+for a true model, from its collision geometry (`nfr_drake.world.obstacles`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pydrake.planning import RobotDiagram, RobotDiagramBuilder
 from pydrake.systems.framework import Context
 
 from nfr_drake.world.plan import ObstacleBox
-from nfr_drake.world.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda
+from nfr_drake.world.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda, add_pedestal
 
 
 @dataclass
@@ -43,11 +44,13 @@ class PlanningScene:
 
 
 def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox]) -> PlanningScene:
-    """The arm with base pose X_WB, the floor, and `obstacles` welded to the world."""
+    """The arm with base pose X_WB (on a pedestal if raised), the floor, and `obstacles` welded to
+    the world."""
     builder = RobotDiagramBuilder(time_step=0.0)
     plant = builder.plant()
     robot = add_panda(plant, X_WB)
     add_floor(plant)
+    add_pedestal(plant, X_WB)
     for box in obstacles:
         plant.RegisterCollisionGeometry(plant.world_body(), box.X_WB, Box(*box.size),
                                         f"obstacle_{box.name}", ProximityProperties())

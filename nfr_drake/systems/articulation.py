@@ -1,6 +1,8 @@
 """Simulating a planned grasp-and-articulate motion on the true object (docs/SIMULATION.md).
 
-A discrete MultibodyPlant (SAP) holds the floor, the arm and the object. The arm's joints are PD
+A discrete MultibodyPlant (SAP) holds the floor, the arm (on a pedestal welded to the world when the
+plan raised its base) and the object; the object's other joints (`SceneObject.locked_joints`) are
+locked shut in the context. The arm's joints are PD
 controlled inside the plant (implicit PD of the actuators) towards the plan, with gravity
 compensation as feed-forward. Once the hand holds the handle the arm turns compliant
 (`SimulationConfig.grasped_stiffness`, `CompliantCommand`): the true joint of the object, not the
@@ -40,6 +42,7 @@ from nfr_drake.world.robot import (
     TOOL_FRAME,
     add_floor,
     add_panda,
+    add_pedestal,
 )
 
 # Implicit PD gains of the actuators (arm joints 1-7, then the two fingers).
@@ -197,6 +200,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap"), builder)
     robot = add_panda(plant, plan.X_WB)
     add_floor(plant)
+    add_pedestal(plant, plan.X_WB)
     model = obj.add_to(plant)
     actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
     robot_actuators = [a for a in actuators if a.model_instance() == robot]
@@ -220,8 +224,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     hand_geometries = GeometrySet([g for body in hand_bodies
                                    for g in plant.GetCollisionGeometriesForBody(body)])
     joint = plant.GetJointByName(obj.joint_name, model)
-    moving_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)
-                     if b != joint.parent_body().index()]
+    moving_bodies = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])]
     moving_geometries = GeometrySet([g for body in moving_bodies
                                      for g in plant.GetCollisionGeometriesForBody(body)])
     scene_graph.collision_filter_manager().Apply(
@@ -252,6 +255,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     lower = joint.position_lower_limits()[0]
     span = joint.position_upper_limits()[0] - lower
     set_joint_value(plant, plant_context, joint, lower + obj.ground_truth.q_current * span)
+    lock_shut(plant, plant_context, [plant.GetJointByName(name, model) for name in obj.locked_joints])
     plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
     for ids in constraint_ids:
         for cid in ids:
@@ -300,6 +304,15 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
                             float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
+
+
+def lock_shut(plant: MultibodyPlant, plant_context, joints) -> None:
+    """Set one-dof `joints` to 0 (shut) and lock them in `plant_context` (`Joint.Lock`; SAP keeps a
+    locked joint still whatever pushes it). Locking instead of welding keeps the object's model as
+    it is everywhere else, and a later run may leave the joints free."""
+    for joint in joints:
+        set_joint_value(plant, plant_context, joint, 0.0)
+        joint.Lock(plant_context)
 
 
 def grip_points(p_BH: np.ndarray, bar_B: np.ndarray, half_length: float, spacing: float) -> np.ndarray:

@@ -9,7 +9,7 @@ from typing import Literal
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlanningError
-from nfr_drake.systems.scene_objects import SceneObject, object_pose
+from nfr_drake.systems.scene_objects import SceneObject, object_pose, random_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 
 
@@ -17,8 +17,9 @@ def plan_command(
     object: Path | None = None,
     joint: str | None = None,
     handle_body: str | None = None,
-    category: Literal["closet", "drawer"] | None = None,
+    category: Literal["closet", "drawer", "furniture"] | None = None,
     seed: int = 0,
+    part: int | None = None,
     task: Literal["open", "close"] = "open",
     start_q: float | None = None,
     target_q: float | None = None,
@@ -35,9 +36,12 @@ def plan_command(
         handle_body: the body whose origin/geometry centre is the handle (with --object).
         category: instead of --object, plan on a sampled object of this category.
         seed: which sampled object (object_rng(SEED_DOMAIN_TRAIN, seed, 0)).
+        part: which door or drawer of a sampled object (its index in canonical order,
+            docs/FURNITURE.md); the others stay shut. Default: drawn from the object's stream.
         task: "open" (start_q -> target_q upward) or "close".
         start_q: articulation in [0, 1] at the start (default 0 to open, the open target to close).
-        target_q: articulation to reach (default 0.6 for doors, 1.0 for drawers to open; 0 to close).
+        target_q: articulation to reach (default 0.6 for doors, 1.0 for drawers to open; 0 to
+            close).
         object_xyz: position of the object's base in the world, m.
         object_yaw_deg: its rotation about the vertical, degrees.
         replay: where to write the self-contained HTML replay.
@@ -48,13 +52,22 @@ def plan_command(
     X_WO = object_pose(object_xyz, object_yaw_deg)
     if (object is None) == (category is None):
         raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category")
+    if object is not None and part is not None:
+        raise NfrDrakeError("--part chooses a front of a sampled object (--category); with --object "
+                            "give --joint")
     if object is not None:
         if joint is None or handle_body is None:
             raise NfrDrakeError("--object needs --joint and --handle-body")
         scene_object = SceneObject.from_model_file(object, joint, handle_body, X_WO, 0.0)
     else:
-        obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, 0))
-        scene_object = SceneObject.from_articulated_object(obj, X_WO, 0.0)
+        rng = object_rng(SEED_DOMAIN_TRAIN, seed, 0)
+        obj = sample_object(category, rng)
+        drawn = random_part(obj, rng)
+        part = drawn if part is None else part
+        scene_object = SceneObject.from_articulated_object(obj, X_WO, 0.0, part=part)
+        if obj.num_fronts > 1:
+            print(f"{obj.params.get('kind', obj.category)} with {obj.num_fronts} parts; opening part "
+                  f"{part} ({obj.front(part).kind})")
     open_q = OPEN_TARGET[scene_object.category]
     q0 = start_q if start_q is not None else (0.0 if task == "open" else open_q)
     q1 = target_q if target_q is not None else (open_q if task == "open" else 0.0)

@@ -1,7 +1,9 @@
 """Articulated objects as the simulation sees them: how to load one, its joint, its handle.
 
-Either a sampled `ArticulatedObject` or any SDFormat/URDF file with one revolute or prismatic joint.
-The ground-truth keypoint trajectory is read from the model (handle point, hinge axis or slide).
+Either one front of a sampled `ArticulatedObject` (the other fronts held shut, their geometry and the
+carcass's an obstacle for the planner) or any SDFormat/URDF file with one revolute or prismatic
+joint. The ground-truth keypoint trajectory is read from the model (handle point, hinge axis or
+slide).
 """
 
 from __future__ import annotations
@@ -19,9 +21,11 @@ from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJ
 from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.errors import ConfigError, NfrDrakeError
-from nfr_drake.objects.articulated import ArticulatedObject
+from nfr_drake.objects.articulated import ArticulatedObject, Front
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.world.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
+from nfr_drake.world.obstacles import object_obstacles
+from nfr_drake.world.plan import ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
 _HINGE_HALF_SPAN = 0.25  # hinge keypoints of a loaded model: this far along the axis from the handle's foot
@@ -48,10 +52,14 @@ GRIP_END_MARGIN = 0.02
 """Free bar kept at each end of a grip (half a finger pad plus a drawer handle's post), m."""
 
 
-def grip_half_length(obj: ArticulatedObject) -> float:
-    """Half the stretch of a sampled object's bar handle where fingers fit, m (0 for a knob)."""
-    length = float(obj.params.get("handle_length", 0.0))
-    return max(0.0, length / 2.0 - GRIP_END_MARGIN)
+def grip_half_length(front: Front) -> float:
+    """Half the stretch of a front's grip where fingers fit, m (0 for a knob)."""
+    return max(0.0, front.grip_half_length - GRIP_END_MARGIN)
+
+
+def random_part(obj: ArticulatedObject, rng: np.random.Generator) -> int:
+    """A front index of `obj` drawn uniformly from `rng` (the piece's own stream, after the piece)."""
+    return int(rng.integers(obj.num_fronts))
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,11 @@ class SceneObject:
         ground_truth: the true keypoint trajectory, in W.
         grip_half_length: half the stretch of the grip, along bar_B about p_BH, where a hand can
             close on it, m; 0 for a point grip (a knob, or a loaded model).
+        locked_joints: the object's other joints, held at 0 (shut) in simulation: locked in the
+            context (`Joint.Lock`), so they stay bodies on joints, the same model as everywhere.
+        obstacles: the object's collision geometry in W without the moving part, as boxes, for
+            planning with the true model (`nfr_drake.world.obstacles`); None: the planner derives
+            a carcass box from the keypoints (closets, drawers, loaded models).
     """
 
     category: str
@@ -77,20 +90,34 @@ class SceneObject:
     bar_B: np.ndarray
     ground_truth: KeypointTrajectory
     grip_half_length: float = 0.0
+    locked_joints: tuple[str, ...] = ()
+    obstacles: tuple[ObstacleBox, ...] | None = None
 
     @staticmethod
-    def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> SceneObject:
-        """A sampled object at articulation q."""
-        axis_M = np.asarray(obj.axis_O) if obj.joint_type == "revolute" else np.array([0.0, 1.0, 0.0])
+    def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float,
+                                part: int = 0) -> SceneObject:
+        """Front `part` of a sampled object at articulation q, the other fronts shut.
+
+        A piece of furniture also gives the planner its geometry as obstacles; a closet or a
+        drawer (one front) leaves it the keypoint-derived box, as its fitted keypoints do."""
+        if not 0 <= part < obj.num_fronts:
+            kinds = ", ".join(f"{k}: {f.kind}" for k, f in enumerate(obj.fronts))
+            raise NfrDrakeError(f"part {part} is out of range: {obj.name} has {obj.num_fronts} "
+                                f"parts ({kinds})")
+        front = obj.front(part)
+        obstacles = (tuple(object_obstacles(obj, X_WO, 0.0, moving=part))
+                     if obj.category == "furniture" else None)
         return SceneObject(
-            category=obj.category,
+            category="closet" if front.joint_type == "revolute" else "drawer",
             add_to=lambda plant: add_articulated_object(plant, obj, X_WO),
-            joint_name=obj.joint_name,
-            handle_body_name=obj.moving_link_name,
-            p_BH=np.asarray(obj.moving_keypoints["handle"], dtype=float),
-            bar_B=axis_M,
-            ground_truth=KeypointTrajectory.from_articulated_object(obj, X_WO, q),
-            grip_half_length=grip_half_length(obj))
+            joint_name=front.joint_name,
+            handle_body_name=front.link_name,
+            p_BH=np.asarray(front.moving_keypoints["handle"], dtype=float),
+            bar_B=np.asarray(front.grip_axis_M, dtype=float),
+            ground_truth=KeypointTrajectory.from_articulated_object(obj, X_WO, q, part=part),
+            grip_half_length=grip_half_length(front),
+            locked_joints=tuple(f.joint_name for k, f in enumerate(obj.fronts) if k != part),
+            obstacles=obstacles)
 
     @staticmethod
     def from_model_file(path: Path, joint_name: str, handle_body_name: str, X_WO: RigidTransform,

@@ -65,11 +65,15 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
 
     With `replay`, a meshcat (given or made here) records the run and the keypoint paths used by the
     planner and an HTML replay is written there. `reference` (e.g. the true keypoints when the
-    planner used predicted ones) is drawn too, under "keypoints_true".
+    planner used predicted ones) is drawn too, under "keypoints_true". Planning with the object's
+    own keypoints (`keypoints` None) uses its geometry as obstacles where it has them
+    (`SceneObject.obstacles`); given keypoints are planned with keypoint-derived boxes only.
     """
     kt = keypoints if keypoints is not None else read_keypoints(obj)
+    obstacles = list(obj.obstacles) if keypoints is None and obj.obstacles is not None else None
     try:
-        plan = plan_articulation(kt, q_target, config=planner_config or PlannerConfig())
+        plan = plan_articulation(kt, q_target, config=planner_config or PlannerConfig(),
+                                 obstacles=obstacles)
     except PlanningError as err:
         return TaskOutcome(q_target, kt, None, str(err), float("nan"), None, None)
     if replay is not None and meshcat is None:
@@ -81,7 +85,7 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         if reference is not None:
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
                                      (reference.q_current, q_target), line_width=2.0)
-        for box in (carcass_box(kt), door_panel_box(kt)):
+        for box in (*(obstacles if obstacles is not None else [carcass_box(kt)]), door_panel_box(kt)):
             if box is not None:
                 draw_obstacle(meshcat, box)
         # Look at the handle path and the robot from the side, from above.

@@ -88,11 +88,15 @@ class KeypointTrajectory:
 
     @staticmethod
     def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q_current: float,
-                                grid_size: int = DEFAULT_GRID_SIZE) -> KeypointTrajectory:
-        """Ground truth from a sampled object's keypoint function."""
+                                grid_size: int = DEFAULT_GRID_SIZE, part: int = 0) -> KeypointTrajectory:
+        """Ground truth from a sampled object's keypoint function, for its front `part`.
+
+        The category is that of the front's joint: "closet" for a door, "drawer" for a drawer."""
         q_grid = np.linspace(0.0, 1.0, grid_size)
+        front = obj.front(part)
+        category = "closet" if front.joint_type == "revolute" else "drawer"
         return KeypointTrajectory.from_object_frame(
-            obj.category, q_grid, obj.keypoint_names, obj.keypoint_array(q_grid), X_WO, q_current)
+            category, q_grid, front.keypoint_names, front.keypoint_array(q_grid), X_WO, q_current)
 
     @staticmethod
     def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:

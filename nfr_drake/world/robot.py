@@ -1,7 +1,8 @@
 """The Franka Panda arm and hand and the floor from `sdf/`, resolved as `package://nfr_drake/...`.
 
-Frames: B is the robot base (panda_link0, on the floor), G the tool frame `panda_tool` at the grasp
-point between the finger pads (+z approach, +y finger closing axis, +x along the pads).
+Frames: B is the robot base (panda_link0, on the floor or on top of a lift column, `add_pedestal`),
+G the tool frame `panda_tool` at the grasp point between the finger pads (+z approach, +y finger
+closing axis, +x along the pads).
 """
 
 from __future__ import annotations
@@ -9,9 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
 import nfr_drake
@@ -31,6 +33,8 @@ Q_HOME = np.array([0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi /
 """Franka's "ready" configuration of the arm joints, rad, shape (7,)."""
 FINGER_OPEN = 0.04
 """Opening of each finger (half the gripper width) when open, m."""
+PEDESTAL_HALF_WIDTH = 0.12
+"""Half the side of the square lift column under a raised base, m (the base plate is 0.2 m across)."""
 
 
 def sdf_dir() -> Path:
@@ -67,3 +71,17 @@ def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:
     (model,) = parser.AddModels(url=FLOOR_URL)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("floor", model))
     return model
+
+
+def add_pedestal(plant: MultibodyPlant, X_WB: RigidTransform) -> None:
+    """A lift column from the floor up to a raised base X_WB: a box of side 2 `PEDESTAL_HALF_WIDTH`
+    on the world body (visual and collision), turned with the base; nothing for a base on the floor
+    (z = 0). Before Finalize()."""
+    height = float(X_WB.translation()[2])
+    if height <= 1e-6:
+        return
+    X_WP = RigidTransform(X_WB.rotation(), X_WB.translation() - [0.0, 0.0, height / 2])
+    shape = Box(2 * PEDESTAL_HALF_WIDTH, 2 * PEDESTAL_HALF_WIDTH, height)
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WP, shape, "pedestal", CoulombFriction(0.8, 0.6))
+    plant.RegisterVisualGeometry(plant.world_body(), X_WP, shape, "pedestal",
+                                 np.array([0.35, 0.35, 0.38, 1.0]))

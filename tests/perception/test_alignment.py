@@ -102,3 +102,28 @@ def test_read_anchors_errors(tmp_path):
         read_anchors(path)
     with pytest.raises(AlignmentError, match="not found"):
         read_anchors(tmp_path / "missing.json")
+
+
+def test_anchors_of_other_photos_are_refused(truth):
+    """Right anchors with 1 mm noise pass; the same anchors assigned to the wrong photos do not."""
+    _, X_RCs, X_WCs = truth
+    rng = np.random.default_rng(0)
+    names = sorted(X_WCs)
+    anchors = {n: X_WCs[n][:3, 3] + rng.normal(scale=0.001, size=3) for n in names}
+    assert align_to_centres(X_RCs, anchors).rms_position_m < 0.002
+    shuffled = dict(zip(names, [anchors[n] for n in names[1:] + names[:1]], strict=True))
+    with pytest.raises(AlignmentError, match="belong to other photos"):
+        align_to_centres(X_RCs, shuffled)
+    assert align_to_centres(X_RCs, shuffled, max_residual=2.0).rms_position_m > 0.5
+
+
+def test_read_anchors_names_the_line(tmp_path):
+    path = tmp_path / "anchors.json"
+    path.write_text('{\n  "a.jpg": [1, 2, 3],\n  "b.jpg": [1, "x", 3]\n}\n')
+    with pytest.raises(AlignmentError, match=r"anchors.json, line 3: the anchor of 'b.jpg'"):
+        read_anchors(path)
+    path.write_text('{"é.jpg": [1, 2, 3], "a.jpg": [NaN, 2, 3]}')
+    with pytest.raises(AlignmentError, match="line 1: the anchor of 'a.jpg' is"):
+        read_anchors(path)
+    path.write_text('{"é.jpg": [1, 2, 3],\n"a.jpg": [1, 2.5, -3]}')
+    np.testing.assert_array_equal(read_anchors(path)["a.jpg"], [1, 2.5, -3])

@@ -39,7 +39,8 @@ def test_all_registered_with_small_reprojection_error(run):
 def test_poses_match_ground_truth(run):
     capture, report, gt = run
     for frame in capture.frames:
-        name = report["frames"][f"images/{frame.image_path.name}"]
+        name = frame.source_photo
+        assert report["frames"][f"images/{frame.image_path.name}"] == name
         truth = gt[name]
         error_m = np.linalg.norm(frame.X_OC[:3, 3] - truth["center_world"])
         error_rad = rotation_angle(np.array(truth["R_world_from_cam"]).T @ frame.X_OC[:3, :3])
@@ -58,19 +59,28 @@ def test_report_has_alignment_residuals(run):
 
 @pytest.mark.slow
 def test_self_calibrated(herz_jesu, tmp_path):
-    """Without intrinsics: SIMPLE_RADIAL with the principal point at the image centre, which is
-    5-6 px off here, so poses are less exact than with the known camera (measured: 23 mm,
-    0.50 deg at worst)."""
+    """Without intrinsics: one SIMPLE_RADIAL camera for the 8 photos, its principal point refined
+    at the end. Plain pycolmap (one camera, principal point kept at the image centre, 5-6 px from
+    the true one here) gets 8.4 mm mean and 12.4 mm max centre error, 0.53 deg
+    mean rotation error; `nfr-drake poses` must do at least as well (measured 5.5 mm, 10.3 mm,
+    0.18 deg; benchmarks/pose_estimation.py)."""
     images, gt = herz_jesu
     anchors = {n: np.array(c["center_world"]) for n, c in gt.items()}
     report = estimate_poses(images, tmp_path / "capture", Alignment(anchors=anchors),
                             progress=lambda _: None)
     capture = read_capture_set(tmp_path / "capture")
     assert report.unregistered == [] and report.mean_reprojection_error_px < 0.5
-    focal = report.cameras["0000.jpg"]["fl_x"]
-    assert focal == pytest.approx(gt["0000.jpg"]["K"][0][0], rel=0.01)
+    assert len({json.dumps(c) for c in report.cameras.values()}) == 1  # one camera
+    camera = report.cameras["0000.jpg"]
+    K = np.array(gt["0000.jpg"]["K"])
+    assert camera["fl_x"] == pytest.approx(K[0, 0], rel=0.01)
+    # Within 3 px of the true principal point, which is 5-6 px from the image centre.
+    assert abs(camera["cx"] - K[0, 2]) < 3 and abs(camera["cy"] - K[1, 2]) < 3
+    centre_mm, rotation_deg = [], []
     for frame in capture.frames:
-        truth = gt[report.frames[f"images/{frame.image_path.name}"]]
-        assert np.linalg.norm(frame.X_OC[:3, 3] - truth["center_world"]) < 0.05
+        truth = gt[frame.source_photo]
+        centre_mm.append(1000 * np.linalg.norm(frame.X_OC[:3, 3] - truth["center_world"]))
         R_error = np.array(truth["R_world_from_cam"]).T @ frame.X_OC[:3, :3]
-        assert np.degrees(rotation_angle(R_error)) < 1.0
+        rotation_deg.append(np.degrees(rotation_angle(R_error)))
+    assert np.mean(centre_mm) < 8.4 and np.max(centre_mm) < 12.4, centre_mm
+    assert np.mean(rotation_deg) < 0.53, rotation_deg

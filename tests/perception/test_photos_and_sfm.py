@@ -1,11 +1,13 @@
-"""Photo folders (listing, resizing) and the EXIF focal-length prior of self-calibration."""
+"""Photo folders (listing, resizing), the EXIF focal-length prior of self-calibration, and the
+cameras that self-calibration shares between photos."""
 
+import cv2
 import numpy as np
 import pytest
 from PIL import Image
 
 from nfr_drake.perception.photos import PhotoFolderError, prepare_photos, working_size
-from nfr_drake.perception.sfm import exif_focal_prior
+from nfr_drake.perception.sfm import SfmOptions, exif_focal_prior, run_sfm
 
 
 def test_working_size():
@@ -38,7 +40,28 @@ def test_exif_focal_prior(tmp_path):
     exif = Image.Exif()
     exif.get_ifd(0x8769)[0xA405] = 28  # FocalLengthIn35mmFilm
     Image.fromarray(np.zeros((300, 400, 3), np.uint8)).save(path, exif=exif)
-    f, w, h = exif_focal_prior(path, 200, 150)
-    assert (w, h) == (200, 150)
+    f = exif_focal_prior(path, 200, 150)
     # 28 mm on a 36 x 24 mm frame: about 0.78 to 0.81 of the longer side (COLMAP uses the diagonal).
     assert 0.7 * 200 < f < 0.9 * 200
+
+
+def test_one_camera_per_image_size(small_photos, tmp_path):
+    """Self-calibration gives the photos of one size one camera (COLMAP on its own gives every
+    photo without EXIF data a camera, i.e. a focal length and distortion, of its own)."""
+    images = prepare_photos(small_photos[0], tmp_path / "images", 320)
+    sizes = {p.work_name: p.size for p in images}
+    for name in list(sizes)[:2]:  # two photos taken at a lower resolution
+        path = tmp_path / "images" / name
+        cv2.imwrite(str(path), cv2.resize(cv2.imread(str(path)), (288, 216), interpolation=cv2.INTER_AREA))
+        sizes[name] = (288, 216)
+    options = SfmOptions(num_threads=2)
+    rec = run_sfm(tmp_path / "images", sizes, tmp_path / "shared", None, options,
+                  progress=None).reconstruction
+    camera_of = {image.name: image.camera_id for image in rec.images.values() if image.has_pose}
+    assert len(camera_of) == 8
+    by_size = {size: {camera_of[n] for n, s in sizes.items() if s == size} for size in set(sizes.values())}
+    assert all(len(ids) == 1 for ids in by_size.values()) and len(rec.cameras) == 2
+    rec = run_sfm(tmp_path / "images", sizes, tmp_path / "per_image", None,
+                  SfmOptions(num_threads=2, camera_per_image=True),
+                  progress=None).reconstruction
+    assert len(rec.cameras) == 8

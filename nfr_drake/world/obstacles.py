@@ -1,0 +1,64 @@
+"""Obstacle boxes from a sampled object's collision geometry (true models only).
+
+The planner gets few boxes (each robot geometry is checked against each box at every collision
+sample), so parts are merged where the arm cannot go between them:
+- each carcass body (furniture parts named `b<n>_...`: its bottom, top, sides, back, partitions,
+  dividers and shelves) is one solid box, its bounding box: behind shut fronts the arm never
+  reaches into it;
+- every other carcass part (a top, a plinth, each leg or foot) is its own box;
+- each front other than the moving one gives its slab (panel and frame strips), its handle, and,
+  when it is out of its compartment (q > 0), its drawer box: one bounding box each in its link
+  frame, posed at its q.
+Cylinders and spheres become their bounding boxes. The moving front is left out: the planner
+treats it from its keypoints (docs/PLANNING.md).
+"""
+
+from __future__ import annotations
+
+import re
+from collections import defaultdict
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from nfr_drake.objects.articulated import ArticulatedObject, Part, SemanticClass, _part_corners
+from nfr_drake.world.plan import ObstacleBox
+
+_BODY_PANEL = re.compile(r"^b(\d+)_")
+
+
+def _bounding_box(name: str, parts: list[Part], X_WL: RigidTransform) -> ObstacleBox:
+    """The box bounding `parts` in their link frame L (axis-aligned in L), posed in W."""
+    corners = np.concatenate([_part_corners(p) for p in parts])
+    lo, hi = corners.min(0), corners.max(0)
+    return ObstacleBox(name, hi - lo, RigidTransform(X_WL.rotation(), X_WL @ ((lo + hi) / 2)))
+
+
+def object_obstacles(obj: ArticulatedObject, X_WO: RigidTransform, q: float | np.ndarray,
+                     moving: int) -> list[ObstacleBox]:
+    """Obstacle boxes in W of `obj` at pose X_WO and articulations q (shape () or (F,)), without
+    front `moving` (module docstring for how parts are merged)."""
+    groups: dict[str, list[Part]] = defaultdict(list)
+    for part in obj.base_parts:
+        body = _BODY_PANEL.match(part.name)
+        groups[f"carcass_body{body.group(1)}" if body else f"carcass_{part.name}"].append(part)
+    boxes = [_bounding_box(name, parts, X_WO) for name, parts in groups.items()]
+    for k, (front, q_k) in enumerate(zip(obj.fronts, obj.articulation(q), strict=True)):
+        if k == moving:
+            continue
+        X_WM = X_WO @ RigidTransform(front.X_OM(q_k))
+        slab = [p for p in front.parts if p.semantic == SemanticClass.MOVING and "box_" not in p.name]
+        box = [p for p in front.parts if p.semantic == SemanticClass.MOVING and "box_" in p.name]
+        handle = [p for p in front.parts if p.semantic == SemanticClass.HANDLE]
+        for what, parts in (("slab", slab), ("handle", handle), ("box", box if q_k > 0.0 else [])):
+            if parts:
+                boxes.append(_bounding_box(f"front{k}_{what}", parts, X_WM))
+    return boxes
+
+
+def distance_to_box(box: ObstacleBox, p_W: np.ndarray) -> np.ndarray:
+    """Distances from points p_W (m, shape (N, 3)) to the solid box, m, shape (N,); 0 inside."""
+    X_BW = box.X_WB.inverse()
+    p_B = (X_BW.rotation().matrix() @ np.asarray(p_W, dtype=float).T).T + X_BW.translation()
+    return np.linalg.norm(np.maximum(np.abs(p_B) - np.asarray(box.size) / 2, 0.0), axis=1)
+
