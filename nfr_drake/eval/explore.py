@@ -57,11 +57,18 @@ TRAJECTORY_POINTS = 21
 
 @dataclass(frozen=True)
 class ExploredObject:
-    """An object in the model's code space: its name, z_obj (k,) and articulation q in [0, 1]."""
+    """An object in the model's code space: its name, z_obj (k,), articulation q in [0, 1] and,
+    for a fitted capture with ground truth, the capture's true q."""
 
     name: str
     z_obj: torch.Tensor
     q: float
+    true_q: float | None = None
+
+    def describe(self) -> str:
+        """Name and q, e.g. "fitted closet_000 (q 0.11, true 0.10)"."""
+        truth = "" if self.true_q is None else f", true {self.true_q:.2f}"
+        return f"{self.name} (q {self.q:.2f}{truth})"
 
     @property
     def z(self) -> torch.Tensor:
@@ -123,8 +130,8 @@ def fitted_object(fitted: FittedModel, capture: Path) -> ExploredObject:
     cap = read_capture_set(capture)
     fitted.check_capture(cap)
     _, outcome = infer(fitted, cap, FitConfig(), np.linspace(0.0, 1.0, TRAJECTORY_POINTS))
-    truth = "" if cap.gt is None else f" (true q {float(cap.gt['q']):.2f})"
-    return ExploredObject(f"fitted {cap.root.name}{truth}", outcome.z[2:].detach(), outcome.q)
+    return ExploredObject(f"fitted {cap.root.name}", outcome.z[2:].detach(), outcome.q,
+                          None if cap.gt is None else float(cap.gt["q"]))
 
 
 def interpolation_path(a: ExploredObject, b: ExploredObject, steps: int) -> list[ExploredObject]:
@@ -224,9 +231,10 @@ def strip_figure(fitted: FittedModel, objects: list[ExploredObject], view: View,
 
 
 def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[float, ...],
-                   view: View, path: Path) -> np.ndarray:
+                   view: View, path: Path) -> tuple[np.ndarray, float]:
     """New objects (columns) at each q of q_values (an RGB and a segmentation row per q);
-    returns each sample's distance to its nearest training code (count,)."""
+    returns each sample's distance to its nearest training code (count,) and, for comparison,
+    the median distance of a training code to its nearest other one."""
     z_objs, nearest = sampled_objects(fitted, count, seed)
     rows, names = [], []
     with tqdm(total=count * len(q_values), desc=path.stem, unit="render") as bar:
@@ -247,7 +255,7 @@ def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[f
             f"({gaussian} covariance)\ncolumn titles: distance to the nearest training code "
             f"(a training code's to its nearest other: median {typical:.2f})",
             path, fitted.category)
-    return nearest
+    return nearest, typical
 
 
 def object_html(fitted: FittedModel, obj: ExploredObject, view: View, path: Path,
@@ -342,16 +350,17 @@ def explore_command(
     cat = fitted.category
     path = interpolation_path(a, b, steps)
     strip_figure(fitted, path, view, [f"{o.name}\nq = {o.q:.2f}" for o in path],
-                 f"{cat}: interpolation of z_obj and z_art from {a.name} (left) to {b.name} (right)",
+                 f"{cat}: interpolation of z_obj and z_art; left: {a.describe()}, right: {b.describe()}",
                  out / "interpolation.png")
     sweep = [ExploredObject(a.name, a.z_obj, float(q)) for q in np.linspace(0.0, 1.0, steps)]
     strip_figure(fitted, sweep, view, [f"q = {o.q:.2f}" for o in sweep],
-                 f"{cat}: new articulations of {a.name} (its own q = {a.q:.2f}); "
+                 f"{cat}: new articulations of {a.describe()}; "
                  "lines: keypoint paths over q", out / "articulations.png")
-    nearest = samples_figure(fitted, samples, seed, sample_q, view, out / "samples.png")
+    nearest, typical = samples_figure(fitted, samples, seed, sample_q, view, out / "samples.png")
     points = object_html(fitted, a, view, out / "object.html")
-    print(f"interpolation: {a.name} (q {a.q:.2f}) -> {b.name} (q {b.q:.2f}), "
+    print(f"interpolation: {a.describe()} -> {b.describe()}, "
           f"z_obj distance {float((a.z_obj - b.z_obj).norm()):.2f}")
-    print(f"samples: distance to the nearest training code {', '.join(f'{d:.2f}' for d in nearest)}")
+    print(f"samples: distance to the nearest training code {', '.join(f'{d:.2f}' for d in nearest)} "
+          f"(a training code's to its nearest other: median {typical:.2f})")
     print(f"wrote {out / 'interpolation.png'}, {out / 'articulations.png'}, {out / 'samples.png'}, "
           f"{out / 'object.html'} ({points} points)")
