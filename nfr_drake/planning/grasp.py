@@ -5,8 +5,9 @@ Conventions (all in the world frame W):
   it is minus the direction in which the handle moves for increasing q (for a drawer exactly minus
   the pull direction; for a door the handle path's tangent, which is the door's outward normal up to
   the angle atan(standoff / radius) of the handle's standoff, 5-15 degrees here);
-- the bar axis is the axis of the handle's grip: the hinge axis (hinge_top - hinge_bottom) for a
-  door, horizontal and across the pull direction for a drawer;
+- the bar axis is the axis of the handle's grip: towards the grip-axis keypoint where the trajectory
+  has one (true furniture models), else the hinge axis (hinge_top - hinge_bottom) for a door,
+  horizontal and across the pull direction for a drawer;
 - the grasp frame G of a `HandleWaypoint` (`nfr_drake.world.plan`) has its origin at the handle
   keypoint, +z along the approach, +x along the bar axis.
 """
@@ -17,7 +18,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import GRIP_AXIS_KEYPOINT, KeypointTrajectory
 from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
@@ -52,7 +53,10 @@ def handle_tangent(kt: KeypointTrajectory, q: float) -> np.ndarray:
 
 
 def bar_axis(kt: KeypointTrajectory, q: float) -> np.ndarray:
-    """Unit axis of the handle's grip, shape (3,): the hinge axis (upward) or horizontal across the pull."""
+    """Unit axis of the handle's grip, shape (3,): towards the `GRIP_AXIS_KEYPOINT` where there is
+    one, else the hinge axis (upward) or horizontal across the pull."""
+    if GRIP_AXIS_KEYPOINT in kt.names:
+        return _unit(kt.point(GRIP_AXIS_KEYPOINT, q) - kt.point("handle", q), "the grip axis")
     if kt.category == "closet":
         a = _unit(kt.point("hinge_top", q) - kt.point("hinge_bottom", q), "the hinge axis")
         return a if a @ _Z >= 0 else -a

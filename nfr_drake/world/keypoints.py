@@ -17,6 +17,11 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject
 
 DEFAULT_GRID_SIZE = 41
+GRIP_AXIS_KEYPOINT = "grip_axis"
+"""An optional keypoint `GRIP_AXIS_OFFSET` from the handle along its grip (the ground truth of
+furniture fronts): the bar axis the hand aligns with. Without it the planner takes the hinge axis
+(doors) or the horizontal across the pull (drawers), as the closet and drawer grips lie."""
+GRIP_AXIS_OFFSET = 0.05
 
 
 @dataclass(frozen=True)
@@ -91,12 +96,19 @@ class KeypointTrajectory:
                                 grid_size: int = DEFAULT_GRID_SIZE, part: int = 0) -> KeypointTrajectory:
         """Ground truth from a sampled object's keypoint function, for its front `part`.
 
-        The category is that of the front's joint: "closet" for a door, "drawer" for a drawer."""
+        The category is that of the front's joint: "closet" for a door, "drawer" for a drawer. A
+        piece of furniture's bar, cup or edge grip adds `GRIP_AXIS_KEYPOINT` (its grips run either
+        way on doors; a knob has no axis)."""
         q_grid = np.linspace(0.0, 1.0, grid_size)
         front = obj.front(part)
         category = "closet" if front.joint_type == "revolute" else "drawer"
-        return KeypointTrajectory.from_object_frame(
-            category, q_grid, front.keypoint_names, front.keypoint_array(q_grid), X_WO, q_current)
+        names, p_OK = front.keypoint_names, front.keypoint_array(q_grid)
+        if obj.category == "furniture" and front.grip_half_length > 0.0:
+            p_MA = (np.asarray(front.moving_keypoints["handle"])
+                    + GRIP_AXIS_OFFSET * np.asarray(front.grip_axis_M))
+            p_OA = np.stack([X[:3, :3] @ p_MA + X[:3, 3] for X in map(front.X_OM, q_grid)])
+            names, p_OK = (*names, GRIP_AXIS_KEYPOINT), np.concatenate([p_OK, p_OA[:, None]], axis=1)
+        return KeypointTrajectory.from_object_frame(category, q_grid, names, p_OK, X_WO, q_current)
 
     @staticmethod
     def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:

@@ -35,18 +35,22 @@ def _bounding_box(name: str, parts: list[Part], X_WL: RigidTransform) -> Obstacl
 
 
 def object_obstacles(obj: ArticulatedObject, X_WO: RigidTransform, q: float | np.ndarray,
-                     moving: int) -> list[ObstacleBox]:
+                     moving: int, merge: bool = True) -> list[ObstacleBox]:
     """Obstacle boxes in W of `obj` at pose X_WO and articulations q (shape () or (F,)), without
-    front `moving` (module docstring for how parts are merged)."""
+    front `moving`: merged as the module docstring says, or (`merge` False, for comparison) one
+    box per part."""
     groups: dict[str, list[Part]] = defaultdict(list)
     for part in obj.base_parts:
-        body = _BODY_PANEL.match(part.name)
+        body = _BODY_PANEL.match(part.name) if merge else None
         groups[f"carcass_body{body.group(1)}" if body else f"carcass_{part.name}"].append(part)
     boxes = [_bounding_box(name, parts, X_WO) for name, parts in groups.items()]
     for k, (front, q_k) in enumerate(zip(obj.fronts, obj.articulation(q), strict=True)):
         if k == moving:
             continue
         X_WM = X_WO @ RigidTransform(front.X_OM(q_k))
+        if not merge:
+            boxes += [_bounding_box(f"front{k}_{p.name}", [p], X_WM) for p in front.parts]
+            continue
         slab = [p for p in front.parts if p.semantic == SemanticClass.MOVING and "box_" not in p.name]
         box = [p for p in front.parts if p.semantic == SemanticClass.MOVING and "box_" in p.name]
         handle = [p for p in front.parts if p.semantic == SemanticClass.HANDLE]

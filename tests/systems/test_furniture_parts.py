@@ -13,6 +13,7 @@ from nfr_drake.cli import main
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects.furniture import sample_furniture
 from nfr_drake.objects.handles import GRIP_PART_NAME
+from nfr_drake.planning.grasp import handle_waypoints
 from nfr_drake.systems.articulation import lock_shut
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import run_task
@@ -80,6 +81,22 @@ def test_obstacles_include_the_neighbouring_door(door_pair):
     panels = np.array([X_WO @ np.array(p.p_LP) for p in door_pair.base_parts if p.name.startswith("b0_")])
     assert np.all(distance_to_box(body, panels) == 0.0)
     assert len(boxes) <= 8  # one body, a top, a plinth, the other door's slab and handle
+    assert len(object_obstacles(door_pair, X_WO, 0.0, moving=1, merge=False)) > 2 * len(boxes)
+
+
+def test_hand_follows_a_horizontal_bar_on_a_door():
+    """A door's horizontal bar: the planner's bar axis is the bar's, turning with the door."""
+    for seed in range(300):
+        obj = sample_furniture(np.random.default_rng(seed))
+        doors = [k for k, f in enumerate(obj.fronts) if f.kind == "door" and f.grip_axis_M == (0.0, 1.0, 0.0)
+                 and f.grip_half_length > 0.0]
+        if doors:
+            break
+    front = obj.front(doors[0])
+    kt = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0, part=doors[0]).ground_truth
+    for waypoint in handle_waypoints(kt, np.array([0.0, 0.3, 0.6])):
+        bar_W = front.X_OM(waypoint.q)[:3, :3] @ np.array(front.grip_axis_M)
+        assert abs(waypoint.bar_W @ bar_W) == pytest.approx(1.0, abs=1e-3)
 
 
 def test_locked_drawer_stays_shut(chest):
