@@ -25,7 +25,7 @@ import torch
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.objects import SemanticClass
-from nfr_drake.perception.handle_detector import load_detector
+from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import HandleMap, locate_handle, project, sighting
 
 

@@ -31,7 +31,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                 "what a model has learned: interpolations, new articulations, new objects, a 3D page"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",
                        "train the paper's image-encoder baseline on a dataset"),
-    "train-handle-detector": ("nfr_drake.perception.handle_detector:train_detector_command",
+    "train-handle-detector": ("nfr_drake.perception.handle_detector.command:train_detector_command",
                               "train the 2D handle detector on rendered datasets"),
     "tune-head": ("nfr_drake.inference.head_tuning:tune_head_command",
                   "tune a model's keypoint head on the codes the fit finds for unseen objects"),

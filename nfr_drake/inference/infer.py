@@ -34,7 +34,7 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
 from nfr_drake.paths import check_writable_file
-from nfr_drake.perception.handle_detector import DETECTOR_DIR, HandleDetector, load_detector
+from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, HandleDetector, load_detector
 from nfr_drake.perception.handle_triangulation import (
     MIN_VIEWS,
     TriangulatedHandle,

@@ -10,4 +10,6 @@ is `nfr_drake.data.camera.PinholeCamera`):
 - `poses`: `nfr-drake poses`, photos -> capture set in frame O.
 - `synthetic`: Drake-rendered photo folders of a closet in a textured room at known poses.
 - `pointcloud`: semantically labelled point clouds (PLY).
+- `handle_detector/`: the 2D handle detector (model, training data, training, its command).
+- `handle_triangulation`: the detector's handle maps in posed views -> one 3D handle point.
 """

@@ -268,7 +268,7 @@ def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
 
     from safetensors.torch import save_file
 
-    from nfr_drake.perception.handle_detector import (
+    from nfr_drake.perception.handle_detector.model import (
         DETECTOR_DIR,
         HandleDetector,
         HandleDetectorConfig,
@@ -348,7 +348,7 @@ def test_the_start_near_the_sighting_runs_only_with_codes_and_a_sighting(model_f
 
 def test_report_adds_the_detector_row_with_both_handles_marked(model_folder, capture):
     from nfr_drake.inference.infer import observed_vs_rendered
-    from nfr_drake.perception.handle_detector import HandleDetector, HandleDetectorConfig
+    from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig
 
     fitted = FittedModel(model_folder)
     z = torch.cat([torch.zeros(2), fitted.z_obj_mean])

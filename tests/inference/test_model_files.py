@@ -11,7 +11,7 @@ from nfr_drake.cli import main
 from nfr_drake.data.captures import captures_command
 from nfr_drake.inference.infer import FittedModel
 from nfr_drake.nfr.checkpoint import CheckpointError
-from nfr_drake.perception.handle_detector import (
+from nfr_drake.perception.handle_detector.model import (
     DETECTOR_DIR,
     HandleDetector,
     HandleDetectorConfig,

@@ -10,15 +10,10 @@ import torch
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
-from nfr_drake.perception import handle_detector
-from nfr_drake.perception.handle_detector import (
-    DetectorTrainConfig,
-    HandleDetector,
-    HandleDetectorConfig,
-    _batch,
-    load_detector,
-    train_detector,
-)
+from nfr_drake.perception.handle_detector import training
+from nfr_drake.perception.handle_detector.data import sample_batch
+from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, load_detector
+from nfr_drake.perception.handle_detector.training import DetectorTrainConfig, train_detector
 
 SMALL = HandleDetectorConfig(channels=8, dilations=(1, 2, 1))
 
@@ -76,7 +71,7 @@ def test_offset_targets_point_at_the_projected_grip_centre(tiny_dataset):
     projection, inside the handle's pixel box (so the projection's conventions are right), and
     mirrored crops mirror the offsets."""
     data = RenderedDataset(tiny_dataset)
-    rgb, mask, offset = _batch(data, 128, data.spec.size, np.random.default_rng(0))
+    rgb, mask, offset = sample_batch(data, 128, data.spec.size, np.random.default_rng(0))
     S = data.spec.size
     seen = 0
     for m, o in zip(mask.numpy() > 0.5, offset.numpy(), strict=True):
@@ -129,12 +124,12 @@ def test_resume_continues_where_the_killed_run_left_off(tiny_dataset, tmp_path, 
             raise KeyboardInterrupt
         return loss(*args)
 
-    loss = handle_detector._loss
-    monkeypatch.setattr(handle_detector, "_loss", killed_at_step_25)
+    loss = training._loss
+    monkeypatch.setattr(training, "_loss", killed_at_step_25)
     torch.manual_seed(5)
     with pytest.raises(KeyboardInterrupt):
         train_detector([tiny_dataset], tmp_path / "twice", config, SMALL)
-    monkeypatch.setattr(handle_detector, "_loss", loss)
+    monkeypatch.setattr(training, "_loss", loss)
     torch.manual_seed(99)  # the resumed run restores the torch RNG itself
     train_detector([tiny_dataset], tmp_path / "twice", config, SMALL, resume=True)
     (a,), (b,) = (load_detector(tmp_path / run)[0].detect([image]) for run in ("once", "twice"))

@@ -1,0 +1,184 @@
+"""Training the detector: the loss, a resumable training loop on rendered datasets of any image
+sizes, and the held-out handle IoU and offset error it reports."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from nfr_drake.cpu import set_torch_threads
+from nfr_drake.data.dataset import RenderedDataset
+from nfr_drake.errors import ConfigError
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import (
+    TRAINER_FILE,
+    CheckpointError,
+    read_training_checkpoint,
+    write_training_checkpoint,
+)
+from nfr_drake.perception.handle_detector.data import sample_batch
+from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, save_detector
+
+CHECKPOINT_DIR = "checkpoint"
+PICKLED_CHECKPOINT = "checkpoint.pt"
+"""What older versions wrote instead of CHECKPOINT_DIR: refused, never loaded."""
+
+
+@dataclass(frozen=True)
+class DetectorTrainConfig:
+    """Training: `steps` Adam steps of `images_per_batch` crops (`crop` px) from each dataset."""
+
+    steps: int = 4000
+    images_per_batch: int = 8
+    lr: float = 1e-3
+    crop: int = 64
+    pos_weight: float = 10.0
+    offset_weight: float = 0.5
+    checkpoint_every: int = 250
+    seed: int = 0
+    threads: int | None = None
+    """torch CPU threads (None: the free cores, `nfr_drake.cpu.free_cores`)."""
+
+    def __post_init__(self):
+        if min(self.steps, self.images_per_batch, self.checkpoint_every,
+               1 if self.threads is None else self.threads) < 1:
+            raise ConfigError("handle detector training: steps, batch, checkpoint_every and "
+                              "threads must be >= 1")
+        if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0 or self.offset_weight < 0:
+            raise ConfigError("handle detector training: crop must be >= 8 px, lr and "
+                              "pos_weight > 0, offset_weight >= 0")
+
+
+def _loss(logits: torch.Tensor, offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor,
+          pos_weight: float, offset_weight: float) -> torch.Tensor:
+    """Weighted binary cross-entropy plus a soft Dice term (handles are ~0.2% of the pixels), plus
+    `offset_weight` times the Huber loss (1 px) of the offsets on the true handle pixels."""
+    bce = nn.functional.binary_cross_entropy_with_logits(
+        logits, mask, pos_weight=torch.tensor(pos_weight))
+    p = torch.sigmoid(logits)
+    dice = 1.0 - (2.0 * (p * mask).sum() + 1.0) / (p.sum() + mask.sum() + 1.0)
+    on = mask > 0.5
+    if not on.any():
+        return bce + dice
+    huber = nn.functional.huber_loss(offsets.permute(0, 2, 3, 1)[on],
+                                     true_offsets.permute(0, 2, 3, 1)[on], delta=1.0)
+    return bce + dice + offset_weight * huber
+
+
+def _offset_error_px(offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor) -> float:
+    """Median distance, px, between predicted and true offsets on the true handle pixels."""
+    on = mask > 0.5
+    d = (offsets - true_offsets).norm(dim=1)[on]
+    return float(d.median()) if d.numel() else float("nan")
+
+
+def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
+    pred, true = logits > 0, mask > 0.5
+    union = (pred | true).sum().item()
+    return float((pred & true).sum().item() / union) if union else 1.0
+
+
+def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig,
+                   model: HandleDetectorConfig = HandleDetectorConfig(), resume: bool = False,
+                   command: str = "", allow_incomplete: bool = False) -> dict:
+    """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
+
+    Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
+    objects are held out; the handle IoU and the median offset error (px, on handle pixels) on 64
+    of their full images per dataset are reported.
+    OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
+    A dataset missing objects is refused unless `allow_incomplete`.
+    Returns the training record written into OUT/config.json.
+    """
+    if not data_dirs:
+        raise ConfigError("train-handle-detector: give at least one --data folder")
+    out = Path(out)
+    ckpt_path = out / CHECKPOINT_DIR
+    if (out / PICKLED_CHECKPOINT).exists():
+        raise CheckpointError(f"{out / PICKLED_CHECKPOINT}: a pickled checkpoint of an older version; "
+                              "it is never loaded (unpickling can run code): delete it or use another "
+                              "--out")
+    if ckpt_path.is_dir() and not resume:
+        raise ConfigError(f"{out} already holds a checkpoint; pass --resume or another --out")
+    set_torch_threads(config.threads)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    sets = [RenderedDataset(d) for d in data_dirs]
+    for s in sets:
+        s.require_complete(allow_incomplete)
+    categories = {s.spec.category for s in sets}
+    if len(categories) != 1:
+        raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
+    train_sets, val_sets = [], []
+    for s in sets:
+        held = max(1, s.num_objects // 20)
+        if s.num_objects <= held:
+            raise ConfigError(f"{s.root}: too few objects ({s.num_objects}) to hold some out")
+        val = RenderedDataset(s.root)
+        val.records, s.records = s.records[-held:], s.records[:-held]
+        train_sets.append(s)
+        val_sets.append(val)
+    net = HandleDetector(model)
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
+    options = json.loads(json.dumps({"model": asdict(model), "train": train_options}))
+    step, seconds, losses = 0, 0.0, []
+    if resume and ckpt_path.is_dir():
+        saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
+        if not isinstance(saved, dict) or {k: saved.get(k) for k in options} != options:
+            raise ConfigError(f"{ckpt_path}: --resume with other options than the run's")
+        state = read_training_checkpoint(ckpt_path, net, opt)
+        try:
+            sched.load_state_dict(state["sched"])
+            rng.bit_generator.state = state["rng"]
+            step, seconds, losses = int(state["step"]), float(state["seconds"]), list(state["losses"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise CheckpointError(f"{ckpt_path / TRAINER_FILE}: bad training state ({err})") from None
+    out.mkdir(parents=True, exist_ok=True)
+
+    def checkpoint() -> None:
+        write_training_checkpoint(ckpt_path, net, opt, {
+            **options, "sched": sched.state_dict(), "rng": rng.bit_generator.state, "step": step,
+            "seconds": seconds, "losses": losses})
+
+    bar = tqdm(total=config.steps, initial=step, desc="train handle detector", mininterval=5.0)
+    while step < config.steps:
+        t0 = time.perf_counter()
+        loss = sum(_loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
+                   for rgb, mask, offsets in
+                   (sample_batch(s, config.images_per_batch, config.crop, rng) for s in train_sets))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        losses.append(loss.item())
+        step += 1
+        seconds += time.perf_counter() - t0
+        bar.update(1)
+        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.3f}", refresh=False)
+        if step % config.checkpoint_every == 0 or step == config.steps:
+            checkpoint()
+    bar.close()
+    val_rng = np.random.default_rng(12345)
+    net.eval()
+    with torch.no_grad():
+        ious, offset_errors = {}, {}
+        for v in val_sets:
+            rgb, mask, true_offsets = sample_batch(v, 64, v.spec.size, val_rng)
+            logits, offsets = net(rgb)
+            ious[str(v.root)] = _iou(logits, mask)
+            offset_errors[str(v.root)] = _offset_error_px(offsets, mask, true_offsets)
+    record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
+              "data": [str(d) for d in data_dirs], "command": command, "seconds": seconds,
+              "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious,
+              "held_out_offset_error_px": offset_errors}
+    save_detector(out, net, record)
+    return record
