@@ -20,7 +20,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "captures": ("nfr_drake.data.captures:captures_command",
                  "render capture sets (transforms.json + gt.json) of unseen objects"),
     "validate": ("nfr_drake.data.validate:validate_command",
-                 "check a capture set (transforms.json and its images)"),
+                 "check a capture set (transforms.json, images, ground truth) or a dataset"),
     "infer": ("nfr_drake.inference.infer:infer_command",
               "fit a model to a capture set and forward-simulate the object's motion"),
     "eval": ("nfr_drake.eval.command:eval_command",

@@ -2,30 +2,36 @@
 
 Each capture is a capture-set folder (transforms.json + images; docs/DATASET_FORMAT.md) plus `gt.json`
 (category, q, keypoints at q and along a q grid, object parameters), `object.sdf` (the true object,
-for planning and simulation) and `labels/` (semantic label images, for evaluation). Objects come
-from the capture seed domain, so they never coincide with training objects of any seed.
+for planning and simulation, with the textures it names under `textures/`) and `labels/` (semantic
+label images, for evaluation). Furniture captures have a q per front, per-part ground truth and
+`parts/` (part-index images). Objects come from the capture seed domain, so they never coincide
+with training objects of any seed.
 """
 
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 from typing import Literal
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from nfr_drake.data.camera import PinholeCamera
-from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.capture import write_capture_set
+from nfr_drake.data.generate import parse_shard, part_articulations
+from nfr_drake.data.object_records import PART_ORDER, front_record, portable_sdformat
 from nfr_drake.data.render import ObjectRenderer, sample_lighting
+from nfr_drake.data.shards import PART_CATEGORIES
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
     ArticulatedObject,
     object_rng,
     sample_object,
-    to_sdformat,
 )
 
 GT_TRAJECTORY_POINTS = 21
@@ -53,20 +59,57 @@ def ground_truth(obj: ArticulatedObject, q: float, label_paths: list[str],
     }
 
 
-def render_capture(obj: ArticulatedObject, q: float, X_OCs: np.ndarray, camera: PinholeCamera,
+def part_ground_truth(obj: ArticulatedObject, q: np.ndarray, label_paths: list[str], part_paths: list[str],
+                      trajectory_points: int = GT_TRAJECTORY_POINTS) -> dict:
+    """The gt.json document of an object with several fronts observed at articulations q (F,):
+    per part (canonical order) its record (`front_record`), q, joint value, keypoints at q and
+    along a q grid (the part's own q swept, the others held: a front's keypoints depend on its
+    own q only); positions in O, metres."""
+    grid = np.linspace(0.0, 1.0, trajectory_points)
+    parts = []
+    for k, front in enumerate(obj.fronts):
+        along = front.keypoint_array(grid)  # (N, K, 3)
+        parts.append({
+            **front_record(obj, k),
+            "q": float(q[k]),
+            "joint_value": float(front.joint_value(q[k])),
+            "keypoints": {n: v.tolist() for n, v in front.keypoints(q[k]).items()},
+            "trajectory": {"q": grid.tolist(), "keypoints": {
+                n: along[:, i].tolist() for i, n in enumerate(front.keypoint_names)}},
+        })
+    return {"category": obj.category, "q": [float(v) for v in q], "part_order": PART_ORDER, "parts": parts,
+            "object": {"name": obj.name, "params": obj.params}, "object_sdf": "object.sdf",
+            "label_paths": label_paths, "part_paths": part_paths}
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise OSError(f"could not read texture {path}")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def render_capture(obj: ArticulatedObject, q: float | np.ndarray, X_OCs: np.ndarray, camera: PinholeCamera,
                    rng: np.random.Generator, out: Path) -> Path:
-    """Render `obj` at q from each pose in X_OCs (n, 4, 4) and write the capture set `out`."""
+    """Render `obj` at q (one value, or one per front for furniture) from each pose in X_OCs
+    (n, 4, 4) and write the capture set `out`."""
     renderer = ObjectRenderer(obj, camera, sample_lighting(rng))
     views = [renderer.render(q, X) for X in X_OCs]
     label_paths = [f"labels/frame_{i:03d}.png" for i in range(len(views))]
     extra = {p: v.label for p, v in zip(label_paths, views, strict=True)}
-    extra["object.sdf"] = to_sdformat(obj)
-    return write_capture_set(out, [v.rgb for v in views], list(X_OCs), camera,
-                             gt=ground_truth(obj, q, label_paths), extra_files=extra)
+    if obj.category in PART_CATEGORIES:
+        part_paths = [f"parts/frame_{i:03d}.png" for i in range(len(views))]
+        extra.update({p: v.part.view(np.uint8) for p, v in zip(part_paths, views, strict=True)})
+        gt = part_ground_truth(obj, obj.articulation(q), label_paths, part_paths)
+    else:
+        gt = ground_truth(obj, q, label_paths)
+    extra["object.sdf"], textures = portable_sdformat(obj)
+    extra.update({rel: _read_rgb(path) for rel, path in textures.items()})
+    return write_capture_set(out, [v.rgb for v in views], list(X_OCs), camera, gt=gt, extra_files=extra)
 
 
 def captures_command(
-    category: Literal["closet", "drawer"],
+    category: Literal["closet", "drawer", "furniture"],
     n: int,
     out: Path,
     views: int = 10,
@@ -77,8 +120,12 @@ def captures_command(
     elevation_deg: tuple[float, float] = (5.0, 40.0),
     seed: int = 0,
     q: float | None = None,
+    framing: Literal["auto", "distance", "bounds"] = "auto",
+    margin: tuple[float, float] = (0.05, 0.25),
+    shard: str = "0/1",
 ) -> None:
-    """Render `n` capture sets of unseen objects into OUT/<category>_<i>, each at a random q.
+    """Render `n` capture sets of unseen objects into OUT/<category>_<i>, each at a random q
+    (furniture: a q per front, drawn as `nfr-drake generate` draws them).
 
     Args:
         category: object category.
@@ -87,25 +134,37 @@ def captures_command(
         views: images per capture set.
         size: square image size, pixels.
         fov_y_deg: vertical field of view, degrees.
-        distance_m: camera distance range to the object centre, metres.
+        distance_m: camera distance range to the object centre, metres (framing "distance").
         azimuth_deg: camera azimuth range around the front, degrees.
         elevation_deg: camera elevation range, degrees.
         seed: capture seed (objects are disjoint from training data for every seed).
-        q: articulation of every capture set, in [0, 1] (default: uniform at random per set);
-            objects and cameras are those of the same seed without it.
+        q: articulation of every capture set (furniture: of every front), in [0, 1] (default:
+            drawn per set); objects and cameras are those of the same seed without it.
+        framing: camera framing as in `nfr-drake generate`: "auto" is "bounds" for furniture
+            (the whole piece in view at every q), "distance" for closets and drawers.
+        margin: framing "bounds": free border around the bounds, a fraction of the image's half-size.
+        shard: i/n renders the capture sets with index % n == i.
     """
     if q is not None and not 0.0 <= q <= 1.0:
         raise ConfigError(f"--q must lie in [0, 1], got {q}")
-    cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m)
+    shard_i, shard_n = parse_shard(shard)
+    cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m,
+                                 framing=resolve_framing(framing, category), margin=margin)
     camera = PinholeCamera.from_fov(size, size, math.radians(fov_y_deg))
     out.mkdir(parents=True, exist_ok=True)
-    for i in tqdm(range(n), unit="capture", desc=f"{category} captures"):
+    mine = [i for i in range(n) if i % shard_n == shard_i]
+    for i in tqdm(mine, unit="capture", desc=f"{category} captures"):
         target = out / f"{category}_{i:03d}"
+        for partial in out.glob(f".{target.name}.tmp-*"):  # left by a killed run
+            shutil.rmtree(partial, ignore_errors=True)
         if target.exists():
             continue
         rng = object_rng(SEED_DOMAIN_CAPTURE, seed, i)
         obj = sample_object(category, rng, name=f"{category}_capture_{i:03d}")
-        q_random = float(rng.uniform(0.0, 1.0))
-        X_OCs = cameras.sample(rng, views, obj.look_at_target())
-        render_capture(obj, q_random if q is None else q, X_OCs, camera, rng, target)
-    print(f"{n} capture sets in {out}")
+        if category in PART_CATEGORIES:
+            q_drawn = part_articulations(rng, 1, obj.num_fronts)[0]
+        else:
+            q_drawn = float(rng.uniform(0.0, 1.0))
+        X_OCs = cameras.sample(rng, views, *cameras.target_of(obj), camera)
+        render_capture(obj, q_drawn if q is None else q, X_OCs, camera, rng, target)
+    print(f"{len(mine)} capture sets in {out}")

@@ -1,4 +1,5 @@
-"""`nfr-drake sheet`: a contact sheet of a dataset: per object, RGB and labels across q."""
+"""`nfr-drake sheet`: a contact sheet of a dataset: per object, RGB and labels across q (and, for
+furniture, the part indices: one colour per front)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,14 @@ import cv2
 import numpy as np
 
 from nfr_drake.data.dataset import RenderedDataset
-from nfr_drake.data.visualize import colorize_labels, image_grid
+from nfr_drake.data.visualize import colorize_labels, colorize_parts, image_grid
 
 
 def contact_sheet(dataset: RenderedDataset, objects: int = 6, articulations: int = 6,
                   view: int = 0) -> np.ndarray:
     """uint8 RGB image: for each of the first `objects` objects a row of renders at
-    `articulations` evenly spread q values (one camera view each), and below it their labels."""
+    `articulations` evenly spread articulations (one camera view each), below it their labels
+    and, for furniture, a row of their part indices (`colorize_parts`)."""
     rows = []
     A = dataset.spec.articulations
     picks = np.unique(np.linspace(0, A - 1, min(articulations, A)).round().astype(int))
@@ -22,6 +24,8 @@ def contact_sheet(dataset: RenderedDataset, objects: int = 6, articulations: int
     for rec in dataset.records[:objects]:
         rows.append([np.asarray(rec.rgb[a, v]) for a in picks])
         rows.append([colorize_labels(np.asarray(rec.label[a, v])) for a in picks])
+        if dataset.has_parts:
+            rows.append([colorize_parts(np.asarray(rec.part[a, v])) for a in picks])
     return image_grid(rows)
 
 
@@ -32,7 +36,7 @@ def contact_sheet_command(data: Path, out: Path, objects: int = 6, articulations
     Args:
         data: dataset folder written by `nfr-drake generate`.
         out: PNG file to write.
-        objects: number of objects (rows of RGB + label images).
+        objects: number of objects (rows of RGB and label images, and part images for furniture).
         articulations: q values per object, evenly spread over the object's articulations.
         scale: integer upscaling of each image, for legibility.
     """

@@ -20,6 +20,7 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
     OBJECTS_DIR,
+    PART_CATEGORIES,
     completed_objects,
     object_dir_name,
     read_spec,
@@ -67,12 +68,18 @@ class ObjectRecord:
         return np.load(self.path / "label.npy", mmap_mode="r")
 
     @cached_property
+    def part(self) -> np.ndarray:
+        """int8 (A, V, S, S) front index per pixel, -1 where none (furniture datasets only)."""
+        return np.load(self.path / "part.npy", mmap_mode="r")
+
+    @cached_property
     def depth_mm(self) -> np.ndarray:
         """uint16 (A, V, S, S), millimetres, 0 = no surface."""
         return np.load(self.path / "depth.npy", mmap_mode="r")
 
     @cached_property
     def q(self) -> np.ndarray:
+        """float32 (A,), or (A, F) for furniture (one q per front)."""
         return np.asarray(self.meta["q"], np.float32)
 
     @cached_property
@@ -93,6 +100,8 @@ class RenderedDataset(torch.utils.data.Dataset):
     """All (object, articulation, view) images of a dataset folder written by `nfr-drake generate`.
 
     Only complete objects are listed; `objects` limits the dataset to its first n objects.
+    Items need one q and one keypoint set per image: furniture datasets (a q per front) give
+    their records, not items.
     `missing` lists the indices below the declared count (dataset.json's, or `objects`) that are
     not on disk. Item i is view i % V of articulation (i // V) % A of object i // (A V).
     """
@@ -111,7 +120,8 @@ class RenderedDataset(torch.utils.data.Dataset):
         self.records = [ObjectRecord(self.root / OBJECTS_DIR / object_dir_name(i))
                         for i in indices]
         self.camera = PinholeCamera.from_json(self.records[0].meta["camera"])
-        self.keypoint_names: tuple[str, ...] = tuple(self.records[0].meta["keypoint_names"])
+        self.has_parts = self.spec.category in PART_CATEGORIES
+        self.keypoint_names: tuple[str, ...] = tuple(self.records[0].meta.get("keypoint_names", ()))
 
     @property
     def num_objects(self) -> int:
@@ -137,6 +147,9 @@ class RenderedDataset(torch.utils.data.Dataset):
         A, V = self.spec.articulations, self.spec.views
         if not 0 <= i < len(self):
             raise IndexError(i)
+        if self.has_parts:
+            raise DatasetError(f"{self.root}: a {self.spec.category} dataset has a q per front; "
+                               "posed images with one q come from closet and drawer datasets")
         j, a, v = i // (A * V), (i // V) % A, i % V
         rec = self.records[j]
         depth = rec.depth_mm[a, v].astype(np.float32) / DEPTH_SCALE

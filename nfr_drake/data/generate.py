@@ -2,7 +2,8 @@
 
 Objects are independent jobs spread over worker processes. Object i's shape, lighting,
 articulations and cameras all come from its own random stream, so the data do not depend on the
-number of workers, on sharding or on interruptions.
+number of workers, on sharding or on interruptions. Furniture (several fronts) adds a q per
+front, a part-index image and per-part metadata (docs/DATASET_FORMAT.md).
 """
 
 from __future__ import annotations
@@ -10,14 +11,15 @@ from __future__ import annotations
 import math
 import multiprocessing
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from tqdm import tqdm
 
-from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
+    PART_CATEGORIES,
     DatasetSpec,
     completed_objects,
     open_dataset_dir,
@@ -25,6 +27,9 @@ from nfr_drake.data.shards import (
     write_object,
 )
 from nfr_drake.errors import DatasetError
+
+if TYPE_CHECKING:
+    from nfr_drake.objects import ArticulatedObject
 
 
 def articulation_values(rng: np.random.Generator, count: int) -> np.ndarray:
@@ -38,51 +43,86 @@ def articulation_values(rng: np.random.Generator, count: int) -> np.ndarray:
     return q
 
 
+PART_STATE_SHARES = (0.15, 0.35, 0.5)
+"""Shares of a furniture articulation's states: all fronts shut, one front open, fronts mixed."""
+FRONT_OPEN_PROBABILITY = 0.5
+"""In a mixed state, each front is open (q uniform in [0, 1]) with this probability, else shut."""
+
+
+def part_articulations(rng: np.random.Generator, count: int, fronts: int) -> np.ndarray:
+    """`count` articulations of an object with `fronts` fronts, shape (count, fronts), q in [0, 1].
+
+    Each articulation is drawn on its own (`PART_STATE_SHARES`): every front shut; one front
+    (chosen uniformly) at q uniform in [0, 1], the others shut; or every front independently
+    shut or, with probability `FRONT_OPEN_PROBABILITY`, at q uniform in [0, 1].
+    """
+    q = np.zeros((count, fronts))
+    for a, state in enumerate(rng.choice(len(PART_STATE_SHARES), size=count, p=PART_STATE_SHARES)):
+        if state == 1:
+            q[a, rng.integers(fronts)] = rng.uniform()
+        elif state == 2:
+            opened = rng.uniform(size=fronts) < FRONT_OPEN_PROBABILITY
+            q[a] = np.where(opened, rng.uniform(size=fronts), 0.0)
+    return q
+
+
+def part_meta(obj: ArticulatedObject, qs: np.ndarray) -> dict:
+    """meta.json's per-part entries of an object rendered at articulations qs (A, F): the part
+    order and, per front, its record (`front_record`), q (A,) and named keypoints (A, 3) in O."""
+    from nfr_drake.data.object_records import PART_ORDER, front_record
+
+    parts = []
+    for k, front in enumerate(obj.fronts):
+        along = front.keypoint_array(qs[:, k])  # (A, K, 3)
+        parts.append({**front_record(obj, k), "q": qs[:, k].tolist(),
+                      "keypoints": {n: along[:, i].tolist() for i, n in enumerate(front.keypoint_names)}})
+    return {"part_order": PART_ORDER, "parts": parts}
+
+
 def render_object_arrays(spec: DatasetSpec, index: int):
-    """Render object `index` of `spec`: (arrays, meta, sdf) ready for `write_object`."""
+    """Render object `index` of `spec`: (arrays, meta, sdf, files) ready for `write_object`."""
     from nfr_drake.data.camera import PinholeCamera
+    from nfr_drake.data.object_records import portable_sdformat
     from nfr_drake.data.render import ObjectRenderer, sample_lighting
-    from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object, to_sdformat
+    from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 
     rng = object_rng(SEED_DOMAIN_TRAIN, spec.seed, index)
     obj = sample_object(spec.category, rng, name=f"{spec.category}_{index:06d}")
     lighting = sample_lighting(rng)
-    qs = articulation_values(rng, spec.articulations)
-    X_OC = np.stack([spec.cameras.sample(rng, spec.views, obj.look_at_target()) for _ in qs])
-    camera = PinholeCamera.from_fov(spec.size, spec.size, math.radians(spec.fov_y_deg))
+    parts = spec.category in PART_CATEGORIES
+    A, V, S = spec.articulations, spec.views, spec.size
+    qs = part_articulations(rng, A, obj.num_fronts) if parts else articulation_values(rng, A)
+    camera = PinholeCamera.from_fov(S, S, math.radians(spec.fov_y_deg))
+    target, bounds = spec.cameras.target_of(obj)
+    X_OC = np.stack([spec.cameras.sample(rng, V, target, bounds, camera) for _ in qs])
     renderer = ObjectRenderer(obj, camera, lighting, spec.background_rgb)
 
-    A, V, S = spec.articulations, spec.views, spec.size
-    rgb = np.empty((A, V, S, S, 3), np.uint8)
-    label = np.empty((A, V, S, S), np.uint8)
-    depth = np.empty((A, V, S, S), np.uint16)
+    arrays = {"rgb": np.empty((A, V, S, S, 3), np.uint8), "label": np.empty((A, V, S, S), np.uint8),
+              "depth": np.empty((A, V, S, S), np.uint16)}
+    if parts:
+        arrays["part"] = np.empty((A, V, S, S), np.int8)
     for a, q in enumerate(qs):
         for v in range(V):
             view = renderer.render(q, X_OC[a, v])
-            rgb[a, v], label[a, v] = view.rgb, view.label
+            arrays["rgb"][a, v], arrays["label"][a, v] = view.rgb, view.label
+            if parts:
+                arrays["part"][a, v] = view.part
             d = np.where(np.isfinite(view.depth), view.depth * DEPTH_SCALE, 0.0)
-            depth[a, v] = np.clip(np.round(d), 0, np.iinfo(np.uint16).max)
-    meta = {
-        "index": index,
-        "name": obj.name,
-        "category": obj.category,
-        "params": obj.params,
-        "joint_upper": obj.joint_upper,
-        "keypoint_names": list(obj.keypoint_names),
-        "q": qs.tolist(),
-        "X_OC": X_OC.tolist(),
-        "keypoints": obj.keypoint_array(qs).tolist(),
-        "camera": camera.to_json(),
-        "lighting": {k: (list(v) if isinstance(v, tuple) else v)
-                     for k, v in vars(lighting).items()},
-    }
-    return {"rgb": rgb, "label": label, "depth": depth}, meta, to_sdformat(obj)
+            arrays["depth"][a, v] = np.clip(np.round(d), 0, np.iinfo(np.uint16).max)
+    meta = {"index": index, "name": obj.name, "category": obj.category, "params": obj.params}
+    if not parts:
+        meta.update(joint_upper=obj.joint_upper, keypoint_names=list(obj.keypoint_names))
+    meta.update(q=qs.tolist(), X_OC=X_OC.tolist())
+    meta.update(part_meta(obj, qs) if parts else {"keypoints": obj.keypoint_array(qs).tolist()})
+    meta.update(camera=camera.to_json(),
+                lighting={k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lighting).items()})
+    sdf, textures = portable_sdformat(obj)
+    return arrays, meta, sdf, {rel: path.read_bytes() for rel, path in textures.items()}
 
 
 def _render_and_write(job: tuple[DatasetSpec, str, int]) -> int:
     spec, root, index = job
-    arrays, meta, sdf = render_object_arrays(spec, index)
-    write_object(Path(root), index, arrays, meta, sdf)
+    write_object(Path(root), index, *render_object_arrays(spec, index))
     return index
 
 
@@ -132,7 +172,7 @@ def generate_dataset(spec: DatasetSpec, out: Path, workers: int = 2, shard: str 
 
 
 def generate_command(
-    category: Literal["closet", "drawer"],
+    category: Literal["closet", "drawer", "furniture"],
     objects: int,
     out: Path,
     articulations: int = 10,
@@ -145,6 +185,8 @@ def generate_command(
     azimuth_deg: tuple[float, float] = (-60.0, 60.0),
     elevation_deg: tuple[float, float] = (5.0, 40.0),
     distance_m: tuple[float, float] = (1.4, 1.9),
+    framing: Literal["auto", "distance", "bounds"] = "auto",
+    margin: tuple[float, float] = (0.05, 0.25),
 ) -> None:
     """Render a training dataset: `objects` instances x `articulations` q values x `views` cameras.
 
@@ -161,9 +203,16 @@ def generate_command(
         fov_y_deg: vertical field of view, degrees.
         azimuth_deg: camera azimuth range around the front, degrees.
         elevation_deg: camera elevation range, degrees.
-        distance_m: camera distance range to the object centre, metres.
+        distance_m: camera distance range to the object centre, metres (framing "distance").
+        framing: "distance": distance drawn from distance_m, looking at the carcass centre;
+            "bounds": from the distance at which the object's bounds over all articulations fill
+            the image but a margin, looking at their centre; "auto": "bounds" for furniture,
+            "distance" for closets and drawers.
+        margin: framing "bounds": free border around the bounds, a fraction of the image's
+            half-size, drawn per view from this range.
     """
-    spec = DatasetSpec(category, objects, articulations, views, size, seed, fov_y_deg,
-                       CameraDistribution(azimuth_deg, elevation_deg, distance_m))
+    cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m,
+                                 framing=resolve_framing(framing, category), margin=margin)
+    spec = DatasetSpec(category, objects, articulations, views, size, seed, fov_y_deg, cameras)
     rendered = generate_dataset(spec, out, workers, shard)
     print(f"rendered {len(rendered)} objects into {out}")

@@ -5,12 +5,15 @@ DIR/dataset.json                 DatasetSpec (what the images are) + format vers
 DIR/objects/obj_000123/          one folder per object, renamed into place when complete
     rgb.npy     uint8   (A, V, S, S, 3)
     label.npy   uint8   (A, V, S, S)      semantic class per pixel (docs/CONVENTIONS.md)
+    part.npy    int8    (A, V, S, S)      furniture only: front index per pixel, -1 where none
     depth.npy   uint16  (A, V, S, S)      millimetres along the optical axis, 0 = no surface
-    meta.json   q (A,), X_OC (A, V, 4, 4) OpenCV axes, keypoints (A, K, 3) in O, params
+    meta.json   q (A,), X_OC (A, V, 4, 4) OpenCV axes, keypoints (A, K, 3) in O, params;
+                furniture: q (A, F) and per part its joint, q and named keypoints
     object.sdf  the object's SDFormat
+    textures/   the PNG textures object.sdf names (by relative path), if any
 ```
-A = articulations, V = views, S = image size. Arrays are plain .npy so that readers memory-map
-them; a folder without the `.tmp` prefix is always complete.
+A = articulations, V = views, S = image size, F = fronts. Arrays are plain .npy so that readers
+memory-map them; a folder without the `.tmp` prefix is always complete.
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ FORMAT_VERSION = 1
 SPEC_FILE = "dataset.json"
 OBJECTS_DIR = "objects"
 DEPTH_SCALE = 1000.0  # depth.npy units per metre
+PART_CATEGORIES = frozenset({"furniture"})
+"""Categories whose objects have several fronts: datasets add part.npy and per-part metadata."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +43,7 @@ class DatasetSpec:
     """Everything that determines a dataset's content; two runs with equal specs write equal data.
 
     Attributes:
-        category: object category ("closet" or "drawer").
+        category: object category ("closet", "drawer" or "furniture").
         objects: number of objects in the whole dataset (all shards).
         articulations: articulations per object (A).
         views: camera views per articulation (V).
@@ -140,8 +145,9 @@ def remove_partial(root: Path, indices: set[int]) -> None:
 
 
 def write_object(root: Path, index: int, arrays: dict[str, np.ndarray], meta: dict,
-                 sdf: str) -> None:
-    """Write one object's folder atomically (temporary folder, then rename).
+                 sdf: str, files: dict[str, bytes] | None = None) -> None:
+    """Write one object's folder atomically (temporary folder, then rename); `files` maps more
+    relative paths to their bytes (the textures object.sdf names).
 
     If another process completed the same object meanwhile (an orphaned worker of a killed run),
     its folder is kept and this one discarded: both hold the same deterministic data.
@@ -154,6 +160,9 @@ def write_object(root: Path, index: int, arrays: dict[str, np.ndarray], meta: di
         np.save(tmp / f"{name}.npy", array)
     (tmp / "meta.json").write_text(json.dumps(meta))
     (tmp / "object.sdf").write_text(sdf)
+    for rel, content in (files or {}).items():
+        (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp / rel).write_bytes(content)
     try:
         os.replace(tmp, final)
     except OSError:

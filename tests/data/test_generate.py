@@ -1,14 +1,13 @@
 """Dataset generation: determinism, sharding, resuming after kill -9, the torch Dataset."""
 
 import os
-import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 import torch
+from dataset_checks import assert_same_data, kill_after_first_object, object_arrays
 
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.data.generate import articulation_values, generate_dataset
@@ -20,11 +19,6 @@ ARGS = ["--category", "closet", "--objects", "5", "--articulations", "3", "--vie
         "--size", "32", "--seed", "4"]
 
 
-def _arrays(root, index):
-    folder = root / OBJECTS_DIR / f"obj_{index:06d}"
-    return {n: np.load(folder / f"{n}.npy") for n in ("rgb", "label", "depth")}
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     root = tmp_path_factory.mktemp("reference")
@@ -32,34 +26,17 @@ def reference(tmp_path_factory):
     return root
 
 
-def _assert_same_data(a, b):
-    assert completed_objects(a) == completed_objects(b) == list(range(SPEC.objects))
-    for i in range(SPEC.objects):
-        x, y = _arrays(a, i), _arrays(b, i)
-        for name in x:
-            np.testing.assert_array_equal(x[name], y[name], err_msg=f"object {i} {name}")
-
-
 def test_shards_and_workers_give_the_same_data(reference, tmp_path):
     generate_dataset(SPEC, tmp_path, workers=2, shard="1/2", progress=False)
     assert completed_objects(tmp_path) == [1, 3]
     generate_dataset(SPEC, tmp_path, workers=2, shard="0/2", progress=False)
-    _assert_same_data(reference, tmp_path)
+    assert_same_data(reference, tmp_path, SPEC.objects)
 
 
 def test_resume_after_kill_completes_without_duplicates_or_corruption(reference, tmp_path):
     cmd = [sys.executable, "-m", "nfr_drake.cli", "generate", *ARGS, "--out", str(tmp_path),
            "--workers", "2"]
-    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    deadline = time.time() + 120
-    while time.time() < deadline and not (tmp_path / OBJECTS_DIR).is_dir():
-        time.sleep(0.05)
-    while time.time() < deadline and len(completed_objects(tmp_path)) < 1:
-        time.sleep(0.01)
-    os.killpg(proc.pid, signal.SIGKILL)  # kill -9 the run and its workers
-    proc.wait()
-    assert len(completed_objects(tmp_path)) < SPEC.objects, "run finished before the kill"
+    assert kill_after_first_object(cmd, tmp_path) < SPEC.objects, "run finished before the kill"
     # A write interrupted halfway leaves a temporary folder; the next run must clean it up.
     partial = tmp_path / OBJECTS_DIR / ".obj_000004.tmp-99999"
     partial.mkdir(exist_ok=True)
@@ -67,7 +44,7 @@ def test_resume_after_kill_completes_without_duplicates_or_corruption(reference,
     done = subprocess.run(cmd, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert sorted(os.listdir(tmp_path / OBJECTS_DIR)) == [f"obj_{i:06d}" for i in range(5)]
-    _assert_same_data(reference, tmp_path)
+    assert_same_data(reference, tmp_path, SPEC.objects)
 
 
 def test_other_options_on_an_existing_folder_are_refused(reference):
@@ -87,7 +64,7 @@ def test_torch_dataset_reads_views_with_their_metadata(reference):
     ds = RenderedDataset(reference)
     assert len(ds) == 5 * 3 * 2 and ds.keypoint_names == ("handle", "hinge_top", "hinge_bottom", "goal")
     item = ds[7]  # object 1, articulation 0, view 1
-    raw = _arrays(reference, 1)
+    raw = object_arrays(reference, 1)
     np.testing.assert_allclose(item.rgb.numpy(), raw["rgb"][0, 1] / 255.0, atol=1e-6)
     assert item.label.dtype == torch.int64 and item.object_index.item() == 1
     assert item.q.item() == 0.0
