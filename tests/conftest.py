@@ -1,11 +1,9 @@
 """Test-wide settings.
 
-Network: nothing in nfr-drake may download (drake_models included). DRAKE_ALLOW_NETWORK=meshcat
-alone would be the strictest setting, but in drake 1.51 it makes every `Parser()` constructor
-fail, because the default PackageMap registers the remote `drake_models` package and refuses to
-do so with package_map networking off and an empty download cache. We therefore also allow
-`package_map`; since this machine (and CI) cannot reach GitHub, any accidental use of
-`package://drake_models/...` still fails the test that makes it.
+Network: nothing in nfr-drake may download (drake_models included), so the tests run with
+DRAKE_ALLOW_NETWORK=meshcat, the strictest setting: package-map networking off. A bare `Parser()`
+or `RobotDiagramBuilder()` fails under it (Drake's default package map registers the remote
+`drake_models`); the package parses through `nfr_drake.parsing`, which works under any value.
 
 Shared fixtures: a tiny rendered dataset, and a tiny closet model folder (random weights, fits in
 seconds) for the inference and evaluation tests.
@@ -15,7 +13,7 @@ import os
 
 import pytest
 
-os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat:package_map")
+os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat")
 
 
 @pytest.fixture(scope="module")

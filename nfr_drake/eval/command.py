@@ -6,8 +6,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import CaptureSet, capture_dirs, read_capture_set
 from nfr_drake.data.visualize import plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
@@ -81,7 +81,7 @@ def eval_command(
     limit: int | None = None,
     fit: FitConfig = FitConfig(),
     example_plots: int = 2,
-    threads: int = 2,
+    threads: int | None = None,
 ) -> None:
     """Evaluate methods on held-out capture sets; resumable (rows already in OUT/results.csv stay).
 
@@ -97,9 +97,9 @@ def eval_command(
         limit: use only the first n captures of each set.
         fit: options of the neural field's fit.
         example_plots: handle-path plots per set.
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     methods: dict[str, Method] = {}
     if model is not None:
         methods.update(neural_field_methods(model, fit))

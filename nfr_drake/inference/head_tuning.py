@@ -27,6 +27,7 @@ import torch
 from safetensors.torch import save_file
 from tqdm import tqdm
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
@@ -70,7 +71,7 @@ _worker_fit: FitConfig = FitConfig()
 
 def _start_worker(model_dir: Path, threads: int, fit: FitConfig) -> None:
     global _worker_model, _worker_fit
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     _worker_model, _worker_fit = FittedModel(model_dir), fit
 
 
@@ -87,8 +88,9 @@ def _fit_one(job: tuple[Path, Path]) -> str:
 
 
 def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1, fit: FitConfig = FitConfig(),
-                 threads: int = 1) -> list[Path]:
-    """Fit every capture set under `captures` that has no fit in OUT/fits yet; returns the
+                 threads: int | None = None) -> list[Path]:
+    """Fit every capture set under `captures` that has no fit in OUT/fits yet, in `workers`
+    processes of `threads` torch threads each (None: their share of the free cores); returns the
     capture folders (all of them, fitted now or before)."""
     dirs = capture_dirs(captures)
     missing = [d.name for d in dirs if not (d / "gt.json").is_file()]
@@ -99,7 +101,8 @@ def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1, f
     fits.mkdir(parents=True, exist_ok=True)
     todo = [(d, fits / f"{d.name}.json") for d in dirs if not (fits / f"{d.name}.json").is_file()]
     if todo:
-        with get_context("spawn").Pool(workers, _start_worker, (model_dir, threads, fit)) as pool:
+        per_worker = set_torch_threads(threads, workers)
+        with get_context("spawn").Pool(workers, _start_worker, (model_dir, per_worker, fit)) as pool:
             for _ in tqdm(pool.imap_unordered(_fit_one, todo), total=len(todo),
                           desc="fit captures", unit="capture"):
                 pass
@@ -200,7 +203,7 @@ def tune_head_command(model: Path, captures: Path, out: Path,
                       steps: int = HeadTuningConfig.steps, lr: float = HeadTuningConfig.lr,
                       distill_weight: float = HeadTuningConfig.distill_weight,
                       fit: FitConfig = FitConfig(),
-                      workers: int = 1, threads: int = 1) -> None:
+                      workers: int = 1, threads: int | None = None) -> None:
     """Fit capture sets of unseen objects, then tune the keypoint head on the fitted codes.
 
     Args:
@@ -213,13 +216,14 @@ def tune_head_command(model: Path, captures: Path, out: Path,
         distill_weight: weight of keeping the head's keypoints on the training codes.
         fit: options of the fits of the captures (fits already in OUT/fits are kept as they are).
         workers: fitting processes.
-        threads: torch threads per fitting process.
+        threads: torch threads per fitting process (default: their share of the free cores,
+            `nfr_drake.cpu.free_cores`).
     """
     out = Path(out)
     started = time.perf_counter()
     dirs = fit_captures(Path(model), Path(captures), out, workers, fit, threads)
     fitted = FittedModel(Path(model))
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     record = tune_head(fitted, dirs, out, HeadTuningConfig(steps=steps, lr=lr,
                                                            distill_weight=distill_weight))
     record.update(command="nfr-drake tune-head " + " ".join(sys.argv[2:]),

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 import tyro
 
+from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
@@ -196,7 +197,7 @@ def infer_command(
     fit: FitConfig = FitConfig(),
     trajectory_points: int = 21,
     keypoints: KeypointSource = "head",
-    threads: int = 2,
+    threads: int | None = None,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (docs/CONVENTIONS.md).
 
@@ -213,9 +214,9 @@ def infer_command(
         trajectory_points: points of the forward-simulated q grid over [0, 1].
         keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
             axis read from the fitted field's rendered segmentation, the head for the rest).
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     for option, path in (("--out", out), ("--report", report), ("--point-cloud", point_cloud),
                          ("--handle-plot", handle_plot)):
         if path is not None:

@@ -13,9 +13,10 @@ from pydrake.geometry import Box, ProximityProperties
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
-from pydrake.planning import RobotDiagram, RobotDiagramBuilder
+from pydrake.planning import RobotDiagram
 from pydrake.systems.framework import Context
 
+from nfr_drake.parsing import make_robot_diagram_builder
 from nfr_drake.world.plan import ObstacleBox
 from nfr_drake.world.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda, add_pedestal
 
@@ -46,7 +47,7 @@ class PlanningScene:
 def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox]) -> PlanningScene:
     """The arm with base pose X_WB (on a pedestal if raised), the floor, and `obstacles` welded to
     the world."""
-    builder = RobotDiagramBuilder(time_step=0.0)
+    builder = make_robot_diagram_builder(time_step=0.0)
     plant = builder.plant()
     robot = add_panda(plant, X_WB)
     add_floor(plant)

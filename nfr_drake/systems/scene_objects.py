@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Role
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
@@ -23,6 +22,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject, Front
 from nfr_drake.objects.plant import add_articulated_object
+from nfr_drake.parsing import make_parser
 from nfr_drake.world.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
 from nfr_drake.world.obstacles import object_obstacles
 from nfr_drake.world.plan import ObstacleBox
@@ -133,7 +133,7 @@ class SceneObject:
 
         def add_to(plant: MultibodyPlant) -> ModelInstanceIndex:
             try:
-                models = Parser(plant, "object").AddModels(str(path))
+                models = make_parser(plant, "object").AddModels(str(path))
             except RuntimeError as err:
                 first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
                 raise NfrDrakeError(

@@ -7,19 +7,14 @@ closing axis, +x along the pads).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
-import nfr_drake
-from nfr_drake.errors import NfrDrakeError
+from nfr_drake.parsing import make_parser
 
-PACKAGE_NAME = "nfr_drake"
 PANDA_URL = "package://nfr_drake/panda/panda_arm_hand.sdf"
 FLOOR_URL = "package://nfr_drake/scene/floor.sdf"
 BASE_FRAME = "panda_link0"
@@ -37,28 +32,10 @@ PEDESTAL_HALF_WIDTH = 0.12
 """Half the side of the square lift column under a raised base, m (the base plate is 0.2 m across)."""
 
 
-def sdf_dir() -> Path:
-    """The `sdf/` folder beside the package source (the package is installed editable)."""
-    path = Path(nfr_drake.__file__).resolve().parent.parent / "sdf"
-    if not (path / "package.xml").is_file():
-        raise NfrDrakeError(
-            f"robot models not found at {path}; install nfr-drake editable from its source tree "
-            "(pip install -e .) so that sdf/ sits beside the nfr_drake package")
-    return path
-
-
-def register_package(parser: Parser) -> Parser:
-    """Make `package://nfr_drake/...` resolve to `sdf/` in this parser; returns the parser."""
-    package_map = parser.package_map()
-    if not package_map.Contains(PACKAGE_NAME):
-        package_map.Add(PACKAGE_NAME, str(sdf_dir()))
-    return parser
-
-
 def add_panda(plant: MultibodyPlant, X_WB: RigidTransform | None = None,
               model_name: str = "panda") -> ModelInstanceIndex:
     """Add the arm and hand with its base welded at X_WB (default identity); before Finalize()."""
-    parser = register_package(Parser(plant, model_name))
+    parser = make_parser(plant, model_name)
     (model,) = parser.AddModels(url=PANDA_URL)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(BASE_FRAME, model),
                      X_WB if X_WB is not None else RigidTransform())
@@ -67,7 +44,7 @@ def add_panda(plant: MultibodyPlant, X_WB: RigidTransform | None = None,
 
 def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:
     """Add the floor with its top surface on the world's z = 0 plane; before Finalize()."""
-    parser = register_package(Parser(plant))
+    parser = make_parser(plant)
     (model,) = parser.AddModels(url=FLOOR_URL)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("floor", model))
     return model
