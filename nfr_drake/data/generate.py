@@ -22,6 +22,7 @@ from nfr_drake.data.shards import (
     PART_CATEGORIES,
     DatasetSpec,
     completed_objects,
+    dataset_lock,
     open_dataset_dir,
     remove_partial,
     write_object,
@@ -141,10 +142,18 @@ def generate_dataset(spec: DatasetSpec, out: Path, workers: int = 2, shard: str 
                      progress: bool = True) -> list[int]:
     """Render the objects of `spec` that belong to `shard` and are not yet in `out`.
 
-    Returns the indices rendered by this call. Safe to interrupt and call again.
+    Returns the indices rendered by this call. Safe to interrupt and call again; a second run
+    on `out` while this one writes it is refused (`dataset_lock`).
     """
     shard_i, shard_n = parse_shard(shard)
     out = Path(out)
+    with dataset_lock(out):
+        return _render_missing(spec, out, workers, shard_i, shard_n, progress)
+
+
+def _render_missing(spec: DatasetSpec, out: Path, workers: int, shard_i: int, shard_n: int,
+                    progress: bool) -> list[int]:
+    """`generate_dataset` once it holds the folder's lock."""
     open_dataset_dir(out, spec)
     mine = [i for i in range(spec.objects) if i % shard_n == shard_i]
     remove_partial(out, set(mine))

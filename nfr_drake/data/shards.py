@@ -18,9 +18,12 @@ memory-map them; a folder without the `.tmp` prefix is always complete.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -32,6 +35,7 @@ from nfr_drake.errors import DatasetError
 FORMAT_NAME = "nfr-drake-dataset"
 FORMAT_VERSION = 1
 SPEC_FILE = "dataset.json"
+LOCK_FILE = ".generate.lock"
 OBJECTS_DIR = "objects"
 DEPTH_SCALE = 1000.0  # depth.npy units per metre
 PART_CATEGORIES = frozenset({"furniture"})
@@ -86,26 +90,48 @@ def object_dir_name(index: int) -> str:
     return f"obj_{index:06d}"
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON so that a reader sees the old file or the new one, never a partial one."""
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2))
-    os.replace(tmp, path)
+@contextmanager
+def dataset_lock(root: Path) -> Iterator[None]:
+    """Hold the lock of the dataset folder `root` (flock on ROOT/.generate.lock, released when
+    the holder exits, even by kill -9) while writing it; DatasetError naming the holder's pid
+    when another run holds it."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    fd = os.open(root / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise DatasetError(f"{root} is being written by another `nfr-drake generate` (pid "
+                               f"{holder}); wait for it to finish, or use another --out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
 
 
 def open_dataset_dir(root: Path, spec: DatasetSpec) -> None:
-    """Create `root` for `spec`, or check that an existing one was written with the same spec."""
+    """Create `root` for `spec`, or check that an existing one was written with the same spec.
+
+    dataset.json is written under a temporary name and linked into place, which fails when the
+    file exists: it is created once, whole, even by two runs at the same moment."""
     (root / OBJECTS_DIR).mkdir(parents=True, exist_ok=True)
     spec_path = root / SPEC_FILE
-    doc = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "spec": spec.to_json()}
-    if spec_path.exists():
+    tmp = spec_path.with_name(f".{SPEC_FILE}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps({"format": FORMAT_NAME, "version": FORMAT_VERSION,
+                               "spec": spec.to_json()}, indent=2))
+    try:
+        os.link(tmp, spec_path)
+    except FileExistsError:
         existing = read_spec(root)
         if existing != spec:
             raise DatasetError(
                 f"{spec_path} was written with other options ({_spec_diff(existing, spec)}); "
-                "use the same options to resume, or another --out")
-    else:
-        write_json_atomic(spec_path, doc)
+                "use the same options to resume, or another --out") from None
+    finally:
+        tmp.unlink()
 
 
 def _spec_diff(a: DatasetSpec, b: DatasetSpec) -> str:
@@ -134,13 +160,25 @@ def completed_objects(root: Path) -> list[int]:
     return sorted(int(n[4:]) for n in names if n.startswith("obj_"))
 
 
+def _alive(pid: int) -> bool:
+    """Whether a process with this id runs on this machine."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
 def remove_partial(root: Path, indices: set[int]) -> None:
-    """Delete temporary folders left by killed runs, for the given object indices only."""
+    """Delete the temporary folders of the given objects whose writer (the pid in the name,
+    `write_object`) is gone; a live one (an orphaned worker of a killed run) keeps its folder."""
     objects = Path(root) / OBJECTS_DIR
     for name in os.listdir(objects):
         if name.startswith(".obj_") and ".tmp-" in name:
-            index = int(name[5:11])
-            if index in indices:
+            index, pid = int(name[5:11]), int(name.rsplit("-", 1)[1])
+            if index in indices and not _alive(pid):
                 shutil.rmtree(objects / name, ignore_errors=True)
 
 
