@@ -98,6 +98,9 @@ class PlannerConfig:
     lift_reach: float = 0.9
     """The base is raised only as far as puts the handle path's highest point at most this far
     above it, m; lower paths keep the base on the floor."""
+    lift_offsets: tuple[float, ...] = (0.0, 0.1, -0.1)
+    """Base heights tried in turn, as offsets from the one `lift_reach` gives (each within
+    [0, max_lift]), m: all base positions at one height before the next."""
     end_stop_overshoot: float = 0.03
     """When the target is full opening (q = 1), the handle path goes on this far past the predicted
     end along its tangent, m, so that the object's own stop ends the motion: a predicted travel a few
@@ -131,16 +134,19 @@ def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np
     return np.array(pts)
 
 
-def _base_height(waypoints: list[HandleWaypoint], cfg: PlannerConfig) -> float:
-    """Height of the base above the floor, m: the least that puts the highest handle waypoint at most
-    `lift_reach` above it, within [0, max_lift]."""
+def _base_heights(waypoints: list[HandleWaypoint], cfg: PlannerConfig) -> list[float]:
+    """Heights of the base above the floor to try, m: the least that puts the highest handle
+    waypoint at most `lift_reach` above it, then `lift_offsets` from it, each within [0, max_lift]."""
     top = max(w.p_WH[2] for w in waypoints)
-    return float(np.clip(top - cfg.lift_reach, 0.0, cfg.max_lift))
+    first = top - cfg.lift_reach
+    heights = [float(np.clip(first + d, 0.0, cfg.max_lift)) for d in cfg.lift_offsets]
+    return list(dict.fromkeys(heights))
 
 
 def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], obstacles: list[ObstacleBox],
-                     cfg: PlannerConfig) -> list[RigidTransform]:
-    """Robot base poses facing the handle path, at `_base_height`, most reachable first.
+                     cfg: PlannerConfig, z_B: float) -> list[RigidTransform]:
+    """Robot base poses facing the handle path with the base `z_B` above the floor (m), most
+    reachable first.
 
     Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
     part's sweep by `_BASE_CLEARANCE`, its column (floor to shoulder) clears every obstacle by
@@ -154,7 +160,6 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ob
     wrists = p - _WRIST_OFFSET * np.array([w.approach_W for w in waypoints])
     swept = _swept_points(kt, waypoints)
     c = p.mean(axis=0)
-    z_B = _base_height(waypoints, cfg)
     column = np.linspace(0.0, z_B + _SHOULDER_HEIGHT, 8)
     scored = []
     for rho in np.arange(0.3, 1.01, 0.1):
@@ -378,7 +383,9 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         waypoints.append(replace(end, p_WH=end.p_WH + onward))
     obstacles, door = list(obstacles) if obstacles is not None else [carcass_box(kt)], door_panel_box(kt)
     failures = []
-    for X_WB in _base_candidates(kt, waypoints, obstacles, config):
+    bases = [X for z_B in _base_heights(waypoints, config)
+             for X in _base_candidates(kt, waypoints, obstacles, config, z_B)]
+    for X_WB in bases:
         near = _within_reach(obstacles, X_WB)
         follow = build_planning_scene(X_WB, near)
         scenes = _Scenes(build_planning_scene(X_WB, [*near, door]) if door else follow, follow)

@@ -40,3 +40,18 @@ def test_unreachable_handle_reports():
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform([0.0, 0.0, 2.0]), 0.0)
     with pytest.raises(PlanningError, match="no feasible motion from q=0.00 to q=1.00: no robot base"):
         plan_articulation(kt, 1.0)
+
+
+def test_high_handle_raises_the_base():
+    """A door 1 m up: the base stands on a lift column, raised so the handle path's top is at most
+    `lift_reach` above it, and the planning scene holds the column."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform([0.0, 0.0, 1.0]), 0.0)
+    config = PlannerConfig()
+    plan = plan_articulation(kt, 0.6, config=config)
+    top = max(w.p_WH[2] for w in plan.waypoints)
+    assert plan.X_WB.translation()[2] == pytest.approx(top - config.lift_reach, abs=0.1 + 1e-9)
+    assert plan.X_WB.translation()[2] > 0.2
+    scene = build_planning_scene(plan.X_WB, [])
+    inspector = scene.diagram.scene_graph().model_inspector()
+    assert "pedestal" in [inspector.GetName(g) for g in inspector.GetAllGeometryIds()]
