@@ -7,13 +7,13 @@ Floors, lowest first (docs/ARCHITECTURE.md):
 1. `objects`: articulated object categories.
 2. `world`: what planning, simulation and replays share: the robot model, keypoint trajectories,
    obstacle boxes, planned motions.
-3. `data`: Drake rendering, datasets, capture sets, cameras.
+3. `data`: the camera model, camera placement, Drake rendering, datasets, capture sets.
 4. `nfr`: the neural field.
 5. `perception`, `inference`, `baseline`: photos to capture sets, the handle detector, fitting the
    field, the image-encoder baseline; `inference` may import `perception` (never the reverse),
    `baseline` imports neither.
 6. `planning`: grasp frames, base placement, trajectory optimisation.
-7. `systems`: Drake systems, simulation, replays, tasks, the pipeline, `demo` and `plan`.
+7. `systems`: Drake systems, simulation, replays, scenarios, tasks, the pipeline, `demo` and `plan`.
 8. `eval`: evaluation runs, tables and plots.
 9. `cli`: the `nfr-drake` command (it loads subcommands by name from every floor).
 
