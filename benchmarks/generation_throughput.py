@@ -1,8 +1,11 @@
 """Dataset generation throughput: images per second with RGB, labels and depth written to disk.
 
-Usage: python benchmarks/generation_throughput.py [--objects 8] [--articulations 10] [--views 10]
+Usage: python benchmarks/generation_throughput.py [--category closet] [--objects 8]
+    [--articulations 10] [--views 10]
 Prints a markdown table for docs/BENCHMARKS.md and the projected time of the paper-scale set
-(1000 objects x 100 articulations x 10 views at 128 px).
+(1000 objects x 100 articulations x 10 views at 128 px). Furniture is rendered as `nfr-drake
+generate --category furniture` renders it: cameras framed by each piece's bounds, a part-index
+image per view, textures copied beside object.sdf.
 """
 
 from __future__ import annotations
@@ -16,17 +19,20 @@ import time
 from datetime import date
 from pathlib import Path
 
+from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.generate import generate_dataset
 from nfr_drake.data.shards import DatasetSpec
+from nfr_drake.objects import CATEGORIES
 
 PAPER_IMAGES = 1000 * 100 * 10
 
 
-def measure(size: int, workers: int, objects: int, articulations: int, views: int) -> float:
+def measure(category: str, size: int, workers: int, objects: int, articulations: int, views: int) -> float:
     """Images per second of one generation run into a fresh temporary folder."""
     out = Path(tempfile.mkdtemp(prefix="nfr_bench_"))
     try:
-        spec = DatasetSpec("closet", objects, articulations, views, size, seed=123)
+        cameras = CameraDistribution(framing=resolve_framing("auto", category))
+        spec = DatasetSpec(category, objects, articulations, views, size, seed=123, cameras=cameras)
         start = time.perf_counter()
         generate_dataset(spec, out, workers=workers, progress=False)
         seconds = time.perf_counter() - start
@@ -37,17 +43,18 @@ def measure(size: int, workers: int, objects: int, articulations: int, views: in
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--category", choices=sorted(CATEGORIES), default="closet")
     parser.add_argument("--objects", type=int, default=8)
     parser.add_argument("--articulations", type=int, default=10)
     parser.add_argument("--views", type=int, default=10)
     args = parser.parse_args()
-    print(f"{date.today()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"load average before: {os.getloadavg()[0]:.2f}")
+    print(f"{args.category}, {date.today()}, {platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} CPUs, load average before: {os.getloadavg()[0]:.2f}")
     print("| size | workers | images/s | paper-scale set (1e6 images at 128 px) |")
     print("|---|---|---|---|")
     for size in (64, 128):
         for workers in (1, 2):
-            rate = measure(size, workers, args.objects, args.articulations, args.views)
+            rate = measure(args.category, size, workers, args.objects, args.articulations, args.views)
             projected = f"{PAPER_IMAGES / rate / 3600:.1f} h" if size == 128 else ""
             print(f"| {size} | {workers} | {rate:.0f} | {projected} |", flush=True)
 

@@ -3,6 +3,7 @@ cameras that frame the whole piece at every q, captures with per-part ground tru
 
 import json
 import math
+import os
 import subprocess
 import sys
 
@@ -27,6 +28,7 @@ from nfr_drake.errors import DatasetError
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.objects.articulated import _part_corners
 from nfr_drake.objects.furniture import sample_furniture
+from nfr_drake.objects.textures import texture_image
 from nfr_drake.parsing import make_parser
 
 SPEC = DatasetSpec("furniture", objects=2, articulations=2, views=2, size=32, seed=0,
@@ -257,8 +259,26 @@ def test_validate_and_sheet_read_a_furniture_dataset(reference):
     ds = RenderedDataset(reference)
     with pytest.raises(DatasetError, match="q per front"):
         ds[0]
+    block = 3 * 34 + 2  # RGB, label and part rows of one object, 2 px apart
     sheet = contact_sheet(ds, objects=2, articulations=2)
-    assert sheet.shape == (6 * 34 + 2, 2 * 34 + 2, 3)  # RGB, label and part rows per object
+    assert sheet.shape == (2 * block, 2 * 34 + 2, 3)
     part = object_arrays(reference, 1, ("part",))["part"][0, 0]
-    tile = sheet[2 + 5 * 34:2 + 5 * 34 + 32, 2:34]
+    tile = sheet[block + 2 + 2 * 34:block + 2 + 2 * 34 + 32, 2:34]
     np.testing.assert_array_equal(tile[part >= 0], PART_PALETTE[part[part >= 0]])
+    side_by_side = contact_sheet(ds, objects=2, articulations=2, per_row=2)
+    assert side_by_side.shape == (block + 12, 2 * (2 * 34 + 2) + 18, 3)
+    np.testing.assert_array_equal(side_by_side[6:6 + block, 6 + 2 * 34 + 2 + 6:-6], sheet[block:])
+
+
+def test_textures_written_at_once_by_several_processes_are_whole(tmp_path):
+    names = [(kind, seed) for kind in ("wood", "metal") for seed in range(4)]
+    code = ("from nfr_drake.objects.textures import texture_uri\n"
+            f"for kind, seed in {names!r}: texture_uri(kind, seed)")
+    env = {**os.environ, "NFR_DRAKE_TEXTURE_DIR": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env) for _ in range(4)]
+    assert [p.wait() for p in procs] == [0] * 4
+    # Every file whole, and no temporary file left behind.
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{k}_{s:08d}.png" for k, s in names)
+    for kind, seed in names:
+        image = cv2.cvtColor(cv2.imread(str(tmp_path / f"{kind}_{seed:08d}.png")), cv2.COLOR_BGR2RGB)
+        np.testing.assert_array_equal(image, texture_image(kind, seed))
