@@ -76,6 +76,29 @@ def _row(scenario: Scenario) -> PipelineRow:
         planning_seconds=task.planning_seconds, failure=failure.replace("\n", " "))
 
 
+def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
+    """Run `base` on objects index = 0 .. n-1 and append a `PipelineRow` per object to `csv_path`
+    (objects of the category already there are skipped); returns the CSV's rows of the category
+    (string values, as `csv.DictReader` reads them)."""
+    done = set()
+    if csv_path.exists():
+        with open(csv_path) as f:
+            done = {(r["category"], int(r["index"])) for r in csv.DictReader(f)}
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    new_file = not csv_path.exists()
+    with open(csv_path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(PipelineRow.__dataclass_fields__))
+        if new_file:
+            writer.writeheader()
+        for i in tqdm(range(n), desc=f"{base.category} pipeline", unit="object"):
+            if (base.category, i) in done:
+                continue
+            writer.writerow(asdict(_row(replace(base, index=i))))
+            f.flush()
+    with open(csv_path) as f:
+        return [r for r in csv.DictReader(f) if r["category"] == base.category]
+
+
 def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
@@ -103,23 +126,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size)
-    done = set()
-    if csv_path.exists():
-        with open(csv_path) as f:
-            done = {(r["category"], int(r["index"])) for r in csv.DictReader(f)}
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    new_file = not csv_path.exists()
-    with open(csv_path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(PipelineRow.__dataclass_fields__))
-        if new_file:
-            writer.writeheader()
-        for i in tqdm(range(n), desc=f"{category} pipeline", unit="object"):
-            if (category, i) in done:
-                continue
-            writer.writerow(asdict(_row(replace(base, index=i))))
-            f.flush()
-    with open(csv_path) as f:
-        rows = [r for r in csv.DictReader(f) if r["category"] == category]
+    rows = evaluate_pipeline(base, n, csv_path)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
     wins = sum(r["success"] == "True" for r in rows)

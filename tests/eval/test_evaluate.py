@@ -58,3 +58,19 @@ def test_results_of_another_version_are_refused(captures, tmp_path):
     csv_path.write_text("capture,set_name,method,keypoint_rmse_cm\nx,closets,shifted,1.0\n")
     with pytest.raises(NfrDrakeError, match="another version"):
         evaluate({"shifted": _oracle()}, {"closets": captures}, csv_path)
+
+
+def test_run_writes_the_tables_and_plots_and_returns_the_summary(captures, tmp_path):
+    from nfr_drake.eval.report import run_evaluation
+
+    out = tmp_path / "run"
+    out.mkdir()
+    methods = {"oracle": _oracle(), "shifted": _oracle((0.0, 0.02, 0.0))}
+    table = run_evaluation(methods, [captures], out, example_plots=1)
+    assert (out / "summary.md").read_text() == table + "\n"
+    assert f"| {captures.name} | shifted | 2 |" in table and "2.00" in table
+    assert (out / "errors.png").stat().st_size > 0
+    assert len(list(out.glob(f"handle_{captures.name}_closet_000.png"))) == 1
+    assert len((out / "results.csv").read_text().splitlines()) == 5
+    run_evaluation(methods, [captures], out, example_plots=1)  # resumes: no row twice
+    assert len((out / "results.csv").read_text().splitlines()) == 5

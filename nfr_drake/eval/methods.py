@@ -1,0 +1,69 @@
+"""The methods an evaluation compares: each turns a capture set and a q grid into a `Prediction`."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nfr_drake.data.capture import CaptureSet
+from nfr_drake.eval.evaluate import Method, Prediction
+from nfr_drake.inference.fit import FitConfig
+
+
+def neural_field_methods(model_dir: Path, config: FitConfig) -> dict[str, Method]:
+    """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
+    geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
+    observed views give PSNR and mIoU."""
+    from nfr_drake.inference.forward import geometric_keypoints, render_view
+    from nfr_drake.inference.infer import FittedModel, infer
+
+    fitted = FittedModel(model_dir)
+    names = fitted.keypoint_names
+    last: dict[str, tuple] = {}  # capture root -> (prediction with head keypoints, fitted z)
+
+    def head(capture: CaptureSet, grid: np.ndarray) -> Prediction:
+        fitted.check_capture(capture)
+        result, outcome = infer(fitted, capture, config, grid)
+        views = [render_view(fitted.model, outcome.z, outcome.q, f.camera, f.X_OC)
+                 for f in capture.frames]
+        prediction = Prediction(result.q, result.keypoints, result.trajectory, result.seconds,
+                                renders=[v.rgb for v in views], labels=[v.labels for v in views],
+                                image_loss=result.image_loss)
+        last.clear()
+        last[str(capture.root)] = (prediction, outcome)
+        return prediction
+
+    def geometry(capture: CaptureSet, grid: np.ndarray) -> Prediction:
+        if str(capture.root) not in last:
+            head(capture, grid)
+        base, outcome = last[str(capture.root)]
+        started = time.perf_counter()
+        now, path = geometric_keypoints(fitted.model, outcome.z, outcome.q, grid, names,
+                                        [(f.camera, f.X_OC) for f in capture.frames])
+        return Prediction(base.q, {n: now[i] for i, n in enumerate(names)},
+                          {n: path[:, i] for i, n in enumerate(names)},
+                          base.seconds + time.perf_counter() - started, renders=base.renders,
+                          labels=base.labels, image_loss=base.image_loss)
+
+    return {"neural field": head, "neural field, geometric keypoints": geometry}
+
+
+def baseline_method(baseline_dir: Path) -> Method:
+    """The image-encoder baseline, keypoints along q by the explicit geometric assumption."""
+    from nfr_drake.baseline.predict import predict_capture
+    from nfr_drake.baseline.train import load_baseline
+
+    model, doc = load_baseline(baseline_dir)
+    size = doc["training"]["image_size"]
+    names = model.config.keypoint_names
+
+    def method(capture: CaptureSet, grid: np.ndarray) -> Prediction:
+        started = time.perf_counter()
+        pred = predict_capture(model, capture, size, grid)
+        return Prediction(pred.q, {n: pred.keypoints[i] for i, n in enumerate(names)},
+                          {n: pred.trajectory[:, i] for i, n in enumerate(names)},
+                          time.perf_counter() - started)
+
+    return method
