@@ -158,6 +158,9 @@ def _check_request(alignment: Alignment, out: Path, max_size: int) -> None:
         raise ConfigError(f"{out} already exists; choose another --out")
     if max_size < 64:
         raise ConfigError(f"max_size {max_size} px is too small for feature matching")
+    if not alignment.max_anchor_residual > 0:
+        raise ConfigError(f"max_anchor_residual {alignment.max_anchor_residual} must be positive "
+                          "(a fraction of the anchors' spread, e.g. 0.05)")
 
 
 def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_dir: Path,

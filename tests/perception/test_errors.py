@@ -56,3 +56,11 @@ def test_missing_folder_and_existing_output(capsys, noise_photos, tmp_path):
     assert status == 2 and "not found" in err
     status, err = _poses(capsys, noise_photos, "--out", noise_photos, "--allow-unaligned")
     assert status == 2 and "already exists" in err
+
+
+def test_anchor_residual_limit_must_be_positive(capsys, noise_photos, tmp_path):
+    anchors = tmp_path / "anchors.json"
+    anchors.write_text(json.dumps({f"noise_{i}.png": [0.1 * i, 0.1 * (i % 2), 1.0] for i in range(3)}))
+    status, err = _poses(capsys, noise_photos, "--out", tmp_path / "out", "--anchors", anchors,
+                         "--max-anchor-residual", "0")
+    assert status == 2 and "must be positive" in err
