@@ -121,7 +121,18 @@ class RenderedDataset(torch.utils.data.Dataset):
                         for i in indices]
         self.camera = PinholeCamera.from_json(self.records[0].meta["camera"])
         self.has_parts = self.spec.category in PART_CATEGORIES
-        self.keypoint_names: tuple[str, ...] = tuple(self.records[0].meta.get("keypoint_names", ()))
+        self._keypoint_names = tuple(self.records[0].meta.get("keypoint_names", ()))
+
+    @property
+    def keypoint_names(self) -> tuple[str, ...]:
+        """The keypoints of every object; DatasetError for furniture (keypoints per front)."""
+        self._require_one_part()
+        return self._keypoint_names
+
+    def _require_one_part(self) -> None:
+        if self.has_parts:
+            raise DatasetError(f"{self.root}: a {self.spec.category} dataset has a q and keypoints per "
+                               "front; training and posed images need closet or drawer datasets")
 
     @property
     def num_objects(self) -> int:
@@ -147,9 +158,7 @@ class RenderedDataset(torch.utils.data.Dataset):
         A, V = self.spec.articulations, self.spec.views
         if not 0 <= i < len(self):
             raise IndexError(i)
-        if self.has_parts:
-            raise DatasetError(f"{self.root}: a {self.spec.category} dataset has a q per front; "
-                               "posed images with one q come from closet and drawer datasets")
+        self._require_one_part()
         j, a, v = i // (A * V), (i // V) % A, i % V
         rec = self.records[j]
         depth = rec.depth_mm[a, v].astype(np.float32) / DEPTH_SCALE

@@ -257,8 +257,9 @@ def test_validate_and_sheet_read_a_furniture_dataset(reference):
     assert result.returncode == 0, result.stderr
     assert "furniture dataset, 2 of 2 objects complete" in result.stdout
     ds = RenderedDataset(reference)
-    with pytest.raises(DatasetError, match="q per front"):
-        ds[0]
+    for use in (lambda: ds[0], lambda: ds.keypoint_names):  # what training reads first
+        with pytest.raises(DatasetError, match="a q and keypoints per front"):
+            use()
     block = 3 * 34 + 2  # RGB, label and part rows of one object, 2 px apart
     sheet = contact_sheet(ds, objects=2, articulations=2)
     assert sheet.shape == (2 * block, 2 * 34 + 2, 3)
