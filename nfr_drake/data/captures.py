@@ -25,7 +25,7 @@ from nfr_drake.data.capture import write_capture_set
 from nfr_drake.data.generate import parse_shard, part_articulations
 from nfr_drake.data.object_records import PART_ORDER, front_record, portable_sdformat
 from nfr_drake.data.render import ObjectRenderer, sample_lighting
-from nfr_drake.data.shards import PART_CATEGORIES
+from nfr_drake.data.shards import PART_CATEGORIES, process_alive
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
@@ -155,8 +155,9 @@ def captures_command(
     mine = [i for i in range(n) if i % shard_n == shard_i]
     for i in tqdm(mine, unit="capture", desc=f"{category} captures"):
         target = out / f"{category}_{i:03d}"
-        for partial in out.glob(f".{target.name}.tmp-*"):  # left by a killed run
-            shutil.rmtree(partial, ignore_errors=True)
+        for partial in out.glob(f".{target.name}.tmp-*"):  # left by a killed run (`write_capture_set`)
+            if not process_alive(int(partial.name.rsplit("-", 1)[1])):
+                shutil.rmtree(partial, ignore_errors=True)
         if target.exists():
             continue
         rng = object_rng(SEED_DOMAIN_CAPTURE, seed, i)

@@ -160,7 +160,7 @@ def completed_objects(root: Path) -> list[int]:
     return sorted(int(n[4:]) for n in names if n.startswith("obj_"))
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
     """Whether a process with this id runs on this machine."""
     try:
         os.kill(pid, 0)
@@ -178,7 +178,7 @@ def remove_partial(root: Path, indices: set[int]) -> None:
     for name in os.listdir(objects):
         if name.startswith(".obj_") and ".tmp-" in name:
             index, pid = int(name[5:11]), int(name.rsplit("-", 1)[1])
-            if index in indices and not _alive(pid):
+            if index in indices and not process_alive(pid):
                 shutil.rmtree(objects / name, ignore_errors=True)
 
 

@@ -10,7 +10,15 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from dataset_checks import ARRAYS, assert_same_data, kill_after_first_object, object_arrays
+from dataset_checks import (
+    ARRAYS,
+    assert_same_data,
+    dead_pid,
+    files_of,
+    kill_after_first_object,
+    kill_when,
+    object_arrays,
+)
 from pydrake.multibody.plant import MultibodyPlant
 
 from nfr_drake.data.camera import PinholeCamera
@@ -63,7 +71,7 @@ def _loads_in_drake(sdf_path):
 def test_resume_after_kill_is_bit_identical_with_the_same_files(reference, tmp_path):
     cmd = [sys.executable, "-m", "nfr_drake.cli", "generate", *ARGS, "--out", str(tmp_path), "--workers", "1"]
     assert kill_after_first_object(cmd, tmp_path) < SPEC.objects, "run finished before the kill"
-    partial = tmp_path / OBJECTS_DIR / ".obj_000001.tmp-99999"
+    partial = tmp_path / OBJECTS_DIR / f".obj_000001.tmp-{dead_pid()}"
     partial.mkdir(exist_ok=True)
     (partial / "part.npy").write_bytes(b"truncated")
     done = subprocess.run(cmd, capture_output=True, text=True)
@@ -71,12 +79,8 @@ def test_resume_after_kill_is_bit_identical_with_the_same_files(reference, tmp_p
     spec_of = [json.loads((root / "dataset.json").read_text()) for root in (tmp_path, reference)]
     assert spec_of[0] == spec_of[1]  # the CLI frames furniture by its bounds, as SPEC does
     assert_same_data(reference, tmp_path, SPEC.objects, NAMES)
-    for i in range(SPEC.objects):
-        files = sorted(p.relative_to(_folder(reference, i)) for p in _folder(reference, i).rglob("*"))
-        assert files == sorted(p.relative_to(_folder(tmp_path, i)) for p in _folder(tmp_path, i).rglob("*"))
-        for rel in files:
-            if rel.suffix in (".sdf", ".png", ".json"):
-                assert (_folder(reference, i) / rel).read_bytes() == (_folder(tmp_path, i) / rel).read_bytes()
+    for i in range(SPEC.objects):  # meta.json, object.sdf and textures too
+        assert files_of(_folder(reference, i)) == files_of(_folder(tmp_path, i))
 
 
 def test_part_image_marks_fronts_exactly_where_the_labels_do(reference):
@@ -198,11 +202,20 @@ def test_closet_cameras_keep_their_fixed_distances():
 def test_captures_carry_every_part_their_images_and_textures(tmp_path):
     out = tmp_path / "caps"
     out.mkdir()
-    (out / ".furniture_000.tmp-99999").mkdir()  # left by a killed run
+    partial = f".furniture_000.tmp-{dead_pid()}"
+    (out / partial).mkdir()  # left by a killed run
     captures_command("furniture", n=2, out=out, views=2, size=32, seed=0, shard="1/2")
-    assert sorted(p.name for p in out.iterdir()) == [".furniture_000.tmp-99999", "furniture_001"]
+    assert sorted(p.name for p in out.iterdir()) == [partial, "furniture_001"]
     captures_command("furniture", n=2, out=out, views=2, size=32, seed=0, shard="0/2")
     assert sorted(p.name for p in out.iterdir()) == ["furniture_000", "furniture_001"]
+    # One run, killed with -9 after its first capture set and run again: the same files.
+    killed = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "nfr_drake.cli", "captures", "--category", "furniture", "--n", "2",
+           "--views", "2", "--size", "32", "--seed", "0", "--out", str(killed)]
+    kill_when(cmd, lambda: (killed / "furniture_000").is_dir())
+    assert not (killed / "furniture_001").exists(), "run finished before the kill"
+    assert subprocess.run(cmd, capture_output=True).returncode == 0
+    assert files_of(killed) == files_of(out)
     for i in range(2):
         root = out / f"furniture_{i:03d}"
         cap = read_capture_set(root)
