@@ -41,7 +41,7 @@ def test_frozen_and_validated():
     with pytest.raises(dataclasses.FrozenInstanceError):
         FitConfig().max_steps = 3
     with pytest.raises(ConfigError, match="explore_steps"):
-        FitConfig(max_steps=50)
+        FitConfig(explore_steps=100, max_steps=50)
     assert not FitConfig(handle_detector=False).uses_sightings
     assert not FitConfig(sighting_weight=0.0).uses_sightings and FitConfig().uses_sightings
 

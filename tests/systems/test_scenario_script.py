@@ -34,7 +34,7 @@ def test_fit_options_load_into_the_shared_frozen_config(tmp_path):
     path.write_text("category: drawer\nfit:\n  max_steps: 300\n  handle_detector: false\n")
     scenario = Scenario.load(path)
     assert scenario.fit == FitConfig(max_steps=300, handle_detector=False)
-    path.write_text("fit:\n  max_steps: 50\n")  # below explore_steps
+    path.write_text("fit:\n  explore_steps: 100\n  max_steps: 50\n")
     with pytest.raises(ConfigError, match="explore_steps"):
         Scenario.load(path)
     path.write_text("fit:\n  max_stepz: 300\n")
