@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from pydrake.geometry import (
@@ -19,12 +20,16 @@ from pydrake.geometry import (
     DepthRenderCamera,
     LightParameter,
     MakeRenderEngineVtk,
+    PerceptionProperties,
     RenderCameraCore,
     RenderEngineVtkParams,
+    RenderLabel,
+    Role,
+    RoleAssign,
 )
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
-from pydrake.multibody.tree import SpatialInertia
+from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
@@ -36,6 +41,12 @@ from nfr_drake.objects.plant import add_articulated_object, apply_semantic_label
 RENDERER_NAME = "nfr_vtk"
 DEFAULT_BACKGROUND_RGB = (0.92, 0.92, 0.92)
 _CLIP_NEAR_M, _CLIP_FAR_M = 0.05, 20.0
+
+
+class LightSet(Protocol):
+    """Lights a renderer takes."""
+
+    def drake_lights(self) -> list[LightParameter]: ...
 
 
 @dataclass(frozen=True)
@@ -92,6 +103,8 @@ class RenderedView:
 
 # Render labels this package assigns: 1 (carcass) to class + 4 (k + 1) of the last front.
 _MAX_LABEL = LABELS_PER_PART * (MAX_FRONTS + 1) + LABELS_PER_PART - 1
+SCENERY_LABEL = 1000
+"""RenderLabel of everything a renderer shows besides its object (class 0, part -1)."""
 
 
 def split_render_label(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,20 +133,38 @@ def drake_camera_info(camera: PinholeCamera) -> CameraInfo:
     return CameraInfo(camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy)
 
 
+def _label_scenery(plant: MultibodyPlant, scene_graph, model: ModelInstanceIndex) -> None:
+    """Give every perception geometry outside `model` the RenderLabel `SCENERY_LABEL` (Drake's
+    parser labels geometry by body index, which would collide with the object's labels)."""
+    inspector = scene_graph.model_inspector()
+    for i in range(plant.num_model_instances()):
+        if ModelInstanceIndex(i) == model:
+            continue
+        for body_index in plant.GetBodyIndices(ModelInstanceIndex(i)):
+            frame_id = plant.GetBodyFrameIdOrThrow(body_index)
+            for geometry_id in inspector.GetGeometries(frame_id, Role.kPerception):
+                props = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
+                props.UpdateProperty("label", "id", RenderLabel(SCENERY_LABEL))
+                scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kPerception)
+                scene_graph.AssignRole(plant.get_source_id(), geometry_id, props, RoleAssign.kNew)
+
+
 class ObjectRenderer:
     """Renders one `ArticulatedObject` with a Drake RgbdSensor at any q and camera pose.
 
     Args:
         obj: the object; its carcass is welded at the world origin (frame O = W).
         camera: intrinsics of every view (no distortion).
-        lighting: lights of this renderer; default `Lighting()`.
+        lighting: lights of this renderer (anything with `drake_lights()`: `Lighting`,
+            `nfr_drake.data.room_lighting.RoomLighting`); default `Lighting()`.
         background_rgb: clear colour, each channel in [0, 1].
         add_scenery: called with the plant before it is finalised, to add more geometry (a
-            textured room, say); it must not add degrees of freedom.
+            room: `nfr_drake.data.rooms.Room.add_to`); joints it adds keep their default
+            positions. Its geometry is labelled `SCENERY_LABEL`: class 0 in the label images.
     """
 
     def __init__(self, obj: ArticulatedObject, camera: PinholeCamera,
-                 lighting: Lighting | None = None,
+                 lighting: LightSet | None = None,
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
                  add_scenery: Callable[[MultibodyPlant], None] | None = None):
         self.obj = obj
@@ -150,6 +181,8 @@ class ObjectRenderer:
         rig = plant.AddRigidBody("camera_rig", rig_model, SpatialInertia.SolidSphereWithMass(0.1, 0.05))
         plant.Finalize()
         apply_semantic_labels(plant, scene_graph, self._model)
+        if add_scenery is not None:
+            _label_scenery(plant, scene_graph, self._model)
 
         core = RenderCameraCore(RENDERER_NAME, drake_camera_info(camera),
                                 ClippingRange(_CLIP_NEAR_M, _CLIP_FAR_M), RigidTransform())

@@ -31,6 +31,7 @@ CATEGORIES: dict[str, Callable[..., ArticulatedObject]] = {
 # object i of seed s in domain d is drawn from np.random.default_rng([d, s, i]).
 SEED_DOMAIN_TRAIN = 0
 SEED_DOMAIN_CAPTURE = 1
+SEED_DOMAIN_ROOM = 2
 
 
 def object_rng(domain: int, seed: int, index: int) -> np.random.Generator:
@@ -49,6 +50,7 @@ def sample_object(category: str, rng: np.random.Generator, name: str | None = No
 __all__ = [
     "CATEGORIES",
     "SEED_DOMAIN_CAPTURE",
+    "SEED_DOMAIN_ROOM",
     "SEED_DOMAIN_TRAIN",
     "SEMANTIC_CLASS_NAMES",
     "ArticulatedObject",
