@@ -116,9 +116,13 @@ class Scenario:
 
 def _thawed(cls: type) -> type:
     """A mutable dataclass with the fields, types and defaults of the frozen dataclass `cls`:
-    `yaml_load_typed` fills a dataclass by setting its attributes one by one."""
+    `yaml_load_typed` fills a dataclass by setting its attributes one by one. It knows no
+    `Literal`: such a field is read as the type of its values (`cls` checks the value)."""
+    def yaml_type(t):
+        return type(typing.get_args(t)[0]) if typing.get_origin(t) is typing.Literal else t
+
     hints = typing.get_type_hints(cls)
-    return make_dataclass(cls.__name__, [(f.name, hints[f.name], field(default=f.default))
+    return make_dataclass(cls.__name__, [(f.name, yaml_type(hints[f.name]), field(default=f.default))
                                          for f in fields(cls)])
 
 

@@ -57,3 +57,21 @@ def test_script_refuses_a_bad_scenario_with_status_2(tmp_path):
     result = subprocess.run([sys.executable, str(SYSTEMS / "run_scenario.py"), str(path)],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 2 and "sofa" in result.stderr
+
+
+def test_frozen_configs_with_literal_fields_load(tmp_path):
+    """Drake's YAML reader knows no Literal: the mutable twin reads such a field as a str."""
+    from dataclasses import dataclass
+    from typing import Literal
+
+    from pydrake.common.yaml import yaml_load_typed
+
+    from nfr_drake.systems.scenario import _thawed
+
+    @dataclass(frozen=True)
+    class Options:
+        mode: Literal["fast", "thorough"] = "fast"
+        steps: int = 3
+
+    loaded = yaml_load_typed(schema=_thawed(Options), data="mode: thorough\nsteps: 5\n")
+    assert Options(**vars(loaded)) == Options("thorough", 5)
