@@ -1,0 +1,16 @@
+"""A 2D object segmenter: finds the target object in a photo of a room.
+
+A tiny U-Net (`model.Segmenter`) trained on Drake renders of objects in random rooms
+(`nfr_drake.data.rooms`, `nfr-drake generate-rooms`) labels each pixel as background, carcass,
+moving part or handle of the target; `Segmenter.object_mask(image)` is the probability that a
+pixel shows the object, (H, W), for a uint8 RGB image of any size. Files of a model folder
+(`models/segmenter/`): `model.safetensors`, `config.json` (architecture and training record),
+`MODEL_CARD.md`; nothing is ever unpickled. Results and failure cases: docs/ROOMS.md.
+
+Modules, one role each:
+- `model`: the network, its configuration, saving and loading a model folder.
+- `data`: images of room datasets and augmented training batches.
+- `training`: the loss and the resumable training loop.
+- `evaluation`: mask IoU per dataset and the figure of predicted and true masks.
+- `command`: `nfr-drake train-segmenter` and `nfr-drake eval-segmenter`.
+"""

@@ -1,0 +1,93 @@
+"""How well a segmenter finds the object: mask IoU on room datasets, and a figure of its masks.
+
+Per dataset: the mean and median IoU of the thresholded mask (probability > 0.5) against the
+true one (label > 0), the pooled IoU (all pixels of all images), the same on the images whose
+true mask touches the image border (the object cut by the image edge) and on the others, and the
+false-positive area (predicted object pixels outside the true mask, relative to the true mask's
+area): what a twin beside the object or a similar neighbour adds to the mask.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from nfr_drake.data.room_dataset import read_room_spec
+from nfr_drake.perception.segmentation.data import RoomImages
+from nfr_drake.perception.segmentation.model import Segmenter
+
+THRESHOLD = 0.5
+
+
+def mask_iou(pred: np.ndarray, true: np.ndarray) -> float:
+    """Intersection over union of two boolean masks of one shape; 1 when both are empty."""
+    union = np.count_nonzero(pred | true)
+    return float(np.count_nonzero(pred & true) / union) if union else 1.0
+
+
+def touches_border(mask: np.ndarray) -> bool:
+    """Whether a boolean mask (H, W) has a pixel in the outermost row or column."""
+    return bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+
+
+def evaluate_dataset(net: Segmenter, root: Path) -> dict:
+    """The measures of the module docstring on every image of the room dataset `root`."""
+    spec = read_room_spec(root)
+    data = RoomImages([root])
+    ious, cut, false_pos = [], [], []
+    inter = union = 0
+    for i in range(len(data)):
+        rgb, label = data.image(i)
+        true = label > 0
+        if not true.any():
+            continue  # the object is hidden (behind the arm or clutter) in this view
+        pred = net.object_mask(rgb) > THRESHOLD
+        ious.append(mask_iou(pred, true))
+        cut.append(touches_border(true))
+        false_pos.append(np.count_nonzero(pred & ~true) / np.count_nonzero(true))
+        inter += np.count_nonzero(pred & true)
+        union += np.count_nonzero(pred | true)
+    ious_a, cut_a = np.asarray(ious), np.asarray(cut, bool)
+
+    def mean(x: np.ndarray) -> float | None:
+        return float(x.mean()) if x.size else None
+
+    return {"dataset": str(root), "category": spec.category, "style": spec.room.style,
+            "images": len(ious), "iou_mean": mean(ious_a), "iou_median": float(np.median(ious_a)),
+            "iou_pooled": inter / union if union else 1.0, "cut_images": int(cut_a.sum()),
+            "iou_mean_cut": mean(ious_a[cut_a]), "iou_mean_whole": mean(ious_a[~cut_a]),
+            "false_positive_area": mean(np.asarray(false_pos)),
+            "iou_below_0.5": int((ious_a < 0.5).sum())}
+
+
+def _overlay(rgb: np.ndarray, mask: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
+    out = rgb.astype(np.float32)
+    out[mask] = 0.45 * out[mask] + 0.55 * np.asarray(colour, np.float32)
+    edge = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+    out[edge] = colour
+    return out.clip(0, 255).astype(np.uint8)
+
+
+def mask_figure(net: Segmenter, roots: list[Path], per_dataset: int, out: Path, seed: int = 0) -> None:
+    """PNG of `per_dataset` random images of each dataset, one row each: the photo, the true mask
+    (green) and the predicted mask (magenta) with its IoU in the corner, 2x enlarged."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for root in roots:
+        data = RoomImages([root])
+        for i in rng.choice(len(data), min(per_dataset, len(data)), replace=False):
+            rgb, label = data.image(int(i))
+            true, pred = label > 0, net.object_mask(rgb) > THRESHOLD
+            tiles = [rgb, _overlay(rgb, true, (0, 220, 0)), _overlay(rgb, pred, (230, 0, 230))]
+            row = cv2.resize(np.concatenate(tiles, 1), None, fx=2, fy=2, interpolation=cv2.INTER_NEAREST)
+            text = f"{data.category[int(i)]} IoU {mask_iou(pred, true):.2f}"
+            cv2.putText(row, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
+                        cv2.LINE_AA)
+            rows.append(row)
+    width = max(r.shape[1] for r in rows)
+    rows = [np.pad(r, ((0, 2), (0, width - r.shape[1]), (0, 0))) for r in rows]
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(out), cv2.cvtColor(np.concatenate(rows, 0), cv2.COLOR_RGB2BGR))

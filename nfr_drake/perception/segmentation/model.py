@@ -1,0 +1,134 @@
+"""The segmenter: a tiny U-Net that labels each pixel of a photo as background or one of the
+target object's classes (carcass, moving part, handle; docs/CONVENTIONS.md).
+
+The object's mask is the probability of "not background" (`object_mask`). Each image is
+standardised (its own mean and standard deviation per channel) before the network sees it, so an
+exposure or white-balance change moves nothing; the network is fully convolutional and pads the
+image to a multiple of 2^levels, so it runs on any image size.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import save_file
+from torch import nn
+
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import CheckpointError, load_strict, read_tensors
+
+NUM_CLASSES = 4
+"""Outputs per pixel: background, carcass, moving part, handle (the semantic classes)."""
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+
+
+@dataclass(frozen=True)
+class SegmenterConfig:
+    """Architecture: a stride-2 stem of `channels`, then `levels` stride-2 stages, channels
+    doubling per stage (at most 4x), two 3x3 convolutions per stage, a bottleneck of dilated
+    convolutions (`bottleneck_dilations`) for context, a decoder of the same stages with skip
+    connections, and logits at half resolution upsampled (bilinear) to the image's."""
+
+    channels: int = 16
+    levels: int = 3
+    bottleneck_dilations: tuple[int, ...] = (2, 4)
+
+    def __post_init__(self):
+        if self.channels < 1 or self.levels < 1 or min(self.bottleneck_dilations, default=1) < 1:
+            raise ConfigError("segmenter: channels, levels and dilations must be positive")
+
+    @classmethod
+    def from_json(cls, d: dict) -> SegmenterConfig:
+        return cls(channels=int(d["channels"]), levels=int(d["levels"]),
+                   bottleneck_dilations=tuple(int(x) for x in d["bottleneck_dilations"]))
+
+
+def _block(c_in: int, c_out: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(c_in, c_out, 3, stride=stride, padding=dilation, dilation=dilation),
+                         nn.ReLU(), nn.Conv2d(c_out, c_out, 3, padding=1), nn.ReLU())
+
+
+class Segmenter(nn.Module):
+    """(B, 3, H, W) RGB in [0, 1] -> class logits (B, NUM_CLASSES, H, W); any H and W."""
+
+    def __init__(self, config: SegmenterConfig):
+        super().__init__()
+        self.config = config
+        c = [config.channels * min(2**i, 4) for i in range(config.levels + 1)]
+        self.stem = _block(3, c[0], stride=2)
+        self.down = nn.ModuleList(_block(c[i], c[i + 1], stride=2) for i in range(config.levels))
+        self.bottleneck = nn.Sequential(*(_block(c[-1], c[-1], dilation=d)
+                                          for d in config.bottleneck_dilations))
+        self.up = nn.ModuleList(_block(c[i + 1] + c[i], c[i]) for i in reversed(range(config.levels)))
+        self.head = nn.Conv2d(c[0], NUM_CLASSES, 1)
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        h, w = rgb.shape[-2:]
+        mean = rgb.mean(dim=(2, 3), keepdim=True)
+        std = rgb.std(dim=(2, 3), keepdim=True)
+        x = (rgb - mean) / (std + 0.05)
+        m = 2 ** (self.config.levels + 1)
+        pad = (0, (-w) % m, 0, (-h) % m)
+        x = nn.functional.pad(x, pad, mode="replicate")
+        skips = [self.stem(x)]
+        for stage in self.down:
+            skips.append(stage(skips[-1]))
+        y = self.bottleneck(skips.pop())
+        for stage in self.up:
+            skip = skips.pop()
+            y = nn.functional.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            y = stage(torch.cat([y, skip], dim=1))
+        logits = nn.functional.interpolate(self.head(y), scale_factor=2.0, mode="bilinear",
+                                           align_corners=False)
+        return logits[..., :h, :w]
+
+    @torch.no_grad()
+    def class_probabilities(self, image: np.ndarray) -> np.ndarray:
+        """Per-pixel class probabilities (H, W, NUM_CLASSES), float32, of a uint8 RGB image
+        (H, W, 3) of any size; NfrDrakeError on anything else."""
+        image = np.asarray(image)
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+            raise NfrDrakeError(f"segmenter: expected a uint8 RGB image (H, W, 3), got {image.dtype} "
+                                f"{image.shape}")
+        if min(image.shape[:2]) < 2:
+            raise NfrDrakeError(f"segmenter: image of {image.shape[1]}x{image.shape[0]} px is too small")
+        self.eval()
+        x = torch.from_numpy(np.ascontiguousarray(image, np.float32) / 255.0).permute(2, 0, 1)[None]
+        return torch.softmax(self(x), dim=1)[0].permute(1, 2, 0).numpy()
+
+    def object_mask(self, image: np.ndarray) -> np.ndarray:
+        """Probability that each pixel shows the target object, (H, W) float32 in [0, 1], of a
+        uint8 RGB image (H, W, 3) of any size."""
+        return 1.0 - self.class_probabilities(image)[..., 0]
+
+
+def save_segmenter(folder: Path, net: Segmenter, record: dict) -> None:
+    """Write `model.safetensors` and `config.json` (`record` plus the architecture under "model")
+    into `folder`, each atomically."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_file({k: v.contiguous() for k, v in net.state_dict().items()}, str(folder / f"{WEIGHTS_FILE}.tmp"))
+    (folder / f"{WEIGHTS_FILE}.tmp").replace(folder / WEIGHTS_FILE)
+    doc = {**record, "model": asdict(net.config)}
+    (folder / f"{CONFIG_FILE}.tmp").write_text(json.dumps(doc, indent=2) + "\n")
+    (folder / f"{CONFIG_FILE}.tmp").replace(folder / CONFIG_FILE)
+
+
+def load_segmenter(folder: Path) -> tuple[Segmenter, dict]:
+    """A trained segmenter and its record from a folder (`models/segmenter`); CheckpointError
+    naming the file that is missing or damaged."""
+    folder = Path(folder)
+    record = read_json(folder / CONFIG_FILE, CheckpointError, "segmenter config")
+    try:
+        net = Segmenter(SegmenterConfig.from_json(record["model"]))
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f"{folder / CONFIG_FILE}: not a segmenter ({err})") from None
+    load_strict(net, read_tensors(folder / WEIGHTS_FILE), folder / WEIGHTS_FILE)
+    net.eval()
+    return net, record

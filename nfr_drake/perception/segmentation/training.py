@@ -1,0 +1,134 @@
+"""Training the segmenter on room datasets: the loss and a resumable training loop.
+
+OUT/checkpoint/ is a safetensors + JSON checkpoint (`write_training_checkpoint`: weights, Adam
+moments, torch RNG; trainer.json: step, scheduler, the sampler's RNG, losses), written every
+`checkpoint_every` steps; a run resumed from it ends with the weights of a run never stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from nfr_drake.cpu import set_torch_threads
+from nfr_drake.errors import ConfigError
+from nfr_drake.jsonio import read_json
+from nfr_drake.nfr.checkpoint import (
+    TRAINER_FILE,
+    CheckpointError,
+    read_training_checkpoint,
+    write_training_checkpoint,
+)
+from nfr_drake.perception.segmentation.data import RoomImages, sample_batch
+from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig, save_segmenter
+
+CHECKPOINT_DIR = "checkpoint"
+
+
+@dataclass(frozen=True)
+class SegmenterTrainConfig:
+    """Training: `steps` Adam steps of `batch` augmented crops of `crop` px; the learning rate
+    decays from `lr` to 0 (cosine); the loss adds `dice_weight` times a soft Dice loss of the
+    object mask to the per-pixel cross-entropy of the classes."""
+
+    steps: int = 3000
+    batch: int = 16
+    crop: int = 80
+    lr: float = 2e-3
+    dice_weight: float = 1.0
+    checkpoint_every: int = 100
+    seed: int = 0
+    threads: int | None = None
+    """torch CPU threads (None: the free cores, `nfr_drake.cpu.free_cores`)."""
+
+    def __post_init__(self):
+        threads = 1 if self.threads is None else self.threads
+        if min(self.steps, self.batch, self.checkpoint_every, threads) < 1:
+            raise ConfigError("segmenter training: steps, batch, checkpoint_every and threads must be >= 1")
+        if self.crop < 16 or self.lr <= 0 or self.dice_weight < 0:
+            raise ConfigError("segmenter training: crop must be >= 16 px, lr > 0, dice_weight >= 0")
+
+
+def segmentation_loss(logits: torch.Tensor, labels: torch.Tensor, dice_weight: float) -> torch.Tensor:
+    """Cross-entropy of the classes plus `dice_weight` times the soft Dice loss of the object
+    mask (every class but background). logits (B, 4, H, W), labels (B, H, W) int64."""
+    ce = nn.functional.cross_entropy(logits, labels)
+    p = 1.0 - torch.softmax(logits, dim=1)[:, 0]
+    mask = (labels > 0).float()
+    dice = 1.0 - (2.0 * (p * mask).sum() + 1.0) / (p.sum() + mask.sum() + 1.0)
+    return ce + dice_weight * dice
+
+
+def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConfig,
+                    model: SegmenterConfig | None = None, resume: bool = False,
+                    command: str = "") -> dict:
+    """Train a segmenter on room datasets (any categories and image sizes); writes OUT/.
+
+    `model` is the architecture (default `SegmenterConfig()`). Returns the training record
+    written into OUT/config.json; OUT/model.safetensors holds the weights (`load_segmenter`).
+    """
+    if not data_dirs:
+        raise ConfigError("train-segmenter: give at least one --data folder")
+    out = Path(out)
+    ckpt_path = out / CHECKPOINT_DIR
+    if ckpt_path.is_dir() and not resume:
+        raise ConfigError(f"{out} already holds a checkpoint; pass --resume or another --out")
+    set_torch_threads(config.threads)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    data = RoomImages(list(data_dirs))
+    model = model or SegmenterConfig()
+    net = Segmenter(model)
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
+    options = json.loads(json.dumps({"model": asdict(model), "train": train_options,
+                                     "images": len(data)}))
+    step, seconds, losses = 0, 0.0, []
+    if resume and ckpt_path.is_dir():
+        saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
+        if not isinstance(saved, dict) or {k: saved.get(k) for k in options} != options:
+            raise ConfigError(f"{ckpt_path}: --resume with other options or data than the run's")
+        state = read_training_checkpoint(ckpt_path, net, opt)
+        try:
+            sched.load_state_dict(state["sched"])
+            rng.bit_generator.state = state["rng"]
+            step, seconds, losses = int(state["step"]), float(state["seconds"]), list(state["losses"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise CheckpointError(f"{ckpt_path / TRAINER_FILE}: bad training state ({err})") from None
+    out.mkdir(parents=True, exist_ok=True)
+
+    def checkpoint() -> None:
+        write_training_checkpoint(ckpt_path, net, opt, {
+            **options, "sched": sched.state_dict(), "rng": rng.bit_generator.state, "step": step,
+            "seconds": seconds, "losses": losses})
+
+    net.train()
+    bar = tqdm(total=config.steps, initial=step, desc="train segmenter", mininterval=10.0)
+    while step < config.steps:
+        t0 = time.perf_counter()
+        rgb, labels = sample_batch(data, config.batch, config.crop, rng)
+        loss = segmentation_loss(net(rgb), labels, config.dice_weight)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        losses.append(loss.item())
+        step += 1
+        seconds += time.perf_counter() - t0
+        bar.update(1)
+        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.3f}", refresh=False)
+        if step % config.checkpoint_every == 0 or step == config.steps:
+            checkpoint()
+    bar.close()
+    record = {"data": [str(d) for d in data_dirs], "images": len(data), "train": asdict(config),
+              "command": command, "seconds": seconds, "final_loss": float(np.mean(losses[-100:]))}
+    save_segmenter(out, net, record)
+    return record

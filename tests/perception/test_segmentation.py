@@ -1,0 +1,125 @@
+"""The 2D object segmenter: any image size, one-line errors, training that learns and resumes
+bit-exactly, and its measures."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from nfr_drake.cli import main
+from nfr_drake.data.room_dataset import RoomDatasetSpec, generate_rooms
+from nfr_drake.data.rooms import RoomDistribution
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.perception.segmentation import training
+from nfr_drake.perception.segmentation.evaluation import evaluate_dataset, mask_iou, touches_border
+from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig, load_segmenter
+from nfr_drake.perception.segmentation.training import SegmenterTrainConfig, train_segmenter
+
+SMALL = SegmenterConfig(channels=4, levels=2, bottleneck_dilations=(2,))
+
+
+@pytest.fixture(scope="module")
+def rooms(tmp_path_factory):
+    """Two closets in rooms, 2 views each, 32 px."""
+    root = tmp_path_factory.mktemp("rooms") / "closet"
+    spec = RoomDatasetSpec("closet", 2, articulations=1, views=2, size=32,
+                           room=RoomDistribution(clutter=(2, 4), cut_probability=0.5))
+    generate_rooms(spec, root, progress=False)
+    return root
+
+
+@pytest.mark.parametrize("shape", [(37, 51), (32, 32), (5, 130), (2, 3)])
+def test_the_mask_has_the_image_size_at_any_size(shape):
+    net = Segmenter(SMALL)
+    image = np.random.default_rng(0).integers(0, 255, (*shape, 3), dtype=np.uint8)
+    mask = net.object_mask(image)
+    assert mask.shape == shape and mask.dtype == np.float32 and np.all((mask >= 0) & (mask <= 1))
+    probs = net.class_probabilities(image)
+    np.testing.assert_allclose(probs.sum(-1), 1.0, rtol=1e-5)
+
+
+@pytest.mark.parametrize("image", [np.zeros((8, 8), np.uint8), np.zeros((8, 8, 4), np.uint8),
+                                   np.zeros((8, 8, 3), np.float32), np.zeros((1, 8, 3), np.uint8)])
+def test_bad_images_are_one_line_errors(image):
+    with pytest.raises(NfrDrakeError) as err:
+        Segmenter(SMALL).object_mask(image)
+    assert "\n" not in str(err.value)
+
+
+def test_exposure_does_not_change_the_mask():
+    """Each image is standardised first: a uniform gain (without clipping) changes nothing."""
+    net = Segmenter(SMALL)
+    image = np.random.default_rng(0).integers(10, 120, (24, 40, 3), dtype=np.uint8)
+    np.testing.assert_allclose(net.object_mask(image), net.object_mask(image * 2), atol=1e-3)
+
+
+def test_training_lowers_the_loss_round_trips_and_refuses_a_second_run(rooms, tmp_path):
+    torch.manual_seed(0)
+    config = SegmenterTrainConfig(steps=30, batch=4, crop=24, checkpoint_every=10, threads=1)
+    out = tmp_path / "seg"
+    record = train_segmenter([rooms], out, config, SMALL)
+    assert sorted(p.name for p in (out / "checkpoint").iterdir()) == [
+        "model.safetensors", "optimizer.safetensors", "trainer.json"]
+    losses = json.loads((out / "checkpoint" / "trainer.json").read_text())["losses"]
+    assert len(losses) == 30 and np.mean(losses[-5:]) < np.mean(losses[:5])
+    assert record["images"] == 4
+    net, saved = load_segmenter(out)
+    assert saved["model"]["channels"] == 4 and saved["train"]["steps"] == 30
+    with pytest.raises(ConfigError, match="--resume"):
+        train_segmenter([rooms], out, config, SMALL)
+    with pytest.raises(ConfigError, match="other options"):
+        train_segmenter([rooms], out, SegmenterTrainConfig(steps=31, batch=4, crop=24, checkpoint_every=10),
+                        SMALL, resume=True)
+
+
+def test_resume_continues_where_the_killed_run_left_off(rooms, tmp_path, monkeypatch):
+    """A run killed at step 15 (checkpoint at 10) and resumed ends with the weights of a run that
+    was never killed: weights, Adam moments, scheduler and both RNGs come back."""
+    config = SegmenterTrainConfig(steps=20, batch=2, crop=16, checkpoint_every=5, threads=1)
+    torch.manual_seed(5)
+    train_segmenter([rooms], tmp_path / "once", config, SMALL)
+    calls = []
+    loss = training.segmentation_loss
+
+    def killed_at_step_15(*args):
+        calls.append(1)
+        if len(calls) == 15:
+            raise KeyboardInterrupt
+        return loss(*args)
+
+    monkeypatch.setattr(training, "segmentation_loss", killed_at_step_15)
+    torch.manual_seed(5)
+    with pytest.raises(KeyboardInterrupt):
+        train_segmenter([rooms], tmp_path / "twice", config, SMALL)
+    monkeypatch.setattr(training, "segmentation_loss", loss)
+    torch.manual_seed(99)  # the resumed run restores the torch RNG itself
+    train_segmenter([rooms], tmp_path / "twice", config, SMALL, resume=True)
+    a, b = (load_segmenter(tmp_path / run)[0].state_dict() for run in ("once", "twice"))
+    for name in a:
+        torch.testing.assert_close(a[name], b[name], rtol=0, atol=0)
+
+
+def test_measures(rooms):
+    t = np.zeros((4, 4), bool)
+    t[1:3, 1:3] = True
+    p = np.zeros((4, 4), bool)
+    p[1:3, 1:4] = True
+    assert mask_iou(p, t) == pytest.approx(4 / 6) and mask_iou(t, t) == 1.0
+    assert mask_iou(np.zeros_like(t), np.zeros_like(t)) == 1.0
+    assert not touches_border(t) and touches_border(p)
+    result = evaluate_dataset(Segmenter(SMALL), rooms)
+    assert result["category"] == "closet" and 0 < result["images"] <= 4
+    assert 0.0 <= result["iou_mean"] <= 1.0
+
+
+def test_cli_errors_are_one_line(tmp_path, capsys):
+    assert main(["train-segmenter", "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert main(["eval-segmenter", "--model", str(tmp_path), "--data", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "dataset.json: not found" in err[0] and "segmenter config" in err[1]
+    with pytest.raises(CheckpointError, match="segmenter config"):
+        load_segmenter(tmp_path)
+    with pytest.raises(ConfigError):
+        SegmenterTrainConfig(crop=8)
