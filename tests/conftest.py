@@ -45,3 +45,14 @@ def tiny_dataset(tmp_path_factory):
     generate_command(category="closet", objects=2, out=out, articulations=2, views=4, size=32,
                      workers=1)
     return out
+
+
+@pytest.fixture(scope="session")
+def furniture_dataset(tmp_path_factory):
+    """3 pieces of furniture x 2 articulations x 2 views at 24 px (a few seconds)."""
+    from nfr_drake.data.generate import generate_command
+
+    out = tmp_path_factory.mktemp("nfr_data") / "furniture"
+    generate_command(category="furniture", objects=3, out=out, articulations=2, views=2, size=24,
+                     workers=1)
+    return out

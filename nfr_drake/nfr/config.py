@@ -37,7 +37,11 @@ class NFRModelConfig:
     """
 
     latent_obj_dim: int = 32
-    """k, size of the object code z_obj (shape and appearance); z = [z_art (2), z_obj (k)]."""
+    """k, size of the object code z_obj (shape and appearance); z = [z_art (2 S), z_obj (k)]."""
+    num_slots: int = 1
+    """S, articulation slots: 1 for closets and drawers; furniture: one per front in canonical
+    order, `MAX_FRONTS` (set from the dataset when training). Above 1 the keypoint head also
+    gives each slot's existence and type logits."""
     hyper_hidden: int = 64
     """Hidden width of each per-layer hypernetwork (one hidden layer, as in SRN)."""
     field_width: int = 64
@@ -65,7 +69,8 @@ class NFRModelConfig:
     num_classes: int = 4
     """Semantic classes: 0 background, 1 carcass, 2 door or drawer, 3 handle (docs/CONVENTIONS.md)."""
     num_keypoints: int = 4
-    """K, keypoints predicted by Gamma(z); set from the dataset's keypoint names when training."""
+    """K, keypoints predicted by Gamma(z); set from the dataset's keypoint names when training
+    (furniture: S x 4, slot-major)."""
     keypoint_hidden: int = 128
     """Hidden width of the keypoint head Gamma (two hidden layers)."""
     bound_center: tuple[float, float, float] = (0.3, 0.0, 0.45)
@@ -76,7 +81,7 @@ class NFRModelConfig:
     """Smallest start depth along a ray (m), used when the camera is inside the sphere."""
 
     def __post_init__(self):
-        _positive(self, "latent_obj_dim", "hyper_hidden", "field_width", "field_layers",
+        _positive(self, "latent_obj_dim", "num_slots", "hyper_hidden", "field_width", "field_layers",
                   "feature_dim", "march_steps", "march_max_step", "lstm_hidden", "pixel_hidden",
                   "num_classes", "num_keypoints", "keypoint_hidden", "bound_radius", "min_depth",
                   "pe_base_frequency")
@@ -90,9 +95,19 @@ class NFRModelConfig:
             raise ConfigError("NFRModelConfig.bound_center must have 3 entries")
 
     @property
+    def art_dim(self) -> int:
+        """Size of z_art: 2 per slot."""
+        return 2 * self.num_slots
+
+    @property
     def latent_dim(self) -> int:
-        """Size of the whole code z = [z_art (2), z_obj (k)]."""
-        return 2 + self.latent_obj_dim
+        """Size of the whole code z = [z_art (2 S), z_obj (k)]."""
+        return self.art_dim + self.latent_obj_dim
+
+    @property
+    def slot_logits(self) -> int:
+        """Logits per slot from the keypoint head: existence, door, drawer (S > 1), else none."""
+        return 3 if self.num_slots > 1 else 0
 
     @classmethod
     def srn_reference(cls, **overrides) -> NFRModelConfig:
@@ -135,6 +150,9 @@ class LossConfig:
     depth_weight: float = 1e3
     """Penalty on negative marching depths (mean of min(d, 0)^2, m^2) from SRN: a depth behind the
     camera is never right, so the term is large enough to act as a hard constraint."""
+    slot_weight: float = 0.1
+    """Several slots only: weight of the existence BCE plus the type CE of existing slots (nats,
+    ~0.7 each at start, so 0.1 keeps them near the image term, like the segmentation)."""
 
     def __post_init__(self):
         for f in fields(self):

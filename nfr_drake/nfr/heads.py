@@ -30,12 +30,21 @@ class PixelGenerator(nn.Module):
 
 
 class KeypointHead(nn.Module):
-    """Gamma(z): code z (B, 2 + k) -> keypoint positions (B, K, 3) in frame O, metres."""
+    """Gamma(z): code z (B, 2 S + k) -> keypoint positions (B, K, 3) in frame O, metres, and
+    slot logits (B, S, L).
 
-    def __init__(self, latent_dim: int, hidden: int, num_keypoints: int):
+    With several slots (furniture) K = S x 4 slot-major and L = 3 per slot: existence, door,
+    drawer. One slot (closets, drawers): L = 0, the head is the paper's Gamma unchanged.
+    """
+
+    def __init__(self, latent_dim: int, hidden: int, num_keypoints: int, num_slots: int = 1,
+                 slot_logits: int = 0):
         super().__init__()
-        self.num_keypoints = num_keypoints
-        self.net = _mlp([latent_dim, hidden, hidden, 3 * num_keypoints])
+        self.num_keypoints, self.num_slots, self.slot_logits = num_keypoints, num_slots, slot_logits
+        self.net = _mlp([latent_dim, hidden, hidden, 3 * num_keypoints + num_slots * slot_logits])
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
-        return self.net(z).view(*z.shape[:-1], self.num_keypoints, 3)
+    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        out = self.net(z)
+        n = 3 * self.num_keypoints
+        return (out[..., :n].unflatten(-1, (self.num_keypoints, 3)),
+                out[..., n:].unflatten(-1, (self.num_slots, self.slot_logits)))

@@ -1,6 +1,9 @@
-"""The structured latent code z = [z_art (2), z_obj (k)] (paper, "Latent code"; docs/CONVENTIONS.md).
+"""The structured latent code z = [z_art (2 S), z_obj (k)] (paper, "Latent code"; docs/CONVENTIONS.md).
 
-`z_art` is normalised onto the unit circle before the networks see it. The upper half of the circle
+z_art holds one 2-vector per articulation slot: S = 1 for closets and drawers (z_art (2)), S =
+`MAX_FRONTS` for furniture, where slot k is front k in canonical order (docs/NEURAL_FIELD.md,
+"Furniture: several parts"). Each slot's 2-vector is normalised onto its unit circle before the
+networks see it. The upper half of the circle
 (angle in [0, pi]) covers q in [0, 1]; the lower half mirrors it, so there is no seam at q = 0 or
 q = 1 and a Gaussian prior on the raw z_art gives a uniform angle. During training z_art is set
 from the true q; when fitting an unseen object it is free.
@@ -14,7 +17,7 @@ import torch
 from torch import nn
 
 ART_DIM = 2
-"""Size of the articulation code."""
+"""Size of one slot's articulation code."""
 
 _EPS = 1e-8
 
@@ -25,9 +28,16 @@ def q_to_z_art(q: torch.Tensor) -> torch.Tensor:
     return torch.stack([torch.cos(angle), torch.sin(angle)], dim=-1)
 
 
+def slots_q_to_z_art(q: torch.Tensor, num_slots: int) -> torch.Tensor:
+    """q per slot (B, S) (or (B,) when S = 1) -> z_art (B, 2 S), slot k in entries 2k, 2k + 1."""
+    return q_to_z_art(q.reshape(q.shape[0], num_slots)).flatten(-2)
+
+
 def normalize_z_art(z_art: torch.Tensor) -> torch.Tensor:
-    """Project z_art (..., 2) onto the unit circle (the paper's normalisation layer)."""
-    return z_art / z_art.norm(dim=-1, keepdim=True).clamp_min(_EPS)
+    """Project each slot's 2-vector of z_art (..., 2 S) onto its unit circle (the paper's
+    normalisation layer, per slot)."""
+    slots = z_art.unflatten(-1, (-1, ART_DIM))
+    return (slots / slots.norm(dim=-1, keepdim=True).clamp_min(_EPS)).flatten(-2)
 
 
 def z_art_to_q(z_art: torch.Tensor) -> torch.Tensor:
@@ -36,13 +46,14 @@ def z_art_to_q(z_art: torch.Tensor) -> torch.Tensor:
 
 
 def compose_z(z_art: torch.Tensor, z_obj: torch.Tensor) -> torch.Tensor:
-    """z = [normalize(z_art), z_obj]: (..., 2) and (..., k) -> (..., 2 + k), as the networks see it."""
+    """z = [normalize(z_art), z_obj]: (..., 2 S) and (..., k) -> (..., 2 S + k), as the networks
+    see it."""
     return torch.cat([normalize_z_art(z_art), z_obj], dim=-1)
 
 
-def split_z(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(..., 2 + k) -> z_art (..., 2), z_obj (..., k)."""
-    return z[..., :ART_DIM], z[..., ART_DIM:]
+def split_z(z: torch.Tensor, num_slots: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+    """(..., 2 S + k) -> z_art (..., 2 S), z_obj (..., k)."""
+    return z[..., :ART_DIM * num_slots], z[..., ART_DIM * num_slots:]
 
 
 class ObjectCodes(nn.Module):
@@ -60,6 +71,7 @@ class ObjectCodes(nn.Module):
         """object_index int64 (B,) -> z_obj (B, k)."""
         return self.weight[object_index]
 
-    def z(self, object_index: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
-        """The training code of each object at articulation q (B,): z (B, 2 + k), z_art from q."""
-        return compose_z(q_to_z_art(q), self(object_index))
+    def z(self, object_index: torch.Tensor, q: torch.Tensor, num_slots: int = 1) -> torch.Tensor:
+        """The training code of each object at articulation q (B,) or per slot (B, S):
+        z (B, 2 S + k), z_art from q."""
+        return compose_z(slots_q_to_z_art(q, num_slots), self(object_index))

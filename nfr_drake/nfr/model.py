@@ -16,7 +16,7 @@ from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.field import Field, encoding_dim
 from nfr_drake.nfr.heads import KeypointHead, PixelGenerator
 from nfr_drake.nfr.hyper import HyperNetwork
-from nfr_drake.nfr.latent import ObjectCodes, compose_z, q_to_z_art
+from nfr_drake.nfr.latent import ObjectCodes, compose_z, slots_q_to_z_art, split_z
 from nfr_drake.nfr.raymarcher import LSTMRaymarcher
 from nfr_drake.nfr.rays import Rays, sphere_interval
 
@@ -48,7 +48,8 @@ class NFRModel(nn.Module):
                                       c.march_max_step)
         self.rgb_head = PixelGenerator(c.feature_dim, c.pixel_hidden, 3)
         self.seg_head = PixelGenerator(c.feature_dim, c.pixel_hidden, c.num_classes)
-        self.keypoint_head = KeypointHead(c.latent_dim, c.keypoint_hidden, c.num_keypoints)
+        self.keypoint_head = KeypointHead(c.latent_dim, c.keypoint_hidden, c.num_keypoints,
+                                          c.num_slots, c.slot_logits)
 
     def depth_bounds(self, rays: Rays) -> tuple[torch.Tensor, torch.Tensor]:
         """(near, far) (B, R): where each ray enters and leaves the bounding sphere."""
@@ -56,31 +57,41 @@ class NFRModel(nn.Module):
                               device=rays.origins.device)
         return sphere_interval(rays, center, self.config.bound_radius, self.config.min_depth)
 
+    def normalized(self, z: torch.Tensor) -> torch.Tensor:
+        """z (..., 2 S + k) with each slot of z_art projected onto its unit circle."""
+        return compose_z(*split_z(z, self.config.num_slots))
+
     def render(self, z: torch.Tensor, rays: Rays) -> RenderOutput:
-        """Render rays (B, R, 3) of B codes z (B, 2 + k); z_art is normalised here.
+        """Render rays (B, R, 3) of B codes z (B, 2 S + k); z_art is normalised here.
 
         z_art of z is projected onto the unit circle before use, so a free z_art can be optimised.
         """
-        z = compose_z(z[..., :2], z[..., 2:])
+        z = self.normalized(z)
         weights = self.hyper(z)
         march = self.marcher(lambda p: self.field(p, weights), rays, *self.depth_bounds(rays))
         return RenderOutput(self.rgb_head(march.features), self.seg_head(march.features),
                             march.points, march.depth, march.depth_trace)
 
     def keypoints(self, z: torch.Tensor) -> torch.Tensor:
-        """Keypoints (B, K, 3) in O of codes z (B, 2 + k) (z_art normalised here)."""
-        return self.keypoint_head(compose_z(z[..., :2], z[..., 2:]))
+        """Keypoints (B, K, 3) in O of codes z (B, 2 S + k) (z_art normalised here)."""
+        return self.keypoint_head(self.normalized(z))[0]
+
+    def slot_logits(self, z: torch.Tensor) -> torch.Tensor:
+        """Per slot (B, S, 3) logits of existence, door and drawer of codes z (B, 2 S + k);
+        (B, 1, 0) for a one-slot model."""
+        return self.keypoint_head(self.normalized(z))[1]
 
     def forward(self, z: torch.Tensor, rays: Rays) -> tuple[RenderOutput, torch.Tensor]:
-        """Both read-outs of codes z (B, 2 + k): (render of rays (B, R, 3), keypoints (B, K, 3))."""
+        """Both read-outs of codes z (B, 2 S + k): (render of rays (B, R, 3), keypoints (B, K, 3))."""
         return self.render(z, rays), self.keypoints(z)
 
 
 class NFRAutoDecoder(nn.Module):
     """Training module: the networks plus one learnable z_obj per training object.
 
-    forward(object_index (B,), q (B,), rays) -> (RenderOutput, keypoints (B, K, 3), z (B, 2 + k)),
-    with z_art = (cos(pi q), sin(pi q)) from the true q (paper, "Training").
+    forward(object_index (B,), q (B,) or per slot (B, S), rays) -> (RenderOutput, keypoints
+    (B, K, 3), z (B, 2 S + k)), with each slot's z_art = (cos(pi q), sin(pi q)) from the true q
+    (paper, "Training").
     """
 
     def __init__(self, config: NFRModelConfig, num_objects: int, code_init_std: float = 0.01):
@@ -89,8 +100,9 @@ class NFRAutoDecoder(nn.Module):
         self.codes = ObjectCodes(num_objects, config.latent_obj_dim, code_init_std)
 
     def code(self, object_index: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
-        """z (B, 2 + k) of training objects at articulations q (B,)."""
-        return torch.cat([q_to_z_art(q), self.codes(object_index)], dim=-1)
+        """z (B, 2 S + k) of training objects at articulations q (B,) or per slot (B, S)."""
+        return torch.cat([slots_q_to_z_art(q, self.model.config.num_slots),
+                          self.codes(object_index)], dim=-1)
 
     def forward(self, object_index: torch.Tensor, q: torch.Tensor, rays: Rays):
         z = self.code(object_index, q)

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from nfr_drake.data.dataset import ObjectRecord
+from nfr_drake.data.slot_dataset import SlotTargets
 from nfr_drake.nfr.config import SamplerConfig
 
 MOVING_CLASS = 2
@@ -21,8 +22,9 @@ HANDLE_CLASS = 3
 
 class RayBatch(NamedTuple):
     """B images x R pixels. uv (B, R, 2) pixel positions (centre convention 0.5); rgb (B, R, 3) in
-    [0, 1]; labels int64 (B, R); K (B, 3, 3); X_OC (B, 4, 4); q (B,); keypoints (B, K, 3) in O;
-    object_index int64 (B,)."""
+    [0, 1]; labels int64 (B, R); K (B, 3, 3); X_OC (B, 4, 4); q (B,), or (B, S) per slot;
+    keypoints (B, K, 3) in O; object_index int64 (B,); exists bool (B, S) and types int64 (B, S)
+    of the slots (one slot: True and 0)."""
 
     uv: torch.Tensor
     rgb: torch.Tensor
@@ -32,6 +34,8 @@ class RayBatch(NamedTuple):
     q: torch.Tensor
     keypoints: torch.Tensor
     object_index: torch.Tensor
+    exists: torch.Tensor
+    types: torch.Tensor
 
     def to(self, device) -> RayBatch:
         return RayBatch(*(t.to(device, non_blocking=True) for t in self))
@@ -64,11 +68,14 @@ class RaySampler:
 
     `objects` are indices into `records` that this sampler may draw from (e.g. one DDP rank's
     share); object_index in the batch is the index into `records` (the code table row).
+    `slots` (furniture, one `SlotTargets` per record) gives q, keypoints, existence and type
+    per slot instead of the records' single q and keypoints.
     """
 
     def __init__(self, records: list[ObjectRecord], K: np.ndarray, config: SamplerConfig,
-                 seed: int, objects: np.ndarray | None = None):
-        self.records, self.config = records, config
+                 seed: int, objects: np.ndarray | None = None,
+                 slots: list[SlotTargets] | None = None):
+        self.records, self.config, self.slots = records, config, slots
         self.K = torch.as_tensor(np.asarray(K, np.float32))
         self.objects = np.arange(len(records)) if objects is None else np.asarray(objects)
         self.rng = np.random.default_rng(seed)
@@ -85,8 +92,7 @@ class RaySampler:
         rgb = np.empty((B, R, 3), np.float32)
         labels = np.empty((B, R), np.int64)
         X_OC = np.empty((B, 4, 4), np.float32)
-        q = np.empty(B, np.float32)
-        kps = []
+        q, kps, exists, types = [], [], [], []
         for b, (j, a, v) in enumerate(zip(objs, arts, views, strict=True)):
             rec = self.records[j]
             label = np.asarray(rec.label[a, v])
@@ -97,9 +103,19 @@ class RaySampler:
             rgb[b] = np.asarray(rec.rgb[a, v]).reshape(-1, 3)[pix] / 255.0
             labels[b] = label.reshape(-1)[pix]
             X_OC[b] = rec.X_OC[a, v]
-            q[b] = rec.q[a]
-            kps.append(rec.keypoints[a])
+            if self.slots is None:
+                q.append(rec.q[a])
+                kps.append(rec.keypoints[a])
+                exists.append(np.ones(1, bool))
+                types.append(np.zeros(1, np.int64))
+            else:
+                slot = self.slots[j]
+                q.append(slot.q[a])
+                kps.append(slot.keypoints[a].reshape(-1, 3))
+                exists.append(slot.exists)
+                types.append(slot.types)
         return RayBatch(torch.from_numpy(uv), torch.from_numpy(rgb), torch.from_numpy(labels),
                         self.K.expand(B, 3, 3).clone(), torch.from_numpy(X_OC),
-                        torch.from_numpy(q), torch.from_numpy(np.stack(kps)),
-                        torch.from_numpy(objs.astype(np.int64)))
+                        torch.from_numpy(np.stack(q).astype(np.float32)),
+                        torch.from_numpy(np.stack(kps)), torch.from_numpy(objs.astype(np.int64)),
+                        torch.from_numpy(np.stack(exists)), torch.from_numpy(np.stack(types)))

@@ -39,6 +39,7 @@ from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
+from nfr_drake.data.slot_dataset import SlotDataset, SlotTargets, open_dataset
 from nfr_drake.errors import ConfigError, Interrupted
 from nfr_drake.nfr.checkpoint import (
     CheckpointError,
@@ -56,9 +57,9 @@ from nfr_drake.nfr.sampling import RaySampler
 from nfr_drake.nfr.viz import colorize_labels, image_grid, plot_curves, save_png
 
 TRAIN_FIELDS = ["step", "seconds", "lr_scale", "total", "image", "seg", "keypoint", "latent",
-                "depth", "psnr", "rays_per_s"]
+                "depth", "psnr", "rays_per_s", "slots"]
 VAL_FIELDS = ["step", "seconds", "image_mse", "psnr", "pixel_acc", "miou", "handle_iou",
-              "kp_mean_cm", "kp_handle_cm"]
+              "kp_mean_cm", "kp_handle_cm", "slot_exists_acc", "slot_type_acc"]
 
 
 @dataclass
@@ -138,16 +139,29 @@ def _iou(pred: np.ndarray, true: np.ndarray, c: int) -> float:
     return float(np.logical_and(pred == c, true == c).sum() / union) if union else math.nan
 
 
+def _targets(data: RenderedDataset) -> tuple[list[np.ndarray], list[np.ndarray], list[SlotTargets]
+                                                 | None]:
+    """Per object: q (A,) or (A, S), keypoints (A, K, 3), and the slot targets of furniture."""
+    if isinstance(data, SlotDataset):
+        return ([t.q for t in data.slots],
+                [t.keypoints.reshape(len(t.q), -1, 3) for t in data.slots], data.slots)
+    return [r.q for r in data.records], [r.keypoints for r in data.records], None
+
+
 @torch.no_grad()
 def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[int, int, int]],
              device: torch.device, run: Path, step: int) -> dict:
-    """Render the fixed validation images in full, write the PNG grids, return metrics."""
+    """Render the fixed validation images in full, write the PNG grids, return metrics.
+
+    Keypoint errors count the keypoints of existing slots only; furniture adds the slot head's
+    existence and type accuracy (training objects, their true q)."""
     model = module.model
     model.eval()
     S = data.spec.size
     recs = data.records
+    qs_all, kps_all, slots = _targets(data)
     obj = torch.tensor([o for o, _, _ in items], device=device)
-    q = torch.tensor([float(recs[o].q[a]) for o, a, _ in items], device=device)
+    q = torch.from_numpy(np.stack([qs_all[o][a] for o, a, _ in items])).to(device)
     X = torch.from_numpy(np.stack([recs[o].X_OC[a, v] for o, a, v in items])).to(device)
     K = torch.from_numpy(data.camera.K.astype(np.float32)).expand(len(items), 3, 3).to(device)
     out = render_images(model, module.code(obj, q), K, X, S, S)
@@ -160,7 +174,10 @@ def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[in
             for i in range(len(items))]
     save_png(run / "val" / f"step_{step:07d}.png", image_grid(rows))
     # q sweep of the first validation object, camera of its first item.
+    # (furniture: every existing front of the object swept together, absent slots shut).
     qs = torch.linspace(0, 1, 5, device=device)
+    if slots is not None:
+        qs = qs[:, None] * torch.from_numpy(slots[items[0][0]].exists).to(qs)
     o0 = obj[:1].expand(5)
     sweep = render_images(model, module.code(o0, qs), K[:1].expand(5, 3, 3), X[:1].expand(5, 4, 4),
                           S, S)
@@ -170,16 +187,29 @@ def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[in
     # Keypoints of every training object at every articulation.
     A = data.spec.articulations
     all_obj = torch.arange(data.num_objects, device=device).repeat_interleave(A)
-    all_q = torch.from_numpy(np.concatenate([r.q for r in recs])).to(device)
-    pred = model.keypoints(module.code(all_obj, all_q)).cpu().numpy()
-    true = np.concatenate([r.keypoints for r in recs])
+    all_q = torch.from_numpy(np.concatenate(qs_all)).to(device)
+    z_all = module.code(all_obj, all_q)
+    pred = model.keypoints(z_all).cpu().numpy()
+    true = np.concatenate(kps_all)
     err = np.linalg.norm(pred - true, axis=-1) * 100.0  # (N A, K) cm
-    handle = list(data.keypoint_names).index("handle") if "handle" in data.keypoint_names else 0
+    names = [n.split("/")[-1] for n in data.keypoint_names]
+    valid = np.ones(err.shape, bool)
+    slot_metrics = {}
+    if slots is not None:
+        exists = np.repeat(np.stack([t.exists for t in slots]), A, axis=0)  # (N A, S)
+        types = np.repeat(np.stack([t.types for t in slots]), A, axis=0)
+        valid = np.repeat(exists, err.shape[1] // exists.shape[1], axis=1)
+        logits = model.slot_logits(z_all).cpu().numpy()
+        slot_metrics = dict(
+            slot_exists_acc=float(((logits[..., 0] > 0) == exists).mean()),
+            slot_type_acc=float((logits[..., 1:].argmax(-1) == types)[exists].mean()))
+    handle = valid & (np.asarray(names) == ("handle" if "handle" in names else names[0]))
     model.train()
     return dict(step=step, image_mse=mse, psnr=-10.0 * math.log10(max(mse, 1e-12)),
                 pixel_acc=float((lab == gt_lab).mean()), miou=float(np.nanmean(ious)),
                 handle_iou=ious[3] if len(ious) > 3 else math.nan,
-                kp_mean_cm=float(err.mean()), kp_handle_cm=float(err[:, handle].mean()))
+                kp_mean_cm=float(err[valid].mean()), kp_handle_cm=float(err[handle].mean()),
+                **slot_metrics)
 
 
 class _StopFlag:
@@ -217,11 +247,13 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
     device = select_device(config.device, dist)
     if device.type == "cpu":
         set_torch_threads(config.threads, dist.world)
-    data = RenderedDataset(data_dir, objects=config.objects)
+    data = open_dataset(data_dir, objects=config.objects)
     data.require_complete(allow_incomplete)
     names = data.keypoint_names
-    if config.model.num_keypoints != len(names):
-        config = replace(config, model=replace(config.model, num_keypoints=len(names)))
+    num_slots = data.num_slots if isinstance(data, SlotDataset) else 1
+    if (config.model.num_keypoints, config.model.num_slots) != (len(names), num_slots):
+        config = replace(config, model=replace(config.model, num_keypoints=len(names),
+                                               num_slots=num_slots))
     ckpt = latest_checkpoint(run) if resume else None
     if not resume and latest_checkpoint(run) is not None:
         raise ConfigError(f"{run} already holds checkpoints; pass --resume to continue it or "
@@ -249,7 +281,8 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
         {"params": net_params, "lr": config.optim.lr_networks, "name": "networks"},
         {"params": list(module.codes.parameters()), "lr": config.optim.lr_codes, "name": "codes"},
     ])
-    sampler = RaySampler(data.records, data.camera.K, config.sampler, seed=config.seed + dist.rank)
+    sampler = RaySampler(data.records, data.camera.K, config.sampler, seed=config.seed + dist.rank,
+                         slots=_targets(data)[2])
     info = {"category": data.spec.category, "keypoint_names": list(names),
             "image_size": data.spec.size,
             "training": {"data": str(data_dir), "dataset_spec": data.spec.to_json(),
@@ -296,7 +329,7 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
         for p in old[:-config.keep_checkpoints]:
             shutil.rmtree(p, ignore_errors=True)
 
-    sums = dict.fromkeys(["total", "image", "seg", "keypoint", "latent", "depth"], 0.0)
+    sums = dict.fromkeys(["total", "image", "seg", "keypoint", "latent", "depth", "slots"], 0.0)
     count, window_t, window_rays = 0, 0.0, 0
     bar = tqdm(total=config.optim.steps, initial=step, disable=not dist.main, mininterval=5.0,
                desc="train", dynamic_ncols=True)
@@ -310,8 +343,10 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
             batch = sampler.sample().to(device)
             rays = pixel_rays(batch.uv, batch.K, batch.X_OC)
             render, keypoints, z = ddp(batch.object_index, batch.q, rays)
-            terms = nfr_loss(render, keypoints, z[:, 2:], batch.rgb, batch.labels, batch.keypoints,
-                             config.loss)
+            slot_logits = module.model.slot_logits(z) if num_slots > 1 else None
+            terms = nfr_loss(render, keypoints, z[:, config.model.art_dim:], batch.rgb,
+                             batch.labels, batch.keypoints, config.loss, slot_logits,
+                             batch.exists, batch.types)
             optimizer.zero_grad(set_to_none=True)
             terms.total.backward()
             if config.optim.grad_clip > 0:
