@@ -148,9 +148,13 @@ def _cell_fronts(s: Sampler, cell: Cell, rect: Rect, gap: float, interior, depth
 
 
 # ---------------------------------------------------------------------------- handles
-def _handle_style(s: Sampler, kind: str) -> str:
+def _handle_style(s: Sampler, kind: str, overhang: bool) -> str:
+    """One style per piece. No edge pulls under an overhanging top: it would cover the flange on
+    the top edge of the drawers beneath it, leaving no room for fingers above it."""
     if kind == "fridge":
         return s.pick(("bar", "edge"), p=(0.7, 0.3))
+    if overhang:
+        return s.pick(("bar", "knob", "cup"), p=np.array([0.55, 0.15, 0.12]) / 0.82)
     return s.pick(("bar", "knob", "cup", "edge"), p=(0.55, 0.15, 0.12, 0.18))
 
 
@@ -234,7 +238,7 @@ def sample_furniture(rng: np.random.Generator, ranges: FurnitureRanges | None = 
         tw, td = W + 2 * top["side"], D + top["front"]
         parts.append(_part("top", (td, tw, top["t"]), (top["front"] / 2, 0.0, H - top["t"] / 2), worktop))
 
-    style = _handle_style(s, kind)
+    style = _handle_style(s, kind, overhang=bool(top))
     length = s.u(*ranges.bar_length)
     radius = s.u(0.012, 0.022) if style in ("knob", "cup") else s.u(0.01, 0.02)
     vertical_doors = kind == "fridge" or s.u(0, 1) < 0.8

@@ -174,3 +174,19 @@ def test_textures_are_pngs_made_once_from_kind_and_seed(tmp_path, monkeypatch):
         np.testing.assert_array_equal(image, texture_image(kind, 3))
         assert image.std() > 1.0  # a pattern, not a flat colour
     assert not np.array_equal(texture_image("wood", 3), texture_image("wood", 4))
+
+
+def test_room_above_every_grip():
+    """No carcass part hangs over a grip within 4 cm above it (an open gripper's finger, or a
+    hand's): an edge pull on the top edge of a drawer under an overhanging top could not be held."""
+    for i in range(100):
+        obj = sample_object("furniture", object_rng(SEED_DOMAIN_TRAIN, 7, i))
+        for k, front in enumerate(obj.fronts):
+            p = front.keypoints(0.0)["handle"]
+            for part in obj.base_parts:
+                if part.shape != "box":
+                    continue
+                half = np.divide(part.size, 2)
+                lo, hi = np.subtract(part.p_LP, half), np.add(part.p_LP, half)
+                over = lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1] and p[2] < lo[2] <= p[2] + 0.04
+                assert not over, f"piece {i} ({obj.params['kind']}) front {k}: {part.name} above"
