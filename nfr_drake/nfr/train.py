@@ -149,6 +149,26 @@ def _targets(data: RenderedDataset) -> tuple[list[np.ndarray], list[np.ndarray],
 
 
 @torch.no_grad()
+def _start_keypoints_at_mean(module: NFRAutoDecoder, data: RenderedDataset) -> None:
+    """Set the keypoint head's output bias to the training keypoints' mean (each keypoint over the
+    objects where its slot exists; the overall mean where none), so that the keypoint loss starts
+    at the data's spread instead of at |p|^2 (about 1 m^2 for furniture, whose clipped gradient
+    then leaves little to the image loss)."""
+    _, kps, slots = _targets(data)
+    true = np.concatenate(kps)  # (N A, K, 3)
+    valid = np.ones(true.shape[:2], bool)
+    if slots is not None:
+        A = data.spec.articulations
+        exists = np.repeat(np.stack([t.exists for t in slots]), A, axis=0)
+        valid = np.repeat(exists, true.shape[1] // exists.shape[1], axis=1)
+    overall = true[valid].mean(0)
+    count = valid.sum(0)[:, None]
+    mean = np.where(count > 0, (true * valid[..., None]).sum(0) / np.maximum(count, 1), overall)
+    bias = module.model.keypoint_head.net[-1].bias
+    bias[:mean.size] = torch.from_numpy(mean.reshape(-1)).to(bias)
+
+
+@torch.no_grad()
 def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[int, int, int]],
              device: torch.device, run: Path, step: int) -> dict:
     """Render the fixed validation images in full, write the PNG grids, return metrics.
@@ -265,6 +285,8 @@ def train(data_dir: Path, out: Path, config: TrainConfig, resume: bool = False,
                               "(see train_config.json)")
     torch.manual_seed(config.seed)
     module = NFRAutoDecoder(config.model, data.num_objects, config.code_init_std)
+    if init_from is None and ckpt is None:
+        _start_keypoints_at_mean(module, data)
     if init_from is not None and ckpt is None:
         start = init_from_model_folder(init_from, module)
         spec = json.loads(json.dumps(data.spec.to_json()))

@@ -5,6 +5,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -133,3 +134,20 @@ def test_furniture_training_resumes_bit_exactly(furniture_dataset, tmp_path):
     assert config["architecture"]["num_slots"] == S
     assert config["keypoint_names"][:2] == ["front0/handle", "front0/goal"]
     assert "slot_exists_acc" in (tmp_path / "split" / "val.csv").read_text()
+
+
+def test_fresh_runs_start_the_keypoint_head_at_the_mean_keypoints(furniture_dataset, tiny_config):
+    from nfr_drake.nfr.train import _start_keypoints_at_mean
+
+    data = SlotDataset(furniture_dataset)
+    cfg = replace(tiny_config, num_slots=S, num_keypoints=len(data.keypoint_names))
+    module = NFRAutoDecoder(cfg, data.num_objects)
+    _start_keypoints_at_mean(module, data)
+    bias = module.model.keypoint_head.net[-1].bias.detach()
+    assert bias.shape == (3 * 4 * S + 3 * S,)
+    handles = [t.keypoints[:, 0, 0] for t in data.slots if t.exists[0]]  # slot 0's handle
+    torch.testing.assert_close(bias[:3], torch.from_numpy(np.concatenate(handles).mean(0)))
+    absent = [k for k in range(S) if not any(t.exists[k] for t in data.slots)]
+    if absent:  # a slot no object has starts at the mean of all keypoints
+        k = absent[0]
+        assert torch.isfinite(bias[12 * k:12 * k + 12]).all()

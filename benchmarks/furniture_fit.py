@@ -1,0 +1,102 @@
+"""Fit a furniture model to furniture capture sets and compare every part with gt.json.
+
+Per capture: whether the part count is right (the slots the head says exist against the true
+fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
+keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
+handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time.
+
+    python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from pathlib import Path
+
+import numpy as np
+
+from nfr_drake.cpu import set_torch_threads
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
+from nfr_drake.inference.fit import observed_rays
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture, part_trajectory
+from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
+from nfr_drake.nfr.checkpoint import load_model
+
+GT_NAMES = {"door": ("handle", "goal", "hinge_top", "hinge_bottom"), "drawer": ("handle", "goal")}
+"""gt.json keypoints of each front type, in `SLOT_KEYPOINTS` order (a door's axis points are its
+hinge points; a drawer's are not in gt.json's keypoints)."""
+
+
+def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig) -> dict:
+    gt = json.loads((capture_dir / "gt.json").read_text())
+    fit = fit_furniture(model, observed_rays(read_capture_set(capture_dir)), codes, config)
+    parts = []
+    for part in gt["parts"]:
+        k, names = part["index"], GT_NAMES[part["type"]]
+        pred = fit.keypoints[k, :len(names)]
+        true = np.array([part["keypoints"][n] for n in names])
+        traj_q = np.asarray(part["trajectory"]["q"])
+        path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
+        parts.append({
+            "index": k, "type": part["type"], "q_true": part["q"], "q": float(fit.q[k]),
+            "found": bool(fit.exists[k]), "type_right": int(fit.types[k]) == (part["type"] == "drawer"),
+            "articulation_error": articulation_error(fit.q[k], part["q"], part["joint_type"],
+                                                     part["joint_upper"]),
+            "keypoint_rmse_cm": keypoint_rmse_cm(pred, true),
+            "trajectory_rmse_cm": trajectory_rmse_cm(
+                path, np.asarray(part["trajectory"]["keypoints"]["handle"]))})
+    return {"capture": capture_dir.name, "fronts": len(gt["parts"]),
+            "found": int(fit.exists.sum()), "count_right": int(fit.exists.sum()) == len(gt["parts"]),
+            "seconds": fit.seconds, "image_loss": fit.image_loss, "parts": parts}
+
+
+def summary(rows: list[dict]) -> dict:
+    parts = [p for r in rows for p in r["parts"]]
+    med = lambda xs: statistics.median(xs) if xs else float("nan")  # noqa: E731
+    return {
+        "captures": len(rows), "parts": len(parts),
+        "count_right": float(np.mean([r["count_right"] for r in rows])),
+        "parts_found": float(np.mean([p["found"] for p in parts])),
+        "type_right": float(np.mean([p["type_right"] for p in parts])),
+        "door_error_deg_median": med([p["articulation_error"] for p in parts if p["type"] == "door"]),
+        "drawer_error_cm_median": med([p["articulation_error"] for p in parts
+                                       if p["type"] == "drawer"]),
+        "keypoint_rmse_cm_median": med([p["keypoint_rmse_cm"] for p in parts]),
+        "trajectory_rmse_cm_median": med([p["trajectory_rmse_cm"] for p in parts]),
+        "fit_seconds_median": med([r["seconds"] for r in rows])}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", type=Path, required=True)
+    parser.add_argument("--captures", type=Path, required=True)
+    parser.add_argument("--n", type=int, default=10)
+    parser.add_argument("--steps", type=int, default=FurnitureFitConfig.steps)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args()
+    set_torch_threads(args.threads)
+    model, codes, _ = load_model(args.model)
+    for p in model.parameters():
+        p.requires_grad_(False)
+    config = FurnitureFitConfig(steps=args.steps)
+    dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
+    rows = []
+    for d in dirs:
+        rows.append(evaluate(model, codes, d, config))
+        r = rows[-1]
+        print(f"{r['capture']}: fronts {r['fronts']}, found {r['found']}, "
+              f"{r['seconds']:.1f} s, " + ", ".join(
+                  f"{p['type']}{p['index']} q {p['q']:.2f}/{p['q_true']:.2f}" for p in r["parts"]),
+              flush=True)
+    result = {"summary": summary(rows), "rows": rows}
+    print(json.dumps(result["summary"], indent=2))
+    if args.out:
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
