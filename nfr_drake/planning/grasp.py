@@ -1,10 +1,12 @@
 """Grasp frames and a static obstacle, derived from a keypoint trajectory alone.
 
 Conventions (all in the world frame W):
-- the approach direction is the unit vector the gripper moves along when closing in on the handle;
-  it is minus the direction in which the handle moves for increasing q (for a drawer exactly minus
-  the pull direction; for a door the handle path's tangent, which is the door's outward normal up to
-  the angle atan(standoff / radius) of the handle's standoff, 5-15 degrees here);
+- the approach direction is the unit vector the gripper moves along when closing in on the handle:
+  from the approach keypoint to the handle where the trajectory has one (a sliding door, whose
+  handle moves across the front), else minus the direction in which the handle moves for increasing
+  q (for a drawer exactly minus the pull direction; for a door the handle path's tangent, which is
+  the door's outward normal up to the angle atan(standoff / radius) of the handle's standoff, 5-15
+  degrees here);
 - the bar axis is the axis of the handle's grip: towards the grip-axis keypoint where the trajectory
   has one (true furniture models), else the hinge axis (hinge_top - hinge_bottom) for a door,
   horizontal and across the pull direction for a drawer;
@@ -18,7 +20,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.world.keypoints import GRIP_AXIS_KEYPOINT, KeypointTrajectory
+from nfr_drake.world.keypoints import APPROACH_KEYPOINT, GRIP_AXIS_KEYPOINT, KeypointTrajectory
 from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
@@ -63,9 +65,17 @@ def bar_axis(kt: KeypointTrajectory, q: float) -> np.ndarray:
     return _unit(np.cross(_Z, handle_tangent(kt, q)), "the drawer's pull direction (vertical?)")
 
 
+def approach_direction(kt: KeypointTrajectory, q: float) -> np.ndarray:
+    """Unit direction the gripper moves in to close in on the handle at q, shape (3,): from the
+    `APPROACH_KEYPOINT` where there is one, else against the handle's motion."""
+    if APPROACH_KEYPOINT in kt.names:
+        return _unit(kt.point("handle", q) - kt.point(APPROACH_KEYPOINT, q), "the approach")
+    return -handle_tangent(kt, q)
+
+
 def handle_waypoints(kt: KeypointTrajectory, q_values: np.ndarray) -> list[HandleWaypoint]:
     """The handle, its approach direction and bar axis at each articulation in `q_values`."""
-    return [HandleWaypoint(float(q), kt.point("handle", q), -handle_tangent(kt, q), bar_axis(kt, q))
+    return [HandleWaypoint(float(q), kt.point("handle", q), approach_direction(kt, q), bar_axis(kt, q))
             for q in q_values]
 
 

@@ -199,7 +199,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap"), builder)
     robot = add_panda(plant, plan.X_WB)
-    add_floor(plant)
+    floor = add_floor(plant)
     add_pedestal(plant, plan.X_WB)
     model = obj.add_to(plant)
     actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
@@ -229,6 +229,12 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                                      for g in plant.GetCollisionGeometriesForBody(body)])
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
+    # A real door or drawer clears the floor; a model's may rest on it (bottom edge at z = 0, or a
+    # mesh a millimetre into it) and would drag on it.
+    floor_geometries = GeometrySet([g for b in plant.GetBodyIndices(floor)
+                                    for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))])
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration().ExcludeBetween(floor_geometries, moving_geometries))
 
     controller_plant = MultibodyPlant(0.0)
     add_panda(controller_plant, plan.X_WB)
@@ -244,7 +250,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     builder.Connect(desired.get_output_port(), command.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
     builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
-    AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth)
+    shut, opened = obj.shut_and_open(joint)
+    AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth, (shut, opened))
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     diagram = builder.Build()
@@ -252,9 +259,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
-    lower = joint.position_lower_limits()[0]
-    span = joint.position_upper_limits()[0] - lower
-    set_joint_value(plant, plant_context, joint, lower + obj.ground_truth.q_current * span)
+    span = opened - shut
+    set_joint_value(plant, plant_context, joint, shut + obj.ground_truth.q_current * span)
     lock_shut(plant, plant_context, [plant.GetJointByName(name, model) for name in obj.locked_joints])
     plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
     for ids in constraint_ids:
@@ -284,7 +290,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
                 grasped = True
         times.append(t)
-        q_obj.append((joint.GetOnePosition(plant_context) - lower) / span)
+        q_obj.append((joint.GetOnePosition(plant_context) - shut) / span)
         p_tool.append(X_WT.translation())
         p_handle.append(p_WH)
         if grasped and t >= t_pull:
@@ -298,7 +304,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     drift = np.linalg.norm(p_tool - p_handle, axis=1)
     max_drift = float(drift[times >= t_pull].max()) if grasped else float(drift[-1])
     revolute = joint.type_name() == "revolute"
-    joint_error = abs(q_obj[-1] - q_target) * span
+    joint_error = abs(q_obj[-1] - q_target) * abs(span)
     tolerance = config.revolute_tolerance if revolute else config.prismatic_tolerance
     success = grasped and joint_error <= tolerance and max_drift <= config.drift_tolerance
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,

@@ -14,7 +14,8 @@ class KeypointTrajectorySource(LeafSystem):
     """Reads the object's joint from the plant state and outputs its `KeypointTrajectory`.
 
     The keypoint positions along q come from `trajectory` (ground truth here, the neural field's
-    forward simulation later); q_current is the joint position mapped onto [0, 1] by its limits.
+    forward simulation later); q_current is the joint position mapped onto [0, 1] by its shut and
+    open values (default: its lower and upper limits).
     The carcass must be welded to the world (the grid positions are in W and do not move).
 
     .. pydrake_system::
@@ -29,12 +30,13 @@ class KeypointTrajectorySource(LeafSystem):
     keypoint_trajectory: an abstract `KeypointTrajectory`.
     """
 
-    def __init__(self, plant: MultibodyPlant, joint: Joint, trajectory: KeypointTrajectory):
+    def __init__(self, plant: MultibodyPlant, joint: Joint, trajectory: KeypointTrajectory,
+                 shut_and_open: tuple[float, float] | None = None):
         super().__init__()
         self._trajectory = trajectory
         self._position_index = joint.position_start()
-        self._lower = float(joint.position_lower_limits()[0])
-        self._range = float(joint.position_upper_limits()[0]) - self._lower
+        shut, opened = shut_and_open or (joint.position_lower_limits()[0], joint.position_upper_limits()[0])
+        self._lower, self._range = float(shut), float(opened) - float(shut)
         self._state_port = self.DeclareVectorInputPort(
             "plant_state", plant.num_multibody_states())
         self._output_port = self.DeclareAbstractOutputPort(
@@ -54,8 +56,11 @@ class KeypointTrajectorySource(LeafSystem):
 
 
 def AddKeypointTrajectorySource(builder: DiagramBuilder, plant: MultibodyPlant, joint: Joint,
-                                trajectory: KeypointTrajectory) -> KeypointTrajectorySource:
-    """Add a `KeypointTrajectorySource` fed by `plant`'s state; returns the system."""
-    system = builder.AddNamedSystem("keypoint_trajectory", KeypointTrajectorySource(plant, joint, trajectory))
+                                trajectory: KeypointTrajectory,
+                                shut_and_open: tuple[float, float] | None = None) -> KeypointTrajectorySource:
+    """Add a `KeypointTrajectorySource` fed by `plant`'s state (the joint's values at q = 0 and 1:
+    `shut_and_open`, default its limits); returns the system."""
+    system = builder.AddNamedSystem("keypoint_trajectory",
+                                    KeypointTrajectorySource(plant, joint, trajectory, shut_and_open))
     builder.Connect(plant.get_state_output_port(), system.get_plant_state_input_port())
     return system

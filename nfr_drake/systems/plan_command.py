@@ -25,6 +25,8 @@ def plan_command(
     target_q: float | None = None,
     object_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0),
     object_yaw_deg: float = 0.0,
+    object_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    closed_at: Literal["lower", "upper"] | None = None,
     replay: Path = Path("out/plan/replay.html"),
     live: bool = False,
 ) -> int:
@@ -33,7 +35,7 @@ def plan_command(
     Args:
         object: SDFormat or URDF file with one revolute or prismatic joint (finite limits).
         joint: the joint to articulate (with --object).
-        handle_body: the body whose origin/geometry centre is the handle (with --object).
+        handle_body: the body whose geometry's centre is the handle (with --object).
         category: instead of --object, plan on a sampled object of this category.
         seed: which sampled object (object_rng(SEED_DOMAIN_TRAIN, seed, 0)).
         part: which door or drawer of a sampled object (its index in canonical order,
@@ -44,21 +46,29 @@ def plan_command(
             close).
         object_xyz: position of the object's base in the world, m.
         object_yaw_deg: its rotation about the vertical, degrees.
+        object_rpy_deg: roll, pitch, yaw of the object in the world, degrees, before the yaw above:
+            stands up a model drawn lying on its side (e.g. exported Y-up: 90 0 0).
+        closed_at: which limit of --joint is shut, "lower" or "upper" (with --object); default: the
+            limit nearer the joint's zero, the position the model is drawn in.
         replay: where to write the self-contained HTML replay.
         live: keep the live meshcat view open after the run until Enter is pressed.
 
     Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
     """
-    X_WO = object_pose(object_xyz, object_yaw_deg)
+    X_WO = object_pose(object_xyz, object_yaw_deg, object_rpy_deg)
     if (object is None) == (category is None):
         raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category")
+    if object is None and (closed_at is not None or any(object_rpy_deg)):
+        raise NfrDrakeError("--closed-at and --object-rpy-deg apply to a model file (--object)")
     if object is not None and part is not None:
         raise NfrDrakeError("--part chooses a front of a sampled object (--category); with --object "
                             "give --joint")
     if object is not None:
         if joint is None or handle_body is None:
             raise NfrDrakeError("--object needs --joint and --handle-body")
-        scene_object = SceneObject.from_model_file(object, joint, handle_body, X_WO, 0.0)
+        scene_object = SceneObject.from_model_file(object, joint, handle_body, X_WO, 0.0, closed_at)
+        for note in scene_object.notes:
+            print(f"warning: {note}")
     else:
         rng = object_rng(SEED_DOMAIN_TRAIN, seed, 0)
         obj = sample_object(category, rng)

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Role
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJoint
@@ -22,23 +21,42 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject, Front
 from nfr_drake.objects.plant import add_articulated_object
-from nfr_drake.parsing import make_parser
-from nfr_drake.world.keypoints import DEFAULT_GRID_SIZE, KeypointTrajectory
-from nfr_drake.world.obstacles import object_obstacles
+from nfr_drake.systems.model_files import (
+    MASSLESS_DENSITY,
+    AddedMass,
+    add_model_file,
+    body_box,
+    check_placement,
+    handle_grip,
+    massless_parts,
+    mesh_problems,
+    shut_and_open,
+    slide_front_normal,
+)
+from nfr_drake.world.keypoints import (
+    APPROACH_KEYPOINT,
+    DEFAULT_GRID_SIZE,
+    GRIP_AXIS_KEYPOINT,
+    GRIP_AXIS_OFFSET,
+    KeypointTrajectory,
+)
+from nfr_drake.world.obstacles import box_corners, geometry_obstacles, object_obstacles
 from nfr_drake.world.plan import ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
 _HINGE_HALF_SPAN = 0.25  # hinge keypoints of a loaded model: this far along the axis from the handle's foot
 
 
-def object_pose(xyz, yaw_deg: float) -> RigidTransform:
-    """X_WO of an object standing on the floor: origin at `xyz` (3,) in W, m, turned `yaw_deg`
-    degrees about W's z. ConfigError unless these are three finite coordinates and a finite angle."""
-    p_WO = np.asarray(xyz, float)
-    if p_WO.shape != (3,) or not np.all(np.isfinite(p_WO)) or not np.isfinite(yaw_deg):
+def object_pose(xyz, yaw_deg: float, rpy_deg=(0.0, 0.0, 0.0)) -> RigidTransform:
+    """X_WO of an object: origin at `xyz` (3,) in W, m, rotated by roll, pitch, yaw `rpy_deg` (3,)
+    (a model drawn lying on its side) and then turned `yaw_deg` degrees about W's z (so the yaws
+    add). ConfigError unless these are finite."""
+    p_WO, rpy = np.asarray(xyz, float), np.asarray(rpy_deg, float)
+    if (p_WO.shape != (3,) or rpy.shape != (3,) or not np.all(np.isfinite(p_WO))
+            or not np.all(np.isfinite(rpy)) or not np.isfinite(yaw_deg)):
         raise ConfigError(f"object pose: need three finite coordinates (m) and a finite yaw (deg), "
-                          f"got xyz {p_WO.tolist()} and yaw {yaw_deg}")
-    return RigidTransform(RollPitchYaw(0.0, 0.0, np.radians(yaw_deg)), p_WO)
+                          f"got xyz {p_WO.tolist()}, yaw {yaw_deg} and rpy {rpy.tolist()}")
+    return RigidTransform(RollPitchYaw(np.radians(rpy + [0.0, 0.0, yaw_deg])), p_WO)
 
 
 def set_joint_value(plant: MultibodyPlant, plant_context, joint, value: float) -> None:
@@ -74,12 +92,15 @@ class SceneObject:
         bar_B: unit axis of the grip in B, shape (3,).
         ground_truth: the true keypoint trajectory, in W.
         grip_half_length: half the stretch of the grip, along bar_B about p_BH, where a hand can
-            close on it, m; 0 for a point grip (a knob, or a loaded model).
+            close on it, m; 0 for a point grip (a knob).
         locked_joints: the object's other joints, held at 0 (shut) in simulation: locked in the
             context (`Joint.Lock`), so they stay bodies on joints, the same model as everywhere.
         obstacles: the object's collision geometry in W without the moving part, as boxes, for
             planning with the true model (`nfr_drake.world.obstacles`); None: the planner derives
-            a carcass box from the keypoints (closets, drawers, loaded models).
+            a carcass box from the keypoints (closets, drawers).
+        joint_range: the joint's values (rad or m) at q = 0 (shut) and q = 1 (open); None: its
+            lower and upper limits (a loaded model may be shut at its upper limit).
+        notes: what loading a model file found unusual but plannable, one line each.
     """
 
     category: str
@@ -92,6 +113,14 @@ class SceneObject:
     grip_half_length: float = 0.0
     locked_joints: tuple[str, ...] = ()
     obstacles: tuple[ObstacleBox, ...] | None = None
+    joint_range: tuple[float, float] | None = None
+    notes: tuple[str, ...] = ()
+
+    def shut_and_open(self, joint) -> tuple[float, float]:
+        """The joint's values at q = 0 and q = 1 (rad or m): `joint_range`, else its limits."""
+        if self.joint_range is not None:
+            return self.joint_range
+        return float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
 
     @staticmethod
     def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float,
@@ -121,43 +150,30 @@ class SceneObject:
 
     @staticmethod
     def from_model_file(path: Path, joint_name: str, handle_body_name: str, X_WO: RigidTransform,
-                        q: float, grid_size: int = DEFAULT_GRID_SIZE) -> SceneObject:
-        """A model file; the parent body of `joint_name` is welded at X_WO, the joint set to q.
+                        q: float, closed_at: str | None = None,
+                        grid_size: int = DEFAULT_GRID_SIZE) -> SceneObject:
+        """A model file made fit to plan on (`nfr_drake.systems.model_files`): the root of the
+        joint's tree welded at X_WO, the joint set to q (0 at its shut limit, `closed_at` "lower",
+        "upper" or None for the rule there), the other joints held shut, massless parts given a
+        mass; or a one-line NfrDrakeError saying what to change.
 
-        The handle point is the mean origin of the handle body's collision (else visual) geometries,
-        or the body origin when it has none.
+        The handle point is the centre of the handle body's geometry (its bounding box); an
+        elongated handle gives the bar axis (`GRIP_AXIS_KEYPOINT`), a sliding door the approach
+        from its front (`APPROACH_KEYPOINT`). The obstacles are the boxes of every collision
+        geometry the joint does not move, at the shut pose.
         """
         path = Path(path)
         if not path.is_file():
             raise NfrDrakeError(f"object model {path} does not exist")
 
-        def add_to(plant: MultibodyPlant) -> ModelInstanceIndex:
-            try:
-                models = make_parser(plant, "object").AddModels(str(path))
-            except RuntimeError as err:
-                first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-                raise NfrDrakeError(
-                    f"Drake could not load {path}: {first}\n  Drake reads SDFormat (.sdf) and URDF "
-                    "(.urdf) whose meshes are .obj, .gltf/.glb or .vtk; convert other meshes (e.g. "
-                    ".stl, .dae) to .obj or .gltf (meshlab, blender or trimesh do this), or replace "
-                    "collision meshes with primitives, and check package:// paths resolve.") from None
-            if len(models) != 1:
-                raise NfrDrakeError(f"{path} holds {len(models)} models; give a file with one")
-            model = models[0]
-            if not plant.HasJointNamed(joint_name, model):
-                names = [plant.get_joint(j).name() for j in plant.GetJointIndices(model)]
-                raise NfrDrakeError(f"{path} has no joint {joint_name!r}; its joints: {names}")
-            if not plant.HasBodyNamed(handle_body_name, model):
-                names = [plant.get_body(b).name() for b in plant.GetBodyIndices(model)]
-                raise NfrDrakeError(f"{path} has no body {handle_body_name!r}; its bodies: {names}")
-            joint = plant.GetJointByName(joint_name, model)
-            plant.WeldFrames(plant.world_frame(), joint.parent_body().body_frame(), X_WO)
-            return model
+        def build(added: tuple[AddedMass, ...]):
+            builder = DiagramBuilder()
+            plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+            model = add_model_file(plant, path, joint_name, handle_body_name, X_WO, added)
+            plant.Finalize()
+            return plant, scene_graph.model_inspector(), model
 
-        builder = DiagramBuilder()
-        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-        model = add_to(plant)
-        plant.Finalize()
+        plant, inspector, model = build(())
         joint = plant.GetJointByName(joint_name, model)
         if not isinstance(joint, (RevoluteJoint, PrismaticJoint)):
             raise NfrDrakeError(f"joint {joint_name!r} is a {joint.type_name()} joint; "
@@ -166,36 +182,71 @@ class SceneObject:
         if not (np.isfinite(lower) and np.isfinite(upper) and upper > lower):
             raise NfrDrakeError(f"joint {joint_name!r} needs finite limits (lower < upper) to map q "
                                 "onto [0, 1]")
-        body = plant.GetBodyByName(handle_body_name, model)
-        inspector = scene_graph.model_inspector()
-        frame_id = plant.GetBodyFrameIdOrThrow(body.index())
-        geometries = (inspector.GetGeometries(frame_id, Role.kProximity)
-                      or inspector.GetGeometries(frame_id, Role.kIllustration))
-        p_BH = (np.mean([inspector.GetPoseInFrame(g).translation() for g in geometries], axis=0)
-                if geometries else np.zeros(3))
-
+        others = [plant.get_joint(j) for j in plant.GetJointIndices(model)
+                  if j != joint.index() and plant.get_joint(j).num_positions() > 0]
+        for other in others:
+            if other.num_positions() != 1:
+                raise NfrDrakeError(f"joint {other.name()!r} is a {other.type_name()} joint: only one-dof "
+                                    "joints can be held shut; make it fixed")
+        shut, opened = shut_and_open(joint, closed_at)
+        added = tuple(massless_parts(plant, inspector, plant.CreateDefaultContext(), model))
+        notes = [f"body {a.body_name!r} and what is welded to it have no mass: given {a.mass:.2g} kg "
+                 f"({MASSLESS_DENSITY:.0f} kg/m^3 over its geometry's boxes); give it an inertial "
+                 "element" for a in added]
+        if added:
+            plant, inspector, model = build(added)
+            joint = plant.GetJointByName(joint_name, model)
         context = plant.CreateDefaultContext()
+        for other in others:
+            set_joint_value(plant, context, plant.GetJointByName(other.name(), model), 0.0)
+        set_joint_value(plant, context, joint, shut)
+        body = plant.GetBodyByName(handle_body_name, model)
+        p_BH, grip_B, grip_half = handle_grip(plant, inspector, body)
         revolute = isinstance(joint, RevoluteJoint)
+        X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
+        axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
+        bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
+        corners = [box_corners(plant.EvalBodyPoseInWorld(context, b) @ RigidTransform((box[0] + box[1]) / 2),
+                               box[1] - box[0])
+                   for b in bodies for box in [body_box(plant, inspector, b)] if box is not None]
+        if not corners:
+            raise NfrDrakeError(f"{path} has no geometry")
+        notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
+        X_WB = plant.EvalBodyPoseInWorld(context, body)
+        moving = set(plant.GetBodiesKinematicallyAffectedBy([joint.index()]))
+        notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
+        front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body,
+                                                           X_WB @ p_BH, axis_W)
+        if not revolute and front_W is None and abs(axis_W @ _Z) > 0.99:
+            raise NfrDrakeError(f"prismatic joint {joint_name!r} is vertical; only horizontal "
+                                "slides (drawers, sliding doors) are supported")
+        R_BW = X_WB.rotation().inverse()
+        if grip_B is None:
+            bar_W = _Z if front_W is not None else axis_W if revolute else np.cross(_Z, axis_W)
+            grip_B = R_BW @ (bar_W / np.linalg.norm(bar_W))
+            grip_half = GRIP_END_MARGIN
+        moving_points = {GRIP_AXIS_KEYPOINT: p_BH + GRIP_AXIS_OFFSET * grip_B}
+        if front_W is not None:
+            moving_points[APPROACH_KEYPOINT] = p_BH + GRIP_AXIS_OFFSET * (R_BW @ front_W)
+        obstacles = geometry_obstacles(plant, inspector, context,
+                                       [b for b in bodies if b.index() not in moving])
+
         q_grid = np.linspace(0.0, 1.0, grid_size)
-        names = ("handle", "hinge_top", "hinge_bottom") if revolute else ("handle",)
+        names = (("handle", "hinge_top", "hinge_bottom") if revolute else ("handle",)) + tuple(moving_points)
         p_WK = np.zeros((grid_size, len(names), 3))
         for i, qi in enumerate(q_grid):
-            set_joint_value(plant, context, joint, lower + qi * (upper - lower))
+            set_joint_value(plant, context, joint, shut + qi * (opened - shut))
             X_WB = plant.EvalBodyPoseInWorld(context, body)
             p_WK[i, 0] = X_WB @ p_BH
-            X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
-            axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
             if revolute:
                 a = axis_W if axis_W @ _Z >= 0 else -axis_W
                 foot = X_WJ.translation() + ((p_WK[i, 0] - X_WJ.translation()) @ a) * a
                 p_WK[i, 1], p_WK[i, 2] = foot + _HINGE_HALF_SPAN * a, foot - _HINGE_HALF_SPAN * a
-            if i == 0:
-                R_BW = X_WB.rotation().inverse()
-                bar_W = axis_W if revolute else np.cross(_Z, axis_W)
-                if np.linalg.norm(bar_W) < 1e-6:
-                    raise NfrDrakeError(f"prismatic joint {joint_name!r} is vertical; only horizontal "
-                                        "slides (drawers) are supported")
-                bar_B = R_BW @ (bar_W / np.linalg.norm(bar_W))
+            p_WK[i, len(names) - len(moving_points):] = [X_WB @ p for p in moving_points.values()]
         category = "closet" if revolute else "drawer"
-        kt = KeypointTrajectory(category, q_grid, names, p_WK, q)
-        return SceneObject(category, add_to, joint_name, handle_body_name, p_BH, bar_B, kt)
+        return SceneObject(
+            category, lambda plant: add_model_file(plant, path, joint_name, handle_body_name, X_WO, added),
+            joint_name, handle_body_name, p_BH, grip_B, KeypointTrajectory(category, q_grid, names, p_WK, q),
+            grip_half_length=max(0.0, grip_half - GRIP_END_MARGIN),
+            locked_joints=tuple(j.name() for j in others), obstacles=tuple(obstacles),
+            joint_range=(shut, opened), notes=tuple(notes))

@@ -47,12 +47,12 @@ def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
     model = obj.add_to(plant)
     plant.Finalize()
     joint = plant.GetJointByName(obj.joint_name, model)
-    source = AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth)
+    shut, opened = obj.shut_and_open(joint)
+    source = AddKeypointTrajectorySource(builder, plant, joint, obj.ground_truth, (shut, opened))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
-    lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
     set_joint_value(plant, plant.GetMyMutableContextFromRoot(context), joint,
-                    lower + obj.ground_truth.q_current * (upper - lower))
+                    shut + obj.ground_truth.q_current * (opened - shut))
     return source.get_keypoint_trajectory_output_port().Eval(source.GetMyContextFromRoot(context))
 
 

@@ -22,6 +22,11 @@ GRIP_AXIS_KEYPOINT = "grip_axis"
 furniture fronts): the bar axis the hand aligns with. Without it the planner takes the hinge axis
 (doors) or the horizontal across the pull (drawers), as the closet and drawer grips lie."""
 GRIP_AXIS_OFFSET = 0.05
+APPROACH_KEYPOINT = "approach_from"
+"""An optional keypoint `GRIP_AXIS_OFFSET` out in front of the handle, moving with it (the ground truth
+of a loaded sliding door, whose handle moves across its front): the hand approaches the handle from
+it. Without it the approach runs against the handle's motion (a door's outward normal, a drawer's
+pull)."""
 
 
 @dataclass(frozen=True)

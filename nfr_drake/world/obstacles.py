@@ -11,6 +11,10 @@ sample), so parts are merged where the arm cannot go between them:
   frame, posed at its q.
 Cylinders and spheres become their bounding boxes. The moving front is left out: the planner
 treats it from its keypoints (docs/PLANNING.md).
+
+A loaded model (any SDFormat/URDF file) gives one box per collision geometry instead
+(`geometry_obstacles`): its oriented bounding box (`geometry_box`; a mesh's is that of its vertices,
+so of the convex hull Drake collides with).
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ import re
 from collections import defaultdict
 
 import numpy as np
+from pydrake.geometry import CalcObb, GeometryId, SceneGraphInspector
 from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
 
 from nfr_drake.objects.articulated import ArticulatedObject, Part, SemanticClass, _part_corners
 from nfr_drake.world.plan import ObstacleBox
@@ -66,3 +72,34 @@ def distance_to_box(box: ObstacleBox, p_W: np.ndarray) -> np.ndarray:
     p_B = (X_BW.rotation().matrix() @ np.asarray(p_W, dtype=float).T).T + X_BW.translation()
     return np.linalg.norm(np.maximum(np.abs(p_B) - np.asarray(box.size) / 2, 0.0), axis=1)
 
+
+
+def geometry_box(inspector: SceneGraphInspector,
+                 geometry_id: GeometryId) -> tuple[RigidTransform, np.ndarray] | None:
+    """The oriented bounding box of a geometry in the frame F it is attached to (its body's): pose
+    X_FB of the box's centre and full size (3,), m; None for a half space."""
+    obb = CalcObb(inspector.GetShape(geometry_id))
+    if obb is None:
+        return None
+    return inspector.GetPoseInFrame(geometry_id) @ obb.pose(), 2.0 * np.asarray(obb.half_width())
+
+
+def box_corners(X_FB: RigidTransform, size: np.ndarray) -> np.ndarray:
+    """The 8 corners (8, 3) in F of a box of full `size` (3,) centred at X_FB, m."""
+    signs = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    return (X_FB.rotation().matrix() @ (signs * size).T).T + X_FB.translation()
+
+
+def geometry_obstacles(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context,
+                       bodies) -> list[ObstacleBox]:
+    """One box in W per collision geometry of `bodies` at the configuration in `plant_context`: its
+    oriented bounding box (`geometry_box`), named after the body and the geometry."""
+    boxes = []
+    for body in bodies:
+        X_WBo = plant.EvalBodyPoseInWorld(plant_context, body)
+        for geometry_id in plant.GetCollisionGeometriesForBody(body):
+            box = geometry_box(inspector, geometry_id)
+            if box is not None:
+                boxes.append(ObstacleBox(f"{body.name()}_{inspector.GetName(geometry_id)}", box[1],
+                                         X_WBo @ box[0]))
+    return boxes

@@ -1,0 +1,336 @@
+"""A user's model file (SDFormat or URDF) made fit to plan on, or refused with one line that says
+what to change (`SceneObject.from_model_file` composes these).
+
+- Loading (`add_model_file`): one model; the root of the articulated joint's tree welded at X_WO
+  (not the joint's parent, which may sit deeper); bodies without a joint to that tree fixed to it
+  as drawn; a model attached to Drake's world (a root link named `world`) refused.
+- The joint (`shut_and_open`): which limit is shut. Rule: the limit nearer the joint's zero, the
+  position the model is drawn in; refused as unclear when both are about as near (`--closed-at`).
+- Massless moving parts (`massless_parts`): a door or drawer whose bodies have no mass gets the mass
+  of its geometry's bounding box at `MASSLESS_DENSITY` (Drake's solver needs a positive mass matrix).
+- The handle (`handle_grip`): the centre of its geometry's bounding box in its body frame, and its
+  bar axis when the geometry is elongated.
+- Sliding doors (`slide_front_normal`): a prismatic joint whose handle stands out of its part
+  across the slide axis slides sideways: the hand comes from the front.
+- Placement (`check_placement`): height, up axis (the joint's axis), floor; a refusal suggests the
+  `--object-xyz` / `--object-rpy-deg` that fix it.
+- Meshes (`mesh_problems`): Drake collides with a mesh's convex hull; a concave one is reported and
+  one whose hull covers the handle refused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Mesh, ReadObjToTriangleSurfaceMesh, Role, SceneGraphInspector
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.parsing import make_parser
+from nfr_drake.world.obstacles import box_corners, geometry_box
+
+MASSLESS_DENSITY = 500.0
+"""Density given to a massless moving part's bounding box, kg/m^3 (chipboard is 600-700)."""
+MAX_HEIGHT, MIN_HEIGHT = 3.0, 0.05
+"""Heights of a piece of furniture in metres that are plausible, m."""
+SINK_TOLERANCE = 0.005
+"""How far below the floor a model's lowest point may lie (a mesh exported 1-2 mm low), m."""
+FLOAT_NOTICE = 0.05
+"""A model whose lowest point is higher above the floor than this is noted (a wall cabinet?), m."""
+MAX_AXIS_TILT_DEG = 30.0
+"""A hinge more than this from vertical, or a slide less than 90 minus this from it, is refused."""
+CONCAVE_FILL = 0.9
+"""A closed .obj mesh filling less than this fraction of its convex hull is reported as concave."""
+_Z = np.array([0.0, 0.0, 1.0])
+_UPRIGHTS = [RotationMatrix.MakeXRotation(np.pi / 2), RotationMatrix.MakeYRotation(-np.pi / 2),
+             RotationMatrix.MakeXRotation(-np.pi / 2), RotationMatrix.MakeYRotation(np.pi / 2),
+             RotationMatrix.MakeXRotation(np.pi)]
+"""Rotations tried to stand a model up, Y-up exports first (y -> z)."""
+
+
+@dataclass(frozen=True)
+class AddedMass:
+    """Mass given to a massless body: a solid box of full `size` (3,), m, centred at p_BC in the
+    body's frame B, of `mass` kg."""
+
+    body_name: str
+    mass: float
+    size: tuple[float, float, float]
+    p_BC: tuple[float, float, float]
+
+
+def add_model_file(plant: MultibodyPlant, path: Path, joint_name: str, handle_body_name: str,
+                   X_WO: RigidTransform, added_masses: tuple[AddedMass, ...] = ()) -> ModelInstanceIndex:
+    """Parse the model into `plant` (before Finalize) as the module docstring says; returns its instance."""
+    try:
+        models = make_parser(plant, "object").AddModels(str(path))
+    except RuntimeError as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise NfrDrakeError(
+            f"Drake could not load {path}: {first}\n  Drake reads SDFormat (.sdf) and URDF "
+            "(.urdf) whose meshes are .obj, .gltf/.glb or .vtk; convert other meshes (e.g. "
+            ".stl, .dae) to .obj or .gltf (meshlab, blender or trimesh do this), or replace "
+            "collision meshes with primitives, and check package:// paths resolve.") from None
+    if len(models) != 1:
+        raise NfrDrakeError(f"{path} holds {len(models)} models; give a file with one")
+    model = models[0]
+    if not plant.HasJointNamed(joint_name, model):
+        names = [plant.get_joint(j).name() for j in plant.GetJointIndices(model)]
+        raise NfrDrakeError(f"{path} has no joint {joint_name!r}; its joints: {names}")
+    if not plant.HasBodyNamed(handle_body_name, model):
+        names = [plant.get_body(b).name() for b in plant.GetBodyIndices(model)]
+        raise NfrDrakeError(f"{path} has no body {handle_body_name!r}; its bodies: {names}")
+    world = plant.world_body().index()
+    joints = [plant.get_joint(j) for j in plant.GetJointIndices(model)]
+    for joint in joints:
+        if world in (joint.parent_body().index(), joint.child_body().index()):
+            raise NfrDrakeError(
+                f"{path}: joint {joint.name()!r} attaches the model to 'world', which Drake takes for "
+                "its own world (a link named 'world' is not a body), so the model cannot be placed: "
+                "rename that link (e.g. to 'base') or remove the joint, then place it with --object-xyz")
+    root = tree_root(plant, model, plant.GetJointByName(joint_name, model).parent_body())
+    X_WR0 = plant.GetDefaultFloatingBaseBodyPose(root)
+    for other in free_roots(plant, model, root):  # fixed to the root as drawn
+        plant.WeldFrames(root.body_frame(), other.body_frame(),
+                         X_WR0.inverse() @ plant.GetDefaultFloatingBaseBodyPose(other))
+    plant.WeldFrames(plant.world_frame(), root.body_frame(), X_WO)
+    for added in added_masses:
+        body = plant.GetBodyByName(added.body_name, model)
+        extra = plant.AddRigidBody(f"{added.body_name}_added_mass", model,
+                                   SpatialInertia.SolidBoxWithMass(added.mass, *added.size))
+        plant.WeldFrames(body.body_frame(), extra.body_frame(), RigidTransform(np.asarray(added.p_BC)))
+    return model
+
+
+def _parents(plant: MultibodyPlant, model: ModelInstanceIndex) -> dict:
+    """Body index -> parent body index over the model's joints."""
+    return {plant.get_joint(j).child_body().index(): plant.get_joint(j).parent_body().index()
+            for j in plant.GetJointIndices(model)}
+
+
+def tree_root(plant: MultibodyPlant, model: ModelInstanceIndex, body):
+    """The body at the root of `body`'s tree of joints (before Finalize)."""
+    parents = _parents(plant, model)
+    index = body.index()
+    while index in parents:
+        index = parents[index]
+    return plant.get_body(index)
+
+
+def free_roots(plant: MultibodyPlant, model: ModelInstanceIndex, root) -> list:
+    """The model's bodies other than `root` with no parent joint: Drake would let them fall."""
+    parents = _parents(plant, model)
+    return [plant.get_body(b) for b in plant.GetBodyIndices(model)
+            if b not in parents and b != root.index()]
+
+
+def shut_and_open(joint, closed_at: str | None) -> tuple[float, float]:
+    """Joint values (rad or m) at q = 0 (shut) and q = 1 (fully open): `closed_at` "lower" or
+    "upper", or None for the rule of the module docstring."""
+    lower, upper = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
+    if closed_at is None:
+        if abs(abs(lower) - abs(upper)) <= 0.1 * (upper - lower):
+            raise NfrDrakeError(
+                f"joint {joint.name()!r}: which limit is shut is unclear (lower {lower:.3g} and upper "
+                f"{upper:.3g} are about as far from the position the model is drawn in, 0); give "
+                "--closed-at lower or --closed-at upper")
+        closed_at = "lower" if abs(lower) < abs(upper) else "upper"
+    return (lower, upper) if closed_at == "lower" else (upper, lower)
+
+
+def body_box(plant: MultibodyPlant, inspector: SceneGraphInspector, body,
+             role: Role | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Corners lo, hi (3,) in the body's frame of the box bounding its geometries (collision ones,
+    else visual ones; or those of `role`), m; None when it has none."""
+    frame_id = plant.GetBodyFrameIdOrThrow(body.index())
+    roles = (role,) if role is not None else (Role.kProximity, Role.kIllustration)
+    for r in roles:
+        boxes = [geometry_box(inspector, g) for g in inspector.GetGeometries(frame_id, r)]
+        corners = [box_corners(*box) for box in boxes if box is not None]
+        if corners:
+            corners = np.concatenate(corners)
+            return corners.min(axis=0), corners.max(axis=0)
+    return None
+
+
+def _bodies_box(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, bodies,
+                frame) -> tuple[np.ndarray, np.ndarray] | None:
+    """lo, hi (3,) in `frame` of the box bounding the geometries of `bodies`, m; None if none."""
+    X_FW = frame.CalcPoseInWorld(plant_context).inverse()
+    corners = []
+    for body in bodies:
+        box = body_box(plant, inspector, body)
+        if box is not None:
+            X_FB = X_FW @ plant.EvalBodyPoseInWorld(plant_context, body)
+            corners.append(box_corners(X_FB @ RigidTransform((box[0] + box[1]) / 2), box[1] - box[0]))
+    if not corners:
+        return None
+    corners = np.concatenate(corners)
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+def massless_parts(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context,
+                   model: ModelInstanceIndex) -> list[AddedMass]:
+    """For each joint of the model that moves bodies of no mass in all (its child and what is
+    welded to it), the mass its child gets: the volume of their geometries' bounding boxes at
+    `MASSLESS_DENSITY` (at least that of a 2 cm cube), as a solid box the size of their bounding
+    box (at least 2 cm a side)."""
+    added = []
+    for index in plant.GetJointIndices(model):
+        joint = plant.get_joint(index)
+        if joint.num_velocities() == 0:
+            continue
+        child = joint.child_body()
+        group = plant.GetBodiesWeldedTo(child)
+        if sum(b.default_mass() for b in group) > 1e-6:
+            continue
+        box = _bodies_box(plant, inspector, plant_context, group, child.body_frame())
+        lo, hi = box if box is not None else (np.full(3, -0.01), np.full(3, 0.01))
+        size = np.maximum(hi - lo, 0.02)
+        volume = sum(float(np.prod(box[1])) for b in group
+                     for g in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(b.index()), Role.kProximity)
+                     for box in [geometry_box(inspector, g)] if box is not None)
+        added.append(AddedMass(child.name(), MASSLESS_DENSITY * max(volume, 0.02 ** 3), tuple(size),
+                               tuple((lo + hi) / 2)))
+    return added
+
+
+def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector,
+                body) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """The handle in its body's frame B: centre p_BH of its geometry's bounding box (the body's
+    origin when it has none), m, (3,); the unit bar axis (3,) when the box's longest side is at
+    least twice the next (else None); half that side, m."""
+    box = body_box(plant, inspector, body)
+    if box is None:
+        return np.zeros(3), None, 0.0
+    lo, hi = box
+    extent = hi - lo
+    order = np.argsort(extent)[::-1]
+    if extent[order[0]] < 2.0 * extent[order[1]]:
+        return (lo + hi) / 2, None, 0.0
+    return (lo + hi) / 2, np.eye(3)[order[0]], float(extent[order[0]] / 2)
+
+
+def slide_front_normal(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
+                       handle_body, p_WH: np.ndarray, axis_W: np.ndarray) -> np.ndarray | None:
+    """The outward normal (3,) in W of a sliding door's front, or None for a drawer.
+
+    The handle stands out of the box bounding the part's other geometry (in the joint's child
+    frame) along one of its axes: across the slide and horizontally for a sliding door, along the
+    slide for a drawer. No such side (the handle inside the box, or no other geometry): a drawer."""
+    child = joint.child_body()
+    bodies = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])
+              if b != handle_body.index()]
+    box = _bodies_box(plant, inspector, plant_context, bodies, child.body_frame())
+    if box is None:
+        return None
+    lo, hi = box
+    X_WC = plant.EvalBodyPoseInWorld(plant_context, child)
+    p_CH = X_WC.inverse() @ p_WH
+    excess = np.maximum(np.maximum(p_CH - hi, lo - p_CH), 0.0)
+    side = int(np.argmax(excess))
+    if excess[side] < 0.005:
+        return None
+    n_W = X_WC.rotation() @ (np.eye(3)[side] * np.sign(p_CH[side] - (lo[side] + hi[side]) / 2))
+    return n_W if abs(n_W @ axis_W) < 0.5 and abs(n_W @ _Z) < 0.5 else None
+
+
+def _axis_upright(axis_W: np.ndarray, revolute: bool) -> bool:
+    tilt = np.degrees(np.arccos(np.clip(abs(axis_W @ _Z), 0.0, 1.0)))
+    return tilt <= MAX_AXIS_TILT_DEG if revolute else tilt >= 90.0 - MAX_AXIS_TILT_DEG
+
+
+def check_placement(corners_W: np.ndarray, X_WO: RigidTransform, axis_W: np.ndarray,
+                    revolute: bool) -> list[str]:
+    """Refuse a model not in metres, lying on its side or sunk into the floor, suggesting the pose
+    options that fix it; returns notes (one line each) for what is only unusual.
+
+    corners_W: corners (N, 3) in W of the model's geometry boxes, shut, m; axis_W: the joint's unit
+    axis in W."""
+    lo, hi = corners_W.min(axis=0), corners_W.max(axis=0)
+    height = float(hi[2] - lo[2])
+    if not MIN_HEIGHT <= height <= MAX_HEIGHT:
+        unit = "centimetres or millimetres" if height > MAX_HEIGHT else "a unit larger than metres"
+        raise NfrDrakeError(
+            f"the model is {height:.3g} m tall at this pose: is it in {unit}? Furniture is "
+            f"{MIN_HEIGHT}-{MAX_HEIGHT} m tall; scale the model's lengths (geometry, poses, prismatic "
+            "limits, mesh scale) to metres")
+    p_WO = X_WO.translation()
+    R = RotationMatrix.Identity()
+    if not _axis_upright(axis_W, revolute):
+        upright = [Rc for Rc in _UPRIGHTS if _axis_upright(Rc @ axis_W, revolute)]
+        R = upright[0] if upright else R
+    z_low = float(((R.matrix() @ (corners_W - p_WO).T).T + p_WO)[:, 2].min())
+    xyz = np.round(p_WO - [0.0, 0.0, z_low], 3)
+    pose = "--object-xyz " + " ".join(f"{v:.3g}" for v in xyz + 0.0)
+    if not R.IsExactlyIdentity():
+        rpy = np.degrees(RollPitchYaw(R @ X_WO.rotation()).vector())
+        kind = "hinge" if revolute else "slide"
+        raise NfrDrakeError(
+            f"the joint's {kind} axis {np.round(axis_W, 3).tolist()} is "
+            f"{'not vertical' if revolute else 'vertical'}: the model lies on its side (exported "
+            f"Y-up?); stand it up with --object-rpy-deg {' '.join(f'{v:.0f}' for v in rpy + 0.0)} "
+            f"{pose} (the planner opens doors on vertical hinges and drawers on horizontal slides)")
+    if lo[2] < -SINK_TOLERANCE:
+        raise NfrDrakeError(f"the model's lowest point is {-lo[2] * 100:.1f} cm below the floor "
+                            f"(z = 0): lift it onto the floor with {pose}")
+    if lo[2] > FLOAT_NOTICE:
+        return [f"the model's lowest point is {lo[2] * 100:.0f} cm above the floor (a wall cabinet? "
+                f"{pose} stands it on the floor)"]
+    return []
+
+
+def _volume(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Volume enclosed by outward triangles (M, 3) of vertices (V, 3), m^3."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    return float(abs(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
+
+
+def _hull(inspector: SceneGraphInspector, geometry_id) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Vertices (V, 3) in the geometry's frame, faces (lists of vertex indices) and their outward
+    unit normals (F, 3) of its convex hull."""
+    hull = inspector.GetConvexHull(geometry_id)
+    vertices = np.array([hull.vertex(v) for v in range(hull.num_vertices())])
+    faces = [np.array([hull.element(f).vertex(k) for k in range(hull.element(f).num_vertices())])
+             for f in range(hull.num_elements())]
+    return vertices, faces, np.array([hull.face_normal(f) for f in range(hull.num_elements())])
+
+
+def mesh_problems(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context,
+                  model: ModelInstanceIndex, moving: set, p_WH: np.ndarray) -> list[str]:
+    """Notes on concave collision meshes (Drake collides with their convex hulls); refuses a mesh
+    on a part that does not move (`moving`: body indices) whose hull covers the handle point p_WH."""
+    notes = []
+    for index in plant.GetBodyIndices(model):
+        body = plant.get_body(index)
+        for g in plant.GetCollisionGeometriesForBody(body):
+            shape = inspector.GetShape(g)
+            if not isinstance(shape, Mesh) or not shape.source().is_path():
+                continue
+            name = Path(shape.source().path()).name
+            vertices, faces, normals = _hull(inspector, g)
+            X_GW = (plant.EvalBodyPoseInWorld(plant_context, body) @ inspector.GetPoseInFrame(g)).inverse()
+            p_GH = X_GW @ p_WH
+            inside = all(n @ (p_GH - vertices[f[0]]) <= 0.0 for f, n in zip(faces, normals, strict=True))
+            if inside and index not in moving:
+                raise NfrDrakeError(
+                    f"the collision mesh {name} of body {body.name()!r} covers the handle: Drake "
+                    "collides with a mesh's convex hull, not the mesh, so the hand cannot reach the "
+                    "handle; split it into convex pieces (one mesh or box per panel) in the model's "
+                    "collision elements")
+            if Path(name).suffix.lower() != ".obj":
+                continue
+            mesh = ReadObjToTriangleSurfaceMesh(shape.source().path(), shape.scale3())
+            tris = np.array([[mesh.element(t).vertex(k) for k in range(3)]
+                             for t in range(mesh.num_elements())])
+            mesh_vertices = np.array([mesh.vertex(v) for v in range(mesh.num_vertices())])
+            hull_tris = np.array([[f[0], f[k], f[k + 1]] for f in faces for k in range(1, len(f) - 1)])
+            fill = _volume(mesh_vertices, tris) / max(_volume(vertices, hull_tris), 1e-12)
+            if fill < CONCAVE_FILL:
+                notes.append(f"the collision mesh {name} of body {body.name()!r} is concave (fills "
+                             f"{fill:.0%} of its convex hull): Drake collides with the hull")
+    return notes

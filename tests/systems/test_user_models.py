@@ -1,0 +1,148 @@
+"""`plan --object FILE` on realistic user models (tests/fixtures/user_models.py): each opens with its
+true keypoints or is refused with one line saying what to change."""
+
+import numpy as np
+import pytest
+from fixtures.user_models import OPENS, Joint, Link, write_models, write_sdf, write_urdf
+from pydrake.math import RigidTransform
+
+from nfr_drake.cli import main
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.grasp import handle_waypoints
+from nfr_drake.systems.scene_objects import SceneObject, object_pose
+from nfr_drake.systems.task import run_task
+from nfr_drake.world.keypoints import APPROACH_KEYPOINT, GRIP_AXIS_KEYPOINT
+from nfr_drake.world.obstacles import distance_to_box
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    return {m.name: m for m in write_models(tmp_path_factory.mktemp("user_models"))}
+
+
+def load(model, X_WO=None, closed_at=None) -> SceneObject:
+    return SceneObject.from_model_file(model.path, model.joint, model.handle_body,
+                                       X_WO if X_WO is not None else RigidTransform(), 0.0, closed_at)
+
+
+REFUSED = ["root_link_named_world", "base_cabinet_in_centimetres", "base_cabinet_y_up", "base_cabinet_sunk",
+           "carcass_one_concave_mesh"]
+
+
+@pytest.mark.parametrize("name", REFUSED)
+def test_a_model_that_cannot_be_planned_on_is_refused_in_one_line(models, name, capsys, tmp_path):
+    model = models[name]
+    assert model.expect != OPENS
+    assert main([*model.plan_args(), "--replay", str(tmp_path / "r.html")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert model.expect in err and len(err.splitlines()) == 1, err
+
+
+def test_the_handle_is_the_centre_of_its_geometry(models):
+    """The wardrobe's handle link has its frame at the hinge; its mesh is 35 cm away."""
+    obj = load(models["wardrobe_handle_mesh_off_frame"])
+    # The U-shaped mesh's bounding box: x 0 to 0.045 (standoff 0.035 plus half the 2 cm bar), y
+    # -0.35 +- 0.01, z +- 0.07 about the link frame.
+    np.testing.assert_allclose(obj.p_BH, [0.0225, -0.35, 0.0], atol=1e-6)
+    # The link frame sits on the door's face, 1 m up, at the hinge (x 0.275 + 0.018, y 0.225).
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3155, -0.125, 1.0], atol=1e-6)
+    assert any("u_handle.obj" in note and "concave" in note for note in obj.notes)
+
+
+def test_a_joint_shut_at_its_upper_limit_starts_shut(models):
+    fridge = models["fridge_shut_at_upper_limit"]
+    obj = load(fridge)
+    assert obj.joint_range == (0.0, -1.9)
+    # Shut, where the file draws it: the centre of the handle's box (bar of radius 1.1 cm 4 cm out,
+    # on posts) 2.55 cm in front of the door's face at x = 0.33.
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3555, 0.25, 1.1], atol=1e-6)
+    opened = obj.ground_truth.point("handle", 1.0)
+    assert opened[0] > 0.5  # swung out
+    assert load(fridge, closed_at="lower").joint_range == (-1.9, 0.0)
+
+
+def test_a_joint_with_no_clear_shut_limit_asks_for_closed_at(tmp_path):
+    links = [Link("box", (), 5.0), Link("door", (), 1.0)]
+    joints = [Joint("hinge", "revolute", "box", "door", limits=(-1.0, 1.0))]
+    path = write_urdf(tmp_path / "ambiguous.urdf", "ambiguous", links, joints)
+    with pytest.raises(NfrDrakeError, match="--closed-at lower or --closed-at upper"):
+        SceneObject.from_model_file(path, "hinge", "door", RigidTransform(), 0.0)
+
+
+def test_a_sliding_door_is_approached_from_the_front(models):
+    obj = load(models["sliding_door"])
+    kt = obj.ground_truth
+    assert APPROACH_KEYPOINT in kt.names and GRIP_AXIS_KEYPOINT in kt.names
+    # It slides along +y; the hand comes along -x (towards the front face) and holds the vertical bar.
+    np.testing.assert_allclose(kt.point("handle", 1.0) - kt.point("handle", 0.0), [0.0, 0.45, 0.0], atol=1e-9)
+    for waypoint in handle_waypoints(kt, np.linspace(0.0, 1.0, 3)):
+        np.testing.assert_allclose(waypoint.approach_W, [-1.0, 0.0, 0.0], atol=1e-9)
+        np.testing.assert_allclose(abs(waypoint.bar_W), [0.0, 0.0, 1.0], atol=1e-9)
+
+
+def test_a_drawer_is_still_pulled_along_its_slide(models):
+    kt = load(models["desk_drawer"]).ground_truth
+    assert APPROACH_KEYPOINT not in kt.names
+    np.testing.assert_allclose(handle_waypoints(kt, [0.0])[0].approach_W, [-1.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_the_planner_sees_the_worktop_overhang(models):
+    obj = load(models["worktop_drawer"])
+    overhang = np.array([[0.315, 0.0, 0.88]])  # under the worktop's front edge, 1.5 cm past the drawer
+    assert any(distance_to_box(box, overhang)[0] == 0.0 for box in obj.obstacles)
+    drawer_front = np.array([[0.29, 0.0, 0.78]])  # the moving part is no obstacle
+    assert all(distance_to_box(box, drawer_front)[0] > 0.0 for box in obj.obstacles)
+
+
+def test_other_joints_are_held_and_massless_parts_get_a_mass(models):
+    obj = load(models["cupboard_right_door"])
+    assert obj.locked_joints == ("left_hinge",)
+    assert any("'left_door'" in note and "no mass" in note for note in obj.notes)
+
+
+def test_the_suggested_pose_stands_a_y_up_model_on_the_floor(models):
+    """The refusal suggests --object-rpy-deg 90 0 0 --object-xyz 0 0 0; with it the hinge is vertical."""
+    obj = load(models["base_cabinet_y_up"], object_pose((0, 0, 0), 0.0, (90, 0, 0)))
+    hinge = obj.ground_truth.point("hinge_top", 0.0) - obj.ground_truth.point("hinge_bottom", 0.0)
+    np.testing.assert_allclose(hinge / np.linalg.norm(hinge), [0, 0, 1], atol=1e-5)  # rpy in 6 digits
+    load(models["base_cabinet_sunk"], object_pose((0, 0, 0.1), 0.0))  # the suggested lift: accepted
+
+
+def test_a_body_without_a_joint_is_fixed_to_the_model_as_drawn(models, tmp_path):
+    """An SDFormat link with no joint (a loose shelf) would fall; it is welded where the file draws it."""
+    text = models["worktop_drawer"].path.read_text().replace(
+        "</model>", '<link name="shelf"><pose>0 0 0.4 0 0 0</pose><collision name="c"><geometry><box>'
+        "<size>0.5 0.5 0.02</size></box></geometry></collision></link>\n</model>")
+    path = tmp_path / "with_shelf.sdf"
+    path.write_text(text)
+    obj = SceneObject.from_model_file(path, "slide", "pull", RigidTransform([1.0, 0.0, 0.0]), 0.0)
+    assert any(distance_to_box(box, np.array([[1.0, 0.0, 0.4]]))[0] == 0.0 for box in obj.obstacles)
+
+
+def test_a_door_resting_on_the_floor_does_not_drag_on_it(models):
+    outcome = run_task(load(models["base_cabinet_door_on_floor"]), 0.6)
+    assert outcome.success, outcome.simulation.summary()
+    assert outcome.simulation.max_constraint_force < 100.0  # 812 N when it dragged
+
+
+def test_a_massless_door_opens(models):
+    outcome = run_task(load(models["cupboard_massless_door"]), 0.6)
+    assert outcome.success, outcome.simulation.summary()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["worktop_drawer", "sliding_door", "fridge_shut_at_upper_limit",
+                                  "cupboard_right_door", "desk_drawer", "wardrobe_handle_mesh_off_frame"])
+def test_a_user_model_opens(models, name, capsys, tmp_path):
+    model = models[name]
+    assert model.expect == OPENS
+    assert main([*model.plan_args(), "--replay", str(tmp_path / "r.html")]) == 0, capsys.readouterr()
+    assert "SUCCESS" in capsys.readouterr().out
+
+
+def test_sdf_writer_places_links_at_their_joints(tmp_path):
+    """The fixtures' SDFormat writer: a child link's frame is its joint's origin in the parent."""
+    links = [Link("a", (), 1.0), Link("b", (), 1.0)]
+    path = write_sdf(tmp_path / "m.sdf", "m", links, [Joint("j", "prismatic", "a", "b", (0.1, 0.2, 0.3),
+                                                             limits=(0.0, 0.5))])
+    assert "<pose>0.1 0.2 0.3 0 0 0</pose>" in path.read_text()
