@@ -1,63 +1,224 @@
-"""Fit time of the neural field per 10-view capture set (issue target: at most 20 s on 2 cores).
+"""Fit time and accuracy of the neural field per capture set: fit presets side by side, or a profile.
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
-       [--n 5] [--threads 2] [--max-steps 400] [--restarts 4] [--focus-steps 150]
-       [--no-handle-detector]
-Create the captures with `nfr-drake captures --category closet --n 5 --out DIR --size 64`.
-Prints seconds per capture (fit + forward simulation of 21 keypoint sets), steps run, and the
-articulation error against gt.json, as a markdown table with its median.
+       [--n 20] [--threads 1] [--variants thorough fast] [--variant NAME:FIELD=VALUE,...]
+       [--profile K] [--csv FILE]
+Create the captures with `nfr-drake captures --category closet --n 20 --out DIR --size 64`.
+
+Side by side (default): every capture is fitted (`nfr_drake.inference.infer.infer`: the fit and the
+forward simulation of gt.json's q grid) once per variant, the variants interleaved on each capture
+(their order alternating from one capture to the next) so that the machine's load hits them
+alike. A variant is a fit preset (`FitConfig(preset=...)`: "fast", the default, or "thorough")
+or one named with `--variant NAME:FIELD=VALUE,...` (FitConfig fields on top of the default,
+`preset=thorough` included). Per fit: CPU seconds of the process (`time.process_time`, the
+measure that another job's load hardly changes with one torch thread), wall seconds, steps, and
+the errors against gt.json (`nfr_drake.eval.evaluate.score`: articulation, keypoint RMSE at the
+observed state, handle error, handle trajectory RMSE). Prints one markdown row per variant:
+medians and 90th percentiles, and the ratio of the medians to the first variant's.
+
+`--profile K`: where the CPU time of K fits of the first variant goes, under cProfile timed by
+`time.process_time` (cProfile adds its own overhead to every Python call, so shares, not
+seconds, are what to read).
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
+import csv
 import os
 import platform
-from datetime import date
+import pstats
+import time
+from dataclasses import fields
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
+from nfr_drake.eval.evaluate import Prediction, score
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, infer
+
+METRICS = (("cpu_s", "CPU s"), ("wall_s", "wall s"), ("steps", "steps"),
+           ("articulation_error", "articulation error"), ("keypoint_rmse_cm", "keypoint RMSE cm"),
+           ("handle_error_cm", "handle error cm"),
+           ("handle_trajectory_rmse_cm", "handle trajectory RMSE cm"))
+
+
+def parse_value(text: str, annotation) -> object:
+    """A FitConfig field's value from text, by the type of its default."""
+    if isinstance(annotation, bool):
+        return text.lower() in ("1", "true", "yes")
+    return type(annotation)(text)
+
+
+def variant_config(spec: str) -> tuple[str, FitConfig]:
+    """"fast" / "thorough" (a preset) or "NAME:FIELD=VALUE,..." -> (name, FitConfig)."""
+    if ":" not in spec:
+        return spec, FitConfig(preset=spec)
+    name, assignments = spec.split(":", 1)
+    defaults = {f.name: f.default for f in fields(FitConfig)}
+    values = {}
+    for item in filter(None, assignments.split(",")):
+        key, value = item.split("=", 1)
+        values[key] = parse_value(value, defaults[key])
+    return name, FitConfig(**values)
+
+
+def fit_once(fitted: FittedModel, capture, config: FitConfig) -> dict:
+    """One `infer` of the capture: times, steps and the errors against gt.json."""
+    cpu, wall = time.process_time(), time.perf_counter()
+    result, outcome = infer(fitted, capture, config, np.asarray(capture.gt["trajectory"]["q"]))
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    metrics = score(capture, Prediction(result.q, result.keypoints, result.trajectory, wall),
+                    capture.root.parent.name, "")
+    return {"cpu_s": cpu, "wall_s": wall, "steps": outcome.steps,
+            **{key: getattr(metrics, key) for key, _ in METRICS[3:]}}
+
+
+def side_by_side(fitted: FittedModel, dirs: list[Path], variants: dict[str, FitConfig],
+                 csv_path: Path | None) -> dict[str, list[dict]]:
+    """Rows per variant, the variants interleaved per capture (alternating order)."""
+    rows: dict[str, list[dict]] = {name: [] for name in variants}
+    names = list(variants)
+    writer = None
+    if csv_path is not None:
+        csv_path.parent.mkdir(parents=True, exist_ok=True)
+        out = open(csv_path, "w", newline="")  # noqa: SIM115 (closed at the end)
+        writer = csv.DictWriter(out, ["capture", "variant"] + [k for k, _ in METRICS])
+        writer.writeheader()
+    for i, d in enumerate(dirs):
+        capture = read_capture_set(d)
+        for name in (names if i % 2 == 0 else names[::-1]):
+            row = fit_once(fitted, capture, variants[name])
+            rows[name].append(row)
+            print(f"{d.name} {name}: " + ", ".join(f"{k} {row[k]:.3g}" for k, _ in METRICS),
+                  flush=True)
+            if writer is not None:
+                writer.writerow({"capture": d.name, "variant": name, **row})
+                out.flush()
+    return rows
+
+
+def summary(rows: dict[str, list[dict]], unit: str) -> str:
+    """Markdown table: per variant the median (p90) of each metric, the median ratios of CPU
+    and wall time to the first variant's."""
+    first = next(iter(rows.values()))
+    heads = [h.replace("articulation error", f"articulation error ({unit})") for _, h in METRICS]
+    lines = ["| variant | fits | " + " | ".join(heads) + " | CPU / first | wall / first |",
+             "|---" * (len(METRICS) + 4) + "|"]
+    for name, rs in rows.items():
+        cells = []
+        for key, _ in METRICS:
+            v = np.array([r[key] for r in rs], float)
+            cells.append(f"{np.median(v):.3g} (p90 {np.percentile(v, 90):.3g})")
+        ratios = [np.median([r[k] for r in rs]) / np.median([r[k] for r in first])
+                  for k in ("cpu_s", "wall_s")]
+        lines.append(f"| {name} | {len(rs)} | " + " | ".join(cells)
+                     + f" | {ratios[0]:.2f} | {ratios[1]:.2f} |")
+    return "\n".join(lines)
+
+
+def profile_parts() -> list[tuple[str, list]]:
+    """(label, functions) of the parts a profile reports; a str names a builtin method."""
+    from torch.nn import LSTMCell
+
+    from nfr_drake.inference import fit, forward
+    from nfr_drake.nfr.field import Field
+    from nfr_drake.nfr.heads import KeypointHead, PixelGenerator
+    from nfr_drake.nfr.hyper import HyperNetwork
+    from nfr_drake.perception import handle_triangulation
+    from nfr_drake.perception.handle_detector.model import HandleDetector
+
+    return [
+        ("photos to rays and edge map", [fit.observed_rays]),
+        ("handle detector on the photos", [HandleDetector.detect]),
+        ("handle triangulation", [handle_triangulation.locate_handle]),
+        ("hypernetwork H(z)", [HyperNetwork.forward]),
+        ("field Phi (encoding, generated MLP)", [Field.forward]),
+        ("LSTM cell of the marcher", [LSTMCell.forward]),
+        ("pixel generators psi_1, psi_2", [PixelGenerator.forward]),
+        ("keypoint head Gamma", [KeypointHead.forward]),
+        ("backward (autograd)", ["<method 'run_backward' of 'torch._C._EngineBase' objects>"]),
+        ("Adam step", [torch.optim.Adam.step]),
+        ("ray sampling", [fit.ObservedRays.sample, fit.ObservedRays.take]),
+        ("forward simulation (keypoint trajectory)", [forward.keypoint_trajectory]),
+    ]
+
+
+def _key(function) -> tuple:
+    """cProfile's key of a Python function (file, first line, name), or of a builtin."""
+    if isinstance(function, str):
+        return ("~", 0, function)
+    code = getattr(function, "__wrapped__", function).__code__
+    return (code.co_filename, code.co_firstlineno, code.co_name)
+
+
+def profile(fitted: FittedModel, dirs: list[Path], config: FitConfig) -> str:
+    """Markdown table of where the time of fits of the captures goes (cProfile cumulative time
+    per part; the marcher's own share is its forward less the field and the LSTM cell)."""
+    from nfr_drake.nfr.raymarcher import LSTMRaymarcher
+
+    captures = [read_capture_set(d) for d in dirs]
+    profiler = cProfile.Profile(time.process_time)  # CPU time: load does not count
+    cpu, wall = time.process_time(), time.perf_counter()
+    profiler.enable()
+    for capture in captures:
+        infer(fitted, capture, config, np.asarray(capture.gt["trajectory"]["q"]))
+    profiler.disable()
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    stats = pstats.Stats(profiler).stats
+    total = sum(entry[2] for entry in stats.values())  # sum of the functions' own times
+
+    def cumulative(function) -> float:
+        key = _key(function)
+        return stats[key][3] if key in stats else 0.0
+
+    parts = {label: sum(cumulative(f) for f in functions) for label, functions in profile_parts()}
+    parts["marcher's own steps (points, step head, clamps)"] = (
+        cumulative(LSTMRaymarcher.forward) - parts["field Phi (encoding, generated MLP)"]
+        - parts["LSTM cell of the marcher"])
+    parts["the rest (Python of the fit loop, losses, lookups)"] = total - sum(parts.values())
+    lines = [f"{len(captures)} fits under cProfile: {cpu:.1f} s CPU, {wall:.1f} s wall, "
+             f"{total:.1f} s CPU profiled", "", "| part | s | share |", "|---|---|---|"]
+    for label, seconds in sorted(parts.items(), key=lambda kv: -kv[1]):
+        lines.append(f"| {label} | {seconds:.2f} | {100 * seconds / total:.0f} % |")
+    return "\n".join(lines)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, required=True)
     parser.add_argument("--captures", type=Path, required=True)
-    parser.add_argument("--n", type=int, default=5)
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--max-steps", type=int, default=400)
-    parser.add_argument("--restarts", type=int, default=4)
-    parser.add_argument("--focus-steps", type=int, default=FitConfig.focus_steps,
-                        help="steps of the close look at the handle (0: none)")
-    parser.add_argument("--no-handle-detector", action="store_true",
-                        help="fit without the model's handle detector")
+    parser.add_argument("--n", type=int, default=20)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--variants", nargs="*", default=["thorough", "fast"],
+                        help="presets to compare, in this order (the first is the reference)")
+    parser.add_argument("--variant", action="append", default=[],
+                        help="NAME:FIELD=VALUE,... another variant (FitConfig fields)")
+    parser.add_argument("--profile", type=int, default=0,
+                        help="profile this many fits of the first variant instead")
+    parser.add_argument("--csv", type=Path, default=None, help="per-fit rows to write")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
-    config = FitConfig(restarts=args.restarts, max_steps=args.max_steps,
-                       explore_steps=min(FitConfig.explore_steps, args.max_steps),
-                       focus_steps=args.focus_steps, handle_detector=not args.no_handle_detector)
-    print(f"{date.today()}, {platform.machine()}, {os.cpu_count()} CPUs, {args.threads} threads, "
-          f"load average before: {os.getloadavg()[0]:.2f}, model {args.model}, "
-          f"close look {args.focus_steps} steps, handle detector "
-          f"{'off' if args.no_handle_detector or fitted.handle_detector is None else 'on'}")
-    print("| capture | views | image size | seconds | steps | q error |")
-    print("|---|---|---|---|---|---|")
-    seconds = []
-    for d in capture_dirs(args.captures)[:args.n]:
-        capture = read_capture_set(d)
-        result, outcome = infer(fitted, capture, config, np.linspace(0, 1, 21))
-        seconds.append(result.seconds)
-        cam = capture.frames[0].camera
-        q_err = abs(result.q - capture.gt["q"]) if capture.gt else float("nan")
-        print(f"| {d.name} | {len(capture.frames)} | {cam.width}x{cam.height} | "
-              f"{result.seconds:.1f} | {outcome.steps} | {q_err:.3f} |", flush=True)
-    print(f"\nmedian {np.median(seconds):.1f} s per capture, max {np.max(seconds):.1f} s")
+    variants = dict(variant_config(s) for s in args.variants + args.variant)
+    dirs = capture_dirs(args.captures)[:args.n]
+    warm = read_capture_set(dirs[0])  # the first fit of a process pays for lazy set-up
+    infer(fitted, warm, next(iter(variants.values())), np.linspace(0.0, 1.0, 3))
+    print(f"{datetime.now():%Y-%m-%d %H:%M}, {platform.machine()}, {os.cpu_count()} CPUs, "
+          f"{args.threads} torch thread(s), load average {os.getloadavg()[0]:.2f}, model "
+          f"{args.model}, {args.captures} ({len(dirs)} captures)", flush=True)
+    if args.profile:
+        print(profile(fitted, dirs[:args.profile], next(iter(variants.values()))))
+        return
+    rows = side_by_side(fitted, dirs, variants, args.csv)
+    print(f"\nload average at the end {os.getloadavg()[0]:.2f}\n")
+    unit = "deg" if warm.gt["object"]["joint_type"] == "revolute" else "cm"
+    print(summary(rows, unit))
 
 
 if __name__ == "__main__":

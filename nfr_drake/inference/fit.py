@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
-from typing import Annotated
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
+from typing import Annotated, ClassVar, Literal
 
 import cv2
 import numpy as np
@@ -52,11 +53,27 @@ class FitConfig:
     `tune-head` and the scenario YAML (`fit:`). On the command line each option is `--fit.NAME`;
     the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
 
-    restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
-    """Codes explored in parallel; start i has q = (i + 0.5) / restarts; the lowest image loss wins."""
-    explore_steps: int = 120
+    preset: Literal["fast", "thorough"] = "fast"
+    """The stages' lengths: "fast", the defaults below (starts looked up, short exploration and
+    refinement), or "thorough", the longer fit kept for comparison (`THOROUGH`: 4 starts spread
+    over q explored for 120 steps, at most 400 steps, patience 60, a close look of 150 steps).
+    Fields left at their default take the preset's value."""
+    start: Literal["lookup", "spread"] = "lookup"
+    """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
+    the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
+    part the keypoint head puts nearest it at that articulation, are scored by one forward pass on
+    `lookup_rays` rays (no gradient); the best per articulation, of those the best `restarts`
+    are explored. "spread": `restarts`
+    codes at q = (i + 0.5) / restarts, and the sighted start after the exploration."""
+    lookup_q: int = 12
+    """Articulations of the lookup's candidates, q = (i + 0.5) / lookup_q."""
+    lookup_rays: int = 512
+    """Rays (edge-weighted like the steps') on which the lookup scores its candidates."""
+    restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 2
+    """Codes explored in parallel (see `start`); the lowest image loss wins."""
+    explore_steps: int = 10
     """Adam steps of the exploration phase (all starts), at most `max_steps`."""
-    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 400
+    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 70
     """Adam steps at most, exploration included."""
     explore_rays: int = 128
     """Random pixels (over all views) per exploration step, shared by the starts."""
@@ -67,10 +84,14 @@ class FitConfig:
     latent_weight: float = 1e-3
     """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
     seen them)."""
-    patience: int = 60
+    patience: int = 20
     """Refinement steps without an improvement of `min_improvement` that end the fit."""
     min_improvement: float = 0.01
-    """Relative improvement of the smoothed loss that counts as progress."""
+    """Relative improvement of the refinement's loss that counts as progress."""
+    stop_every: int = 10
+    """Early stopping measures the refined code's image loss on `lookup_rays` fixed rays (drawn
+    like the steps'), without gradient, every `stop_every` refinement steps; 0: it watches the
+    steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`)."""
     eval_rays: int = 4096
     """Fixed rays on which the starts are compared and the final loss is measured."""
     detail_fraction: Annotated[float, tyro.conf.arg(aliases=("--detail-fraction",))] = 0.5
@@ -79,7 +100,7 @@ class FitConfig:
     decide q and the hinge side weigh more in the loss."""
     seed: int = 0
     """Seed of ray sampling."""
-    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 150
+    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 30
     """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
     """Rays passing within this distance of the part take part in the close look, m."""
@@ -98,14 +119,35 @@ class FitConfig:
     """s of the sighting term, m: about the sighting's accuracy; beyond it the term grows only
     logarithmically, so a wrong sighting cannot drag the fit far."""
     sighting_codes: int = 16
-    """With a sighting and the training codes, the exploration's winner meets a second start: its
-    z_art with the mean of the `sighting_codes` training z_obj whose part the head puts nearest the
-    sighting at the winner's q (0: no second start); the two explore for half of `explore_steps`
-    (within `max_steps`)."""
+    """With a sighting and the training codes, starts from the mean of the `sighting_codes`
+    training z_obj whose part the head puts nearest the sighting (0: none): among the lookup's
+    candidates, or (start "spread") a second start at the exploration's winner's q that the two
+    explore for half of `explore_steps` (within `max_steps`)."""
+
+    THOROUGH: ClassVar[dict] = dict(start="spread", restarts=4, explore_steps=120, max_steps=400,
+                                    patience=60, stop_every=0, focus_steps=150)
+    """The "thorough" preset's values."""
+
+    @classmethod
+    def thorough(cls, **overrides) -> FitConfig:
+        """The "thorough" preset, with `overrides` on top."""
+        return cls(preset="thorough", **overrides)
 
     def __post_init__(self):
+        if self.preset not in ("fast", "thorough"):
+            raise ConfigError(f"FitConfig.preset must be 'fast' or 'thorough', not {self.preset!r}")
+        if self.preset == "thorough":  # the preset's value for every field left at its default
+            defaults = {f.name: f.default for f in fields(self)}
+            for name, value in self.THOROUGH.items():
+                if getattr(self, name) == defaults[name]:
+                    object.__setattr__(self, name, value)
+        if self.start not in ("lookup", "spread"):
+            raise ConfigError(f"FitConfig.start must be 'lookup' or 'spread', not {self.start!r}")
+        if self.start == "lookup" and self.restarts > self.lookup_q:
+            raise ConfigError(f"FitConfig.restarts ({self.restarts}) must be at most lookup_q "
+                              f"({self.lookup_q}): the looked-up starts lie at distinct q")
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
-                     "eval_rays"):
+                     "eval_rays", "lookup_q", "lookup_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
         if not 0 <= self.explore_steps <= self.max_steps:
@@ -113,6 +155,8 @@ class FitConfig:
                               f"[0, max_steps ({self.max_steps})]")
         if not 0.0 <= self.detail_fraction <= 1.0:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
+        if self.stop_every < 0:
+            raise ConfigError("FitConfig.stop_every must be >= 0")
         if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
             raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
         if self.sighting_weight < 0 or self.sighting_scale_m <= 0 or self.sighting_codes < 0:
@@ -244,8 +288,8 @@ class FitOutcome:
     evaluation rays; start_losses (S,) (on the selection rays, edge-weighted when
     detail_fraction > 0) and start_q (S,) of every start after exploration; steps
     run in all; seconds of wall time; focus what became of the close look ("kept", "off", or
-    why it was discarded); sighted_start whether the start from the codes near the sighting
-    (`FitConfig.sighting_codes`) won over the exploration's winner."""
+    why it was discarded); sighted_start whether the winning start came from the codes near the
+    sighting (`FitConfig.sighting_codes`)."""
 
     z: torch.Tensor
     q: float
@@ -304,7 +348,8 @@ def _sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | No
 
 def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
           generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool,
-          sighting: PartSighting | None = None) -> int:
+          sighting: PartSighting | None = None,
+          held_loss: Callable[[torch.Tensor], float] | None = None) -> int:
     """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
     each; returns the steps run.
 
@@ -313,13 +358,15 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     below would be reported at another articulation than the one that was rendered and fitted
     (a shut door fitted at q = -0.02 was reported, and forward-simulated, at +0.02).
 
-    With `stop_early`, stops when the smoothed summed loss has not improved by
-    `min_improvement` (relative) for `patience` steps.
+    With `stop_early`, stops when the loss has not improved by `min_improvement` (relative) for
+    `patience` steps: the summed per-step image loss, smoothed, or with `held_loss` (codes (S, D)
+    -> their summed image loss on fixed rays) that loss, measured every `stop_every` steps.
     """
     z.requires_grad_(True)
     optimiser = torch.optim.Adam([z], lr=config.lr)
     S = z.shape[0]
-    best, smoothed, since_best = math.inf, None, 0
+    best, since_best = math.inf, 0
+    current = held_loss(z.detach()) if stop_early and held_loss is not None else None
     for step in range(1, steps + 1):
         index = rays.sample(rays_per_step, config.detail_fraction, generator)
         batch_rays, target = rays.take(index, S)
@@ -332,13 +379,18 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         optimiser.step()
         with torch.no_grad():  # keep z_art on the upper half circle, where q lies (docstring)
             z[:, 1].abs_()
-        value = float(image.detach())
-        smoothed = value if smoothed is None else 0.9 * smoothed + 0.1 * value
-        if smoothed < best * (1.0 - config.min_improvement):
-            best, since_best = smoothed, 0
+        if not stop_early:
+            continue
+        if held_loss is None:
+            value = float(image.detach())
+            current = value if current is None else 0.9 * current + 0.1 * value
+        elif step % config.stop_every == 0:
+            current = held_loss(z.detach())
+        if current < best * (1.0 - config.min_improvement):
+            best, since_best = current, 0
         else:
             since_best += 1
-        if stop_early and since_best >= config.patience:
+        if since_best >= config.patience:
             return step
     return steps
 
@@ -389,12 +441,9 @@ def _sighted_start(model: NFRModel, rays: ObservedRays, config: FitConfig,
 
     The codes are matched at the fitted q, not at the starts' spread q: matched at another q, a
     drawer's codes would be those whose handle reaches the sighted point after a shorter pull."""
-    with torch.no_grad():
-        z_art = normalize_z_art(z_best[:, :2])
-        bank = codes.to(z_best)
-        part = model.keypoints(torch.cat([z_art.expand(len(bank), 2), bank], -1))[:, sighting.keypoint]
-        near = torch.argsort((part - sighting.p_O.to(z_best)).norm(dim=-1))[:config.sighting_codes]
-        z = torch.cat([z_best, torch.cat([z_art, bank[near].mean(0, keepdim=True)], -1)]).clone()
+    z_art = normalize_z_art(z_best[:, :2].detach())
+    near = _nearest_codes(model, z_art, codes.to(z_best), sighting, config.sighting_codes)
+    z = torch.cat([z_best, torch.cat([z_art, near], -1)]).clone()
     _adam(model, z, rays, config, generator, steps, config.explore_rays, stop_early=False,
           sighting=sighting)
     with torch.no_grad():
@@ -403,18 +452,58 @@ def _sighted_start(model: NFRModel, rays: ObservedRays, config: FitConfig,
     return z.detach()[best:best + 1].clone(), best == 1
 
 
+def _nearest_codes(model: NFRModel, z_art: torch.Tensor, codes: torch.Tensor,
+                   sighting: PartSighting, count: int) -> torch.Tensor:
+    """Per articulation z_art (Q, 2): the mean (Q, k) of the `count` training z_obj of codes
+    (N, k) whose part the keypoint head puts nearest the sighting."""
+    with torch.no_grad():
+        Q, N = z_art.shape[0], codes.shape[0]
+        z = torch.cat([z_art[:, None].expand(Q, N, 2), codes[None].expand(Q, N, -1)], -1)
+        part = model.keypoints(z.reshape(Q * N, -1))[:, sighting.keypoint].view(Q, N, 3)
+        near = torch.argsort((part - sighting.p_O.to(z)).norm(dim=-1), dim=-1)[:, :count]
+        return codes[near].mean(1)
+
+
+def _lookup_starts(model: NFRModel, rays: ObservedRays, config: FitConfig,
+                   generator: torch.Generator, z_obj: torch.Tensor, sighting: PartSighting | None,
+                   codes: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The starts (S, D) of the lookup (`FitConfig.start`), each at another articulation: the
+    best candidate per articulation by image loss on `lookup_rays` rays plus the sighting term,
+    from one forward pass without gradient, and of those the best `restarts`; and whether each
+    came from the codes near the sighting (S,) bool. z_obj (k,): the starts' object code."""
+    q = (torch.arange(config.lookup_q, dtype=z_obj.dtype, device=z_obj.device) + 0.5) / config.lookup_q
+    z_art = q_to_z_art(q)
+    candidates = [torch.cat([z_art, z_obj.expand(len(q), -1)], -1)]
+    if sighting is not None and codes is not None and config.sighting_codes > 0:
+        near = _nearest_codes(model, z_art, codes.to(z_obj), sighting, config.sighting_codes)
+        candidates.append(torch.cat([z_art, near], -1))
+    z = torch.cat(candidates)
+    index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
+    with torch.no_grad():
+        batch_rays, target = rays.take(index, z.shape[0])
+        losses = _per_code_mse(model, z, batch_rays, target) + _sighting_loss(model, z, sighting,
+                                                                               config)
+    per_q, source = losses.view(len(candidates), len(q)).min(0)  # the better code per q
+    best = torch.argsort(per_q)[:config.restarts]
+    return z[source[best] * len(q) + best].clone(), source[best] > 0
+
+
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
          focus: FocusTarget | None, sighting: PartSighting | None, codes: torch.Tensor | None,
          started: float) -> FitOutcome:
     S, k = config.restarts, model.config.latent_obj_dim
     dtype, device = rays.rgb.dtype, rays.rgb.device
-    q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
     if z_obj_init is not None and z_obj_init.shape != (k,):
         raise ConfigError(f"fit: z_obj_init has shape {tuple(z_obj_init.shape)}, expected ({k},)")
-    z_obj = (z_obj_init.to(dtype=dtype, device=device).expand(S, k).clone()
-             if z_obj_init is not None else torch.zeros(S, k, dtype=dtype, device=device))
-    z = torch.cat([q_to_z_art(q0), z_obj], dim=-1)
+    z_obj = (z_obj_init.to(dtype=dtype, device=device) if z_obj_init is not None
+             else torch.zeros(k, dtype=dtype, device=device))
     generator = torch.Generator(device="cpu").manual_seed(config.seed)
+    if config.start == "lookup":
+        z, sighted = _lookup_starts(model, rays, config, generator, z_obj, sighting, codes)
+    else:
+        q0 = (torch.arange(S, dtype=dtype, device=device) + 0.5) / S
+        z = torch.cat([q_to_z_art(q0), z_obj.expand(S, k)], dim=-1)
+        sighted = torch.zeros(S, dtype=torch.bool)
     eval_index = torch.randperm(rays.rgb.shape[0], generator=generator)[:config.eval_rays]
     # Starts are compared on the loss they minimise (edge-weighted when detail_fraction > 0);
     # the reported image loss stays the plain MSE on uniformly drawn rays.
@@ -433,15 +522,20 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
     winner = int(torch.argmin(start_losses))
     z_best = z.detach()[winner:winner + 1].clone()
-    sighted_start = False
+    sighted_start = bool(sighted[winner])
     second = min(config.explore_steps // 2, config.max_steps - steps)
-    if sighting is not None and codes is not None and config.sighting_codes > 0 and second > 0:
+    if (config.start == "spread" and sighting is not None and codes is not None
+            and config.sighting_codes > 0 and second > 0):
         z_best, sighted_start = _sighted_start(model, rays, config, generator, z_best, sighting,
                                                codes, second,
                                                lambda c: eval_losses(c, select_index))
         steps += second
+    held_loss = None
+    if config.stop_every:
+        held_index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
+        held_loss = lambda c: float(eval_losses(c, held_index).sum())  # noqa: E731
     steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
-                   config.rays_per_step, stop_early=True, sighting=sighting)
+                   config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss)
     z_best = z_best.detach()[0]
     look = "off"
     if focus is not None and config.focus_steps > 0:

@@ -329,8 +329,8 @@ def test_the_reported_q_is_the_articulation_that_was_fitted(model_folder, captur
 def test_the_start_near_the_sighting_runs_only_with_codes_and_a_sighting(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    config = FitConfig(restarts=2, explore_steps=10, max_steps=12, explore_rays=32,
-                       rays_per_step=32, eval_rays=64, focus_steps=0)
+    config = FitConfig(start="spread", restarts=2, explore_steps=10, max_steps=12,
+                       explore_rays=32, rays_per_step=32, eval_rays=64, focus_steps=0)
     z0 = torch.cat([torch.zeros(2), fitted.codes[0]])
     sighting = PartSighting(0, fitted.model.keypoints(z0[None])[0, 0].detach())
     plain = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=sighting)

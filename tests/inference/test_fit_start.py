@@ -1,0 +1,136 @@
+"""The fast fit's mechanics on a small untrained model: the looked-up start, early stopping on
+fixed rays, and the presets."""
+
+from dataclasses import replace
+
+import pytest
+import torch
+import tyro
+
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.captures import captures_command
+from nfr_drake.errors import ConfigError
+from nfr_drake.inference.fit import (
+    FitConfig,
+    PartSighting,
+    _adam,
+    _lookup_starts,
+    _nearest_codes,
+    fit_latent,
+    observed_rays,
+)
+from nfr_drake.inference.infer import FittedModel
+from nfr_drake.nfr.latent import q_to_z_art
+
+SMALL = FitConfig(restarts=2, explore_steps=2, max_steps=6, explore_rays=32, rays_per_step=32,
+                  eval_rays=64, lookup_q=6, lookup_rays=256, focus_steps=0)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("caps")
+    captures_command("closet", n=1, out=root, views=3, size=24)
+    return read_capture_set(root / "closet_000")
+
+
+def test_nearest_codes_are_those_whose_part_is_nearest_the_sighting(model_folder):
+    fitted = FittedModel(model_folder)
+    z_art = q_to_z_art(torch.tensor([0.2, 0.7]))
+    with torch.no_grad():  # the part of training code 2 at q = 0.2
+        p = fitted.model.keypoints(torch.cat([z_art[:1], fitted.codes[2:3]], -1))[0, 0]
+    near = _nearest_codes(fitted.model, z_art, fitted.codes, PartSighting(0, p), count=1)
+    assert near.shape == (2, fitted.codes.shape[1])
+    torch.testing.assert_close(near[0], fitted.codes[2])
+    everything = _nearest_codes(fitted.model, z_art, fitted.codes, PartSighting(0, p), count=3)
+    torch.testing.assert_close(everything, fitted.codes.mean(0).expand(2, -1))
+
+
+def test_the_lookup_keeps_the_candidates_of_lowest_loss(model_folder, capture):
+    """Photos rendered by the model at one candidate code: the lookup ranks that code first."""
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = replace(SMALL, restarts=3)
+    q = (torch.arange(config.lookup_q) + 0.5) / config.lookup_q
+    truth = torch.cat([q_to_z_art(q[4]), fitted.z_obj_mean])
+    with torch.no_grad():
+        all_rays, _ = rays.take(torch.arange(rays.rgb.shape[0]), 1)
+        rgb = fitted.model.render(truth[None], all_rays).rgb[0]
+    rendered = replace(rays, rgb=rgb)
+    starts, sighted = _lookup_starts(fitted.model, rendered, config, torch.Generator().manual_seed(0),
+                                     fitted.z_obj_mean, None, fitted.codes)
+    assert starts.shape == (3, truth.shape[0]) and not sighted.any()  # no sighting: no codes
+    torch.testing.assert_close(starts[0], truth)
+    assert len({round(float(torch.atan2(s[1], s[0])), 6) for s in starts}) == 3  # distinct q
+
+
+def test_a_sighting_adds_candidates_from_the_codes_near_it(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    z = torch.cat([q_to_z_art(torch.tensor(0.25)), fitted.codes[1]])
+    with torch.no_grad():
+        p = fitted.model.keypoints(z[None])[0, 0]
+    # A sighting term that outweighs any image loss: the start must be a code near the sighting.
+    config = replace(SMALL, restarts=1, sighting_codes=1, sighting_weight=100.0,
+                     sighting_scale_m=1e-4)
+    starts, sighted = _lookup_starts(fitted.model, rays, config, torch.Generator().manual_seed(0),
+                                     fitted.z_obj_mean, PartSighting(0, p), fitted.codes)
+    assert sighted.tolist() == [True]
+    torch.testing.assert_close(starts[0], z)
+    outcome = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=PartSighting(0, p),
+                         codes=fitted.codes)
+    assert outcome.sighted_start
+
+
+def test_early_stopping_on_fixed_rays_checks_every_stop_every_steps(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = replace(SMALL, patience=6, stop_every=3, min_improvement=0.1)
+    calls = []
+
+    def improving(z):  # each check 20 % better than the last: never stops
+        calls.append(z.shape)
+        return 0.8 ** len(calls)
+
+    def flat(z):
+        calls.append(z.shape)
+        return 1.0
+
+    def run(held_loss, steps=30):
+        z = torch.cat([q_to_z_art(torch.tensor([0.5])), fitted.z_obj_mean[None]], -1)
+        calls.clear()
+        return _adam(fitted.model, z, rays, config, torch.Generator().manual_seed(0), steps, 32,
+                     stop_early=True, held_loss=held_loss)
+
+    assert run(improving) == 30 and len(calls) == 1 + 30 // 3  # one before the first step
+    assert run(flat) == 7 and len(calls) == 1 + 7 // 3  # best at step 1, then 6 steps without
+    assert run(flat, steps=4) == 4  # at most `steps`
+
+
+def test_the_fit_stops_early_on_a_flat_loss(model_folder, capture):
+    fitted = FittedModel(model_folder)
+    config = replace(SMALL, max_steps=500, patience=10, stop_every=5, min_improvement=0.9)
+    outcome = fit_latent(fitted.model, observed_rays(capture), config, fitted.z_obj_mean)
+    assert outcome.steps == config.explore_steps + config.patience + 1
+
+
+def test_presets():
+    thorough = FitConfig.thorough()
+    assert thorough.preset == "thorough"
+    for name, value in FitConfig.THOROUGH.items():
+        assert getattr(thorough, name) == value != getattr(FitConfig(), name)
+    assert FitConfig.thorough(max_steps=300).max_steps == 300  # a field set on top is kept
+    assert FitConfig.thorough(max_steps=300).restarts == 4
+
+    def command(fit: FitConfig = FitConfig()) -> FitConfig:
+        return fit
+
+    assert tyro.cli(command, args=["--fit.preset", "thorough"]) == thorough
+    assert tyro.cli(command, args=[]) == FitConfig()
+    with pytest.raises(ConfigError, match="preset"):
+        FitConfig(preset="slow")
+    with pytest.raises(ConfigError, match="start"):
+        FitConfig(start="random")
+    with pytest.raises(ConfigError, match="lookup_q"):
+        FitConfig(lookup_q=0)
+    with pytest.raises(ConfigError, match="stop_every"):
+        FitConfig(stop_every=-1)
