@@ -147,8 +147,8 @@ def _extract(database: Path, image_dir: Path, image_sizes: dict[str, tuple[int, 
             extraction_options=extraction, device=pycolmap.Device.cpu)
 
 
-def _refine_principal_points(reconstruction: pycolmap.Reconstruction, options: SfmOptions
-                             ) -> pycolmap.Reconstruction:
+def _refine_principal_points(reconstruction: pycolmap.Reconstruction, options: SfmOptions,
+                             say: Callable[[str], None]) -> pycolmap.Reconstruction:
     """A global bundle adjustment that also refines the principal point of every camera that at
     least MIN_IMAGES_FOR_PRINCIPAL_POINT registered images share; the input when no camera
     qualifies or a principal point leaves MAX_PRINCIPAL_POINT_SHIFT of the image centre."""
@@ -158,7 +158,10 @@ def _refine_principal_points(reconstruction: pycolmap.Reconstruction, options: S
             users[image.camera_id] = users.get(image.camera_id, 0) + 1
     shared = {c for c, n in users.items() if n >= MIN_IMAGES_FOR_PRINCIPAL_POINT}
     if not shared:
+        say(f"principal point kept at the image centre: no camera is shared by "
+            f"{MIN_IMAGES_FOR_PRINCIPAL_POINT} registered photos")
         return reconstruction
+    say("refining the principal point in a final bundle adjustment")
     refined = pycolmap.Reconstruction(reconstruction)
     ba = pycolmap.BundleAdjustmentOptions(refine_principal_point=True, print_summary=False)
     ba.ceres.solver_options.num_threads = options.num_threads
@@ -175,6 +178,8 @@ def _refine_principal_points(reconstruction: pycolmap.Reconstruction, options: S
         shift = np.abs([camera.principal_point_x - camera.width / 2,
                         camera.principal_point_y - camera.height / 2])
         if np.any(shift > MAX_PRINCIPAL_POINT_SHIFT * np.array([camera.width, camera.height])):
+            say(f"principal point kept at the image centre: refined it moved ({shift[0]:.0f}, "
+                f"{shift[1]:.0f}) px, more than {MAX_PRINCIPAL_POINT_SHIFT:.0%} of the image size")
             return reconstruction
     return refined
 
@@ -213,7 +218,7 @@ def _run_sfm(image_dir: Path, image_sizes: dict[str, tuple[int, int]], work_dir:
             "overlap, texture and a camera that moves between shots)")
     best = max(models.values(), key=lambda r: r.num_reg_images())
     if camera is None and options.refine_principal_point:
-        best = _refine_principal_points(best, options)
+        best = _refine_principal_points(best, options, say)
     seconds["mapping"] = time.perf_counter() - start
     say(f"registered {best.num_reg_images()} of {n} images, {best.num_points3D()} points, "
         f"mean reprojection error {best.compute_mean_reprojection_error():.3f} px")

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from nfr_drake.perception import sfm
 from nfr_drake.perception.photos import PhotoFolderError, prepare_photos, working_size
 from nfr_drake.perception.sfm import SfmOptions, exif_focal_prior, run_sfm
 
@@ -65,3 +66,24 @@ def test_one_camera_per_image_size(small_photos, tmp_path):
                   SfmOptions(num_threads=2, camera_per_image=True),
                   progress=None).reconstruction
     assert len(rec.cameras) == 8
+
+
+def test_principal_point_refined_only_when_plausible(small_photos, tmp_path, monkeypatch):
+    """The shared camera's principal point leaves the image centre in the final bundle adjustment,
+    unless it would move further than MAX_PRINCIPAL_POINT_SHIFT (here set to 0: any move)."""
+    images = prepare_photos(small_photos[0], tmp_path / "images", 320)
+    sizes = {p.work_name: p.size for p in images}
+
+    def principal_point(work: str) -> tuple[list[str], np.ndarray]:
+        said = []
+        rec = run_sfm(tmp_path / "images", sizes, tmp_path / work, None, SfmOptions(num_threads=2),
+                      progress=said.append).reconstruction
+        (camera,) = rec.cameras.values()
+        return said, np.array([camera.principal_point_x, camera.principal_point_y])
+
+    said, refined = principal_point("refined")
+    assert "refining the principal point in a final bundle adjustment" in said
+    assert np.any(refined != [160, 120]) and np.all(np.abs(refined - [160, 120]) < 0.05 * 320)
+    monkeypatch.setattr(sfm, "MAX_PRINCIPAL_POINT_SHIFT", 0.0)
+    said, kept = principal_point("kept")
+    assert np.all(kept == [160, 120]) and any("kept at the image centre" in line for line in said)
