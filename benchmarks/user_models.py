@@ -1,11 +1,13 @@
 """`nfr-drake plan --object FILE` on realistic user models of furniture: opened or refused, and why.
 
-    python benchmarks/user_models.py [--only NAME ...] [--out DIR]
+    python benchmarks/user_models.py [--only NAME ...] [--out DIR] [--random N --seed S]
 
 Writes the models of tests/fixtures/user_models.py (SDFormat, URDF, .obj meshes) into DIR (default
 a temporary folder), runs `plan` on each as a user would (true keypoints, plan and simulation) and
 prints one row per model: outcome (opened, failed: planned but the simulated motion failed,
 refused: exit 2 with one line), the message, planning time, expected outcome, wall time.
+`--random N` runs N random doors, drawers and sliding doors at random poses instead
+(`random_models`: sizes, hinge sides, joint directions, handle kinds and heights drawn from seed S).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from fixtures.user_models import OPENS, write_models  # noqa: E402
+from fixtures.user_models import OPENS, random_models, write_models  # noqa: E402
 
 from nfr_drake.cli import main as nfr_drake  # noqa: E402
 
@@ -53,11 +55,12 @@ def run(model, replay: Path) -> tuple[str, str, str, float]:
     return outcome, message, planning.group(1) if planning else "-", wall
 
 
-def main(only: tuple[str, ...] = (), out: Path | None = None) -> None:
+def main(only: tuple[str, ...] = (), out: Path | None = None, random: int = 0, seed: int = 0) -> None:
     """Print the table (markdown) with the date and machine."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     folder = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="user_models_"))
-    models = [m for m in write_models(folder) if not only or m.name in only]
+    models = random_models(folder, random, seed) if random else write_models(folder)
+    models = [m for m in models if not only or m.name in only]
     print(f"{datetime.datetime.now():%Y-%m-%d %H:%M}, {platform.node()}, {os.cpu_count()} CPUs "
           f"({platform.processor() or platform.machine()}), load {os.getloadavg()[0]:.1f}; "
           f"models in {folder}\n")

@@ -45,6 +45,8 @@ MAX_AXIS_TILT_DEG = 30.0
 """A hinge more than this from vertical, or a slide less than 90 minus this from it, is refused."""
 CONCAVE_FILL = 0.9
 """A closed .obj mesh filling less than this fraction of its convex hull is reported as concave."""
+MAX_HANDLE_SIZE = 0.5
+"""A handle body's geometry larger than this across is noted, m."""
 _Z = np.array([0.0, 0.0, 1.0])
 _UPRIGHTS = [RotationMatrix.MakeXRotation(np.pi / 2), RotationMatrix.MakeYRotation(-np.pi / 2),
              RotationMatrix.MakeXRotation(-np.pi / 2), RotationMatrix.MakeYRotation(np.pi / 2),
@@ -213,6 +215,19 @@ def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector,
     if extent[order[0]] < 2.0 * extent[order[1]]:
         return (lo + hi) / 2, None, 0.0
     return (lo + hi) / 2, np.eye(3)[order[0]], float(extent[order[0]] / 2)
+
+
+def handle_notes(plant: MultibodyPlant, inspector: SceneGraphInspector, body) -> list[str]:
+    """Notes on a handle body that is no handle: one with no geometry, or one whose geometry is
+    more than `MAX_HANDLE_SIZE` across (the door itself?)."""
+    box = body_box(plant, inspector, body)
+    if box is None:
+        return [f"the handle body {body.name()!r} has no geometry: its origin is taken as the handle"]
+    size = float(np.max(box[1] - box[0]))
+    if size > MAX_HANDLE_SIZE:
+        return [f"the handle body {body.name()!r} is {size:.2f} m across: the hand grips the centre of its "
+                "geometry; give --handle-body a body that holds only the handle"]
+    return []
 
 
 def slide_front_normal(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,

@@ -28,6 +28,7 @@ from nfr_drake.systems.model_files import (
     body_box,
     check_placement,
     handle_grip,
+    handle_notes,
     massless_parts,
     mesh_problems,
     shut_and_open,
@@ -160,7 +161,7 @@ class SceneObject:
         The handle point is the centre of the handle body's geometry (its bounding box); an
         elongated handle gives the bar axis (`GRIP_AXIS_KEYPOINT`), a sliding door the approach
         from its front (`APPROACH_KEYPOINT`). The obstacles are the boxes of every collision
-        geometry the joint does not move, at the shut pose.
+        geometry the joint does not move, at the shut pose (none: the keypoint-derived box).
         """
         path = Path(path)
         if not path.is_file():
@@ -202,6 +203,7 @@ class SceneObject:
         set_joint_value(plant, context, joint, shut)
         body = plant.GetBodyByName(handle_body_name, model)
         p_BH, grip_B, grip_half = handle_grip(plant, inspector, body)
+        notes += handle_notes(plant, inspector, body)
         revolute = isinstance(joint, RevoluteJoint)
         X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
         axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
@@ -248,5 +250,5 @@ class SceneObject:
             category, lambda plant: add_model_file(plant, path, joint_name, handle_body_name, X_WO, added),
             joint_name, handle_body_name, p_BH, grip_B, KeypointTrajectory(category, q_grid, names, p_WK, q),
             grip_half_length=max(0.0, grip_half - GRIP_END_MARGIN),
-            locked_joints=tuple(j.name() for j in others), obstacles=tuple(obstacles),
+            locked_joints=tuple(j.name() for j in others), obstacles=tuple(obstacles) or None,
             joint_range=(shut, opened), notes=tuple(notes))

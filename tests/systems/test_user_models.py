@@ -146,3 +146,9 @@ def test_sdf_writer_places_links_at_their_joints(tmp_path):
     path = write_sdf(tmp_path / "m.sdf", "m", links, [Joint("j", "prismatic", "a", "b", (0.1, 0.2, 0.3),
                                                              limits=(0.0, 0.5))])
     assert "<pose>0.1 0.2 0.3 0 0 0</pose>" in path.read_text()
+
+
+def test_a_handle_body_that_is_the_door_is_noted(models):
+    model = models["base_cabinet_door_on_floor"]
+    obj = SceneObject.from_model_file(model.path, "hinge", "door", RigidTransform(), 0.0)
+    assert any("'door' is 0.72 m across" in note for note in obj.notes)
