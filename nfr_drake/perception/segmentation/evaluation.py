@@ -70,11 +70,13 @@ def _overlay(rgb: np.ndarray, mask: np.ndarray, colour: tuple[int, int, int]) ->
     return out.clip(0, 255).astype(np.uint8)
 
 
-def mask_figure(net: Segmenter, roots: list[Path], per_dataset: int, out: Path, seed: int = 0) -> None:
-    """PNG of `per_dataset` random images of each dataset, one row each: the photo, the true mask
-    (green) and the predicted mask (magenta) with its IoU in the corner, 2x enlarged."""
+def mask_figure(net: Segmenter, roots: list[Path], per_dataset: int, out: Path, columns: int = 2,
+                seed: int = 0) -> None:
+    """PNG of `per_dataset` random images of each dataset, `columns` per row, each as a triplet:
+    the photo, the true mask (green) and the predicted mask (magenta), 2x enlarged, with the
+    category and the IoU written on the photo."""
     rng = np.random.default_rng(seed)
-    rows = []
+    triplets = []
     for root in roots:
         data = RoomImages([root])
         for i in rng.choice(len(data), min(per_dataset, len(data)), replace=False):
@@ -85,9 +87,13 @@ def mask_figure(net: Segmenter, roots: list[Path], per_dataset: int, out: Path, 
             text = f"{data.category[int(i)]} IoU {mask_iou(pred, true):.2f}"
             cv2.putText(row, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
                         cv2.LINE_AA)
-            rows.append(row)
-    width = max(r.shape[1] for r in rows)
-    rows = [np.pad(r, ((0, 2), (0, width - r.shape[1]), (0, 0))) for r in rows]
+            triplets.append(np.pad(row, ((0, 4), (0, 8), (0, 0)), constant_values=255))
+    h, w = max(t.shape[0] for t in triplets), max(t.shape[1] for t in triplets)
+    triplets = [np.pad(t, ((0, h - t.shape[0]), (0, w - t.shape[1]), (0, 0)), constant_values=255)
+                for t in triplets]
+    triplets += [np.full_like(triplets[0], 255)] * (-len(triplets) % columns)
+    grid = np.concatenate([np.concatenate(triplets[k:k + columns], 1)
+                           for k in range(0, len(triplets), columns)], 0)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(out), cv2.cvtColor(np.concatenate(rows, 0), cv2.COLOR_RGB2BGR))
+    cv2.imwrite(str(out), cv2.cvtColor(grid, cv2.COLOR_RGB2BGR))
