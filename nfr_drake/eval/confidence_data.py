@@ -1,0 +1,121 @@
+"""Fits with known errors for the fit confidence: run, resumable, one JSON line per fit.
+
+A case is a model fitted to a capture set changed by a variant (`capture_variants`); its line
+keeps what the fit found (z, q, the starts' losses and q, the triangulated handle), the handle's
+error against gt.json and the confidence features (`inference.confidence`). The handle's truth is
+the capture's handle at its q; for a furniture capture (several fronts) the nearest front's handle.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.eval.capture_variants import apply_variant
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import FittedModel, infer
+
+
+@dataclass(frozen=True)
+class Case:
+    """One fit to make: model folder, capture-set folder, variant and its seed, and the split it
+    belongs to ("calibration", "evaluation" or "ood")."""
+
+    model: str
+    capture: str
+    variant: str
+    seed: int
+    split: str
+
+    @property
+    def key(self) -> str:
+        return f"{self.model}|{self.capture}|{self.variant}|{self.seed}"
+
+
+def true_handles(gt: dict) -> np.ndarray:
+    """Handle positions (M, 3) in O at the captured state: one for a closet or drawer, one per
+    front with a handle for furniture (gt.json's `parts`)."""
+    if "parts" in gt:
+        return np.array([p["keypoints"]["handle"] for p in gt["parts"] if "handle" in p["keypoints"]])
+    return np.array([gt["keypoints"]["handle"]])
+
+
+def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
+    """Fit `case` and return its JSON line (see module docstring)."""
+    capture = read_capture_set(case.capture)
+    capture, images = apply_variant(case.variant, capture, capture.load_images(), case.seed)
+    result, outcome = infer(fitted, capture, fit, np.linspace(0.0, 1.0, 2), images=images)
+    handle = result.keypoints["handle"]
+    truth = true_handles(capture.gt)
+    error = float(np.linalg.norm(truth - handle, axis=1).min())
+    same = capture.gt.get("category") == fitted.category
+    keypoint_rmse = (float(np.sqrt(np.mean([np.sum((np.asarray(capture.gt["keypoints"][n]) - p) ** 2)
+                                            for n, p in result.keypoints.items()])))
+                     if same else None)
+    seen = result.extra["handle_sighting"]
+    return {**asdict(case), "key": case.key, "category": capture.gt.get("category"),
+            "model_category": fitted.category, "q": result.q, "q_true": capture.gt.get("q"),
+            "z": result.z.tolist(), "image_loss": result.image_loss,
+            "start_losses": outcome.start_losses.tolist(), "start_q": outcome.start_q.tolist(),
+            "sighting_p_O": seen.get("p_O"), "handle": handle.tolist(),
+            "handle_error_m": error, "keypoint_rmse_m": keypoint_rmse,
+            "confidence": result.extra.get("confidence"), "seconds": result.seconds}
+
+
+CALIBRATION_VARIANTS = ("clean", "clean", "few_views", "occluded", "edge_cut")
+"""Variants of the calibration captures, by capture index modulo 5: the training world, with the
+failures it can produce (too few views, occlusion, the object cut by the edge)."""
+
+OOD_VARIANTS = ("background", "recoloured", "occluded", "edge_cut", "few_views", "wrong_category")
+"""Variants of the out-of-distribution captures, by capture index modulo 6; "wrong_category" fits
+the other category's model to the clean capture."""
+
+
+def plan_cases(data: Path, calibration: int, evaluation: int, ood: int, furniture: int
+               ) -> list[Case]:
+    """The cases of the confidence study from the capture sets under `data` (docs/EVALUATION.md,
+    "Fit confidence"): per category `calibration` captures of C_calib (seed 500), `evaluation` of
+    C_train_cams (seed 0, clean) and `ood` of C_oodsrc (seed 600), and `furniture` captures of
+    furniture_oodsrc fitted by the closet and drawer models in turn. Models are models/C."""
+    cases = []
+    for c in ("closet", "drawer"):
+        for i in range(calibration):
+            cases.append(Case(f"models/{c}", str(data / f"{c}_calib" / f"{c}_{i:03d}"),
+                              CALIBRATION_VARIANTS[i % 5], 500 + i, "calibration"))
+    for i in range(max(evaluation, ood, furniture)):
+        for c, other in (("closet", "drawer"), ("drawer", "closet")):
+            if i < ood:
+                variant = OOD_VARIANTS[i % 6]
+                model = other if variant == "wrong_category" else c
+                cases.append(Case(f"models/{model}", str(data / f"{c}_oodsrc" / f"{c}_{i:03d}"),
+                                  "clean" if variant == "wrong_category" else variant, 600 + i,
+                                  "ood"))
+            if i < evaluation:
+                cases.append(Case(f"models/{c}", str(data / f"{c}_train_cams" / f"{c}_{i:03d}"),
+                                  "clean", i, "evaluation"))
+        if i < furniture:
+            cases.append(Case(f"models/{'closet' if i % 2 == 0 else 'drawer'}",
+                              str(data / "furniture_oodsrc" / f"furniture_{i:03d}"), "clean",
+                              600 + i, "ood"))
+    return cases
+
+
+def run_cases(cases: list[Case], out: Path, fit: FitConfig = FitConfig()) -> list[dict]:
+    """Fit every case not yet in `out` (JSON lines, appended as each fit ends); returns all lines."""
+    done = set()
+    if out.exists():
+        done = {json.loads(line)["key"] for line in out.read_text().splitlines() if line.strip()}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    models: dict[str, FittedModel] = {}
+    for case in tqdm([c for c in cases if c.key not in done], desc="confidence fits", unit="fit"):
+        if case.model not in models:
+            models[case.model] = FittedModel(Path(case.model))
+        line = run_case(case, models[case.model], fit)
+        with open(out, "a") as f:
+            f.write(json.dumps(line) + "\n")
+    return [json.loads(line) for line in out.read_text().splitlines() if line.strip()]

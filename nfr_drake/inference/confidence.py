@@ -1,0 +1,201 @@
+"""Fit confidence: how well the fitted field explains the photos, and the probability that the
+handle it gives is within 2 cm of the truth.
+
+Features come from what the fit found plus one render pass over a grid of each view's pixels
+(at most `VIEW_RAYS` per view): the image loss (mean and worst view), the agreement of the
+rendered silhouette with the observed one, the distance between the keypoint head's handle and the
+handle detector's triangulated handle, how clearly the best start won, and how far the fitted
+object code z_obj lies from the training codes. A `ConfidenceModel` (logistic regression on a few
+of them, read from the model folder's `confidence.json`) turns them into P(handle within 2 cm).
+
+The observed silhouette is pluggable (`ObservedMask`): the default assumes the training world's
+uniform background and thresholds each pixel's colour distance to the colour of the image border.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nfr_drake.data.capture import CaptureFrame
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.fit import frame_ray_directions
+from nfr_drake.nfr.model import NFRModel
+from nfr_drake.nfr.rays import Rays
+from nfr_drake.objects import SemanticClass
+
+CONFIDENCE_FILE = "confidence.json"
+"""The calibration in a model folder."""
+
+VIEW_RAYS = 1024
+"""Pixels per view rendered for the features: a regular grid over the image."""
+
+NEAREST_CODES = 5
+"""z_obj's distance to the training codes is the mean distance to this many nearest ones."""
+
+ObservedMask = Callable[[np.ndarray], np.ndarray]
+"""Observed object mask: uint8 RGB image (H, W, 3) -> bool (H, W), True on the object."""
+
+
+def uniform_background_mask(image: np.ndarray, threshold: float = 0.08) -> np.ndarray:
+    """Object mask of a photo on a uniform background: pixels whose largest colour-channel
+    difference to the median colour of the image border exceeds `threshold` (0..1 scale)."""
+    rgb = image.astype(np.float32) / 255.0
+    border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]])
+    return np.abs(rgb - np.median(border, axis=0)).max(-1) > threshold
+
+
+def code_scale(codes: torch.Tensor) -> float:
+    """The training codes' own spacing: the median over codes (N, k) of the mean distance to
+    their `NEAREST_CODES` nearest other codes (the unit of the "code_distance" feature)."""
+    d = torch.cdist(codes.double(), codes.double())
+    d.fill_diagonal_(math.inf)
+    return float(d.topk(NEAREST_CODES, largest=False).values.mean(-1).median())
+
+
+def _grid(height: int, width: int) -> np.ndarray:
+    """Row-major pixel indices of a regular grid of at most `VIEW_RAYS` pixels."""
+    stride = max(1, math.ceil(math.sqrt(height * width / VIEW_RAYS)))
+    rows, cols = np.meshgrid(np.arange(stride // 2, height, stride),
+                             np.arange(stride // 2, width, stride), indexing="ij")
+    return (rows * width + cols).reshape(-1)
+
+
+def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
+                 images: list[np.ndarray], start_losses: np.ndarray, codes: torch.Tensor,
+                 scale: float, handle_keypoint: int, sighting_p_O: np.ndarray | None,
+                 observed_mask: ObservedMask = uniform_background_mask) -> tuple[dict, list[dict]]:
+    """The features of a fit (dict name -> float) and per view {image_loss, silhouette_iou,
+    edge_contact (share of the image border on the observed object)}.
+
+    z (D,): the fitted code; frames and images (uint8 RGB (H, W, 3)): the views fitted;
+    start_losses (S,): the starts' losses after exploration (`FitOutcome`); codes (N, k): the
+    training z_obj, `scale` their spacing (`code_scale`); sighting_p_O (3,) in O, m: the detector's
+    triangulated handle, or None.
+    """
+    per_view = []
+    z = z.detach().float()
+    with torch.no_grad():
+        for frame, image in zip(frames, images, strict=True):
+            cam = frame.camera
+            index = _grid(cam.height, cam.width)
+            d = torch.from_numpy(frame_ray_directions(frame)[index]).float()
+            o = torch.from_numpy(frame.X_OC[:3, 3]).float().expand_as(d)
+            out = model.render(z[None], Rays(o[None], d[None]))
+            observed = torch.from_numpy(image.reshape(-1, 3)[index] / 255.0).float()
+            rendered_fg = (out.logits[0].argmax(-1) != int(SemanticClass.BACKGROUND)).numpy()
+            mask = observed_mask(image)
+            observed_fg = mask.reshape(-1)[index]
+            union = np.logical_or(rendered_fg, observed_fg).sum()
+            iou = float(np.logical_and(rendered_fg, observed_fg).sum() / union) if union else 1.0
+            border = np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]])
+            per_view.append({"image_loss": float(((out.rgb[0] - observed) ** 2).mean()),
+                             "silhouette_iou": iou, "edge_contact": float(border.mean())})
+        handle = model.keypoints(z[None])[0, handle_keypoint].double().numpy()
+        code_d = torch.cdist(z[None, 2:].double(), codes.double())[0]
+        code_distance = float(code_d.topk(min(NEAREST_CODES, len(code_d)), largest=False)
+                              .values.mean()) / scale
+    losses = np.array([v["image_loss"] for v in per_view])
+    ious = np.array([v["silhouette_iou"] for v in per_view])
+    ordered = np.sort(np.asarray(start_losses, float))
+    gap = None if sighting_p_O is None else float(np.linalg.norm(handle - np.asarray(sighting_p_O)))
+    features = {
+        "image_loss": float(losses.mean()),
+        "image_loss_worst_view": float(losses.max()),
+        "silhouette_iou": float(ious.mean()),
+        "silhouette_iou_worst_view": float(ious.min()),
+        "edge_contact": max(v["edge_contact"] for v in per_view),
+        "sighting_missing": float(gap is None),
+        "sighting_gap_m": 0.0 if gap is None else gap,
+        "start_loss_ratio": float(ordered[0] / ordered[1]) if len(ordered) > 1 and ordered[1] > 0
+        else 0.0,
+        "code_distance": code_distance,
+        "views": float(len(frames)),
+    }
+    return features, per_view
+
+
+TRANSFORMS = {
+    "identity": lambda x: x,
+    "log10": lambda x: math.log10(max(x, 1e-6)),
+    "one_minus": lambda x: 1.0 - x,
+    "log10_cm": lambda x: math.log10(100.0 * x + 0.5),
+}
+"""Transforms of a feature before the logistic regression (`ConfidenceModel.terms`)."""
+
+
+@dataclass
+class ConfidenceModel:
+    """P(handle within 2 cm) = sigmoid(intercept + sum_i coef_i (t_i(x_i) - mean_i) / std_i) over
+    the terms (feature name, transform name in `TRANSFORMS`); a fit is refused below `threshold`.
+    `source` records the data and command the calibration came from."""
+
+    terms: list[tuple[str, str]]
+    mean: list[float]
+    std: list[float]
+    coef: list[float]
+    intercept: float
+    threshold: float
+    source: dict
+
+    def design(self, features: dict) -> np.ndarray:
+        """The standardised terms (T,) of one fit's features."""
+        x = np.array([TRANSFORMS[t](float(features[name])) for name, t in self.terms])
+        return (x - np.array(self.mean)) / np.array(self.std)
+
+    def probability(self, features: dict) -> float:
+        """P(handle within 2 cm) of one fit's features."""
+        return float(1.0 / (1.0 + math.exp(-(self.intercept + self.design(features) @ self.coef))))
+
+    def to_json(self) -> dict:
+        return {"target": "P(handle within 2 cm of the truth)",
+                "terms": [list(t) for t in self.terms], "mean": self.mean, "std": self.std,
+                "coef": self.coef, "intercept": self.intercept, "threshold": self.threshold,
+                "source": self.source}
+
+    def write(self, folder: Path) -> Path:
+        path = Path(folder) / CONFIDENCE_FILE
+        path.write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        return path
+
+    @classmethod
+    def read(cls, folder: Path) -> ConfidenceModel | None:
+        """The calibration of a model folder, or None when it has none."""
+        path = Path(folder) / CONFIDENCE_FILE
+        if not path.exists():
+            return None
+        try:
+            doc = json.loads(path.read_text())
+            terms = [(str(n), str(t)) for n, t in doc["terms"]]
+            unknown = [t for _, t in terms if t not in TRANSFORMS]
+            if unknown:
+                raise KeyError(f"unknown transform {unknown[0]}")
+            return cls(terms, [float(v) for v in doc["mean"]], [float(v) for v in doc["std"]],
+                       [float(v) for v in doc["coef"]], float(doc["intercept"]),
+                       float(doc["threshold"]), doc.get("source", {}))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+            raise NfrDrakeError(f"{path}: not a readable confidence calibration ({err})") from None
+
+
+def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1.0, iterations: int = 50
+                 ) -> tuple[np.ndarray, float]:
+    """Logistic regression by Newton's method with an L2 penalty `l2` on the coefficients (not
+    the intercept): X (N, T) standardised terms, y (N,) 0/1; returns (coef (T,), intercept)."""
+    A = np.hstack([np.ones((len(X), 1)), X])
+    w = np.zeros(A.shape[1])
+    penalty = np.diag([0.0] + [l2] * X.shape[1])
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-(A @ w)))
+        grad = A.T @ (p - y) + penalty @ w
+        hess = A.T @ (A * (p * (1 - p))[:, None]) + penalty + 1e-9 * np.eye(len(w))
+        step = np.linalg.solve(hess, grad)
+        w -= step
+        if np.abs(step).max() < 1e-10:
+            break
+    return w[1:], float(w[0])
