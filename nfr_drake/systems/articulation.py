@@ -229,12 +229,15 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                                      for g in plant.GetCollisionGeometriesForBody(body)])
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
-    # A real door or drawer clears the floor; a model's may rest on it (bottom edge at z = 0, or a
-    # mesh a millimetre into it) and would drag on it.
-    floor_geometries = GeometrySet([g for b in plant.GetBodyIndices(floor)
-                                    for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))])
+    # The joint alone decides where the moving part goes: a real door or drawer clears the floor and
+    # its neighbours, while a model's may rest on the floor (bottom edge at z = 0, or a mesh a
+    # millimetre into it) or swing a few mm into a neighbouring front (an idealised hinge axis).
+    moving_indices = {body.index() for body in moving_bodies}
+    clear_of = GeometrySet([g for b in (*plant.GetBodyIndices(floor), *plant.GetBodyIndices(model))
+                            if b not in moving_indices
+                            for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))])
     scene_graph.collision_filter_manager().Apply(
-        CollisionFilterDeclaration().ExcludeBetween(floor_geometries, moving_geometries))
+        CollisionFilterDeclaration().ExcludeBetween(clear_of, moving_geometries))
 
     controller_plant = MultibodyPlant(0.0)
     add_panda(controller_plant, plan.X_WB)
