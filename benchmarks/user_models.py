@@ -48,7 +48,7 @@ def run(model, replay: Path) -> tuple[str, str, str, float]:
     outcome = {0: "opened", 1: "failed", 2: "refused"}.get(status, "crashed")
     message = next((line for line in lines if line.startswith(("SUCCESS", "FAILURE", "nfr-drake plan: error",
                                                                 "traceback"))), lines[-1] if lines else "")
-    message = message.replace("nfr-drake plan: error: ", "")
+    message = message.replace("nfr-drake plan: error: ", "").split("; planning ")[0]
     warnings = [line for line in lines if line.startswith("warning:")]
     if warnings:
         message = f"{message} [{len(warnings)} warning(s): {warnings[0][len('warning: '):]}]"
@@ -64,16 +64,16 @@ def main(only: tuple[str, ...] = (), out: Path | None = None, random: int = 0, s
     print(f"{datetime.datetime.now():%Y-%m-%d %H:%M}, {platform.node()}, {os.cpu_count()} CPUs "
           f"({platform.processor() or platform.machine()}), load {os.getloadavg()[0]:.1f}; "
           f"models in {folder}\n")
-    print("| model | outcome | expected | planning (s) | wall (s) | message |")
-    print("|---|---|---|---|---|---|")
+    print("| model | what | outcome | expected | planning (s) | wall (s) | message |")
+    print("|---|---|---|---|---|---|---|")
     as_expected = 0
     for model in models:
         outcome, message, planning, wall = run(model, folder / f"{model.name}.html")
         expected = "opened" if model.expect == OPENS else "refused"
         ok = outcome == expected and (model.expect == OPENS or model.expect in message)
         as_expected += ok
-        print(f"| {model.name} | {outcome} | {expected}{'' if ok else ' (NOT MET)'} | {planning} | "
-              f"{wall:.0f} | {message} |", flush=True)
+        print(f"| {model.name} | {model.what} | {outcome} | {expected}{'' if ok else ' (NOT MET)'} | "
+              f"{planning} | {wall:.0f} | {message} |", flush=True)
     print(f"\n{as_expected} of {len(models)} as expected")
 
 

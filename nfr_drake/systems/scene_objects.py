@@ -182,7 +182,8 @@ class SceneObject:
         lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
         if not (np.isfinite(lower) and np.isfinite(upper) and upper > lower):
             raise NfrDrakeError(f"joint {joint_name!r} needs finite limits (lower < upper) to map q "
-                                "onto [0, 1]")
+                                f"onto [0, 1], has [{lower:.3g}, {upper:.3g}]: give it a <limit> with lower "
+                                "and upper (a URDF 'continuous' joint becomes 'revolute')")
         others = [plant.get_joint(j) for j in plant.GetJointIndices(model)
                   if j != joint.index() and plant.get_joint(j).num_positions() > 0]
         for other in others:

@@ -69,6 +69,23 @@ def test_a_joint_with_no_clear_shut_limit_asks_for_closed_at(tmp_path):
         SceneObject.from_model_file(path, "hinge", "door", RigidTransform(), 0.0)
 
 
+def test_a_continuous_joint_is_refused_with_what_to_change(tmp_path):
+    links = [Link("box", (), 5.0), Link("door", (), 1.0)]
+    path = write_urdf(tmp_path / "spinning.urdf", "spinning", links,
+                      [Joint("hinge", "continuous", "box", "door", limits=(0.0, 0.0))])
+    with pytest.raises(NfrDrakeError, match="give it a <limit> with lower and upper"):
+        SceneObject.from_model_file(path, "hinge", "door", RigidTransform(), 0.0)
+
+
+def test_an_exported_model_with_turned_frames_and_a_visual_only_handle(models):
+    """The handle's mesh (no collision geometry) gives its centre; the door's joint frame is turned."""
+    obj = load(models["exported_cabinet"])
+    # The U handle's box centre, 2.25 cm out of the door's face (x = 0.298), 6 cm from the free edge
+    # (to 10 um: the file's angles have 6 digits).
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3205, 0.24, 0.6], atol=1e-5)
+    assert len(obj.obstacles) == 5  # one box per convex collision piece of the carcass
+
+
 def test_a_sliding_door_is_approached_from_the_front(models):
     obj = load(models["sliding_door"])
     kt = obj.ground_truth
