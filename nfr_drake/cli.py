@@ -29,6 +29,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
              "evaluate the neural field and the baseline on held-out capture sets"),
     "eval-pipeline": ("nfr_drake.eval.pipeline_eval:eval_pipeline_command",
                       "success rate of perception + planning + simulation on unseen objects"),
+    "calibrate-confidence": ("nfr_drake.eval.confidence_calibration:calibrate_confidence_command",
+                             "calibrate the fit confidence and check it on out-of-distribution captures"),
     "explore": ("nfr_drake.eval.explore:explore_command",
                 "what a model has learned: interpolations, new articulations, new objects, a 3D page"),
     "train-baseline": ("nfr_drake.baseline.train:train_baseline_command",

@@ -1,8 +1,9 @@
 """Fits with known errors for the fit confidence: run, resumable, one JSON line per fit.
 
 A case is a model fitted to a capture set changed by a variant (`capture_variants`); its line
-keeps what the fit found (z, q, the starts' losses and q, the triangulated handle), the handle's
-error against gt.json and the confidence features (`inference.confidence`). The handle's truth is
+keeps what the fit found (z, q, the starts' losses and q, the triangulated handle) and the handle's
+error against gt.json. The confidence features are computed from the line (`case_features`), so a
+change of the features needs no new fit. The handle's truth is
 the capture's handle at its q; for a furniture capture (several fronts) the nearest front's handle.
 """
 
@@ -13,10 +14,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
-from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.eval.capture_variants import apply_variant
+from nfr_drake.inference.confidence import fit_features
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, infer
 
@@ -45,10 +48,26 @@ def true_handles(gt: dict) -> np.ndarray:
     return np.array([gt["keypoints"]["handle"]])
 
 
+def load_case(case: Case | dict) -> tuple[CaptureSet, list[np.ndarray]]:
+    """The capture set and images a case's fit sees (its capture set changed by its variant);
+    `case` may be a line."""
+    case = Case(**{k: case[k] for k in Case.__dataclass_fields__}) if isinstance(case, dict) else case
+    capture = read_capture_set(case.capture)
+    return apply_variant(case.variant, capture, capture.load_images(), case.seed)
+
+
+def case_features(line: dict, fitted: FittedModel) -> tuple[dict, list[dict]]:
+    """The confidence features of a line's fit (`inference.confidence.fit_features`), as `infer`
+    computes them."""
+    capture, images = load_case(line)
+    return fit_features(fitted.model, torch.tensor(line["z"]), capture.frames, images,
+                        np.array(line["start_losses"]), fitted.codes, fitted.code_scale,
+                        fitted.keypoint_names.index("handle"), line["sighting_p_O"])
+
+
 def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
     """Fit `case` and return its JSON line (see module docstring)."""
-    capture = read_capture_set(case.capture)
-    capture, images = apply_variant(case.variant, capture, capture.load_images(), case.seed)
+    capture, images = load_case(case)
     result, outcome = infer(fitted, capture, fit, np.linspace(0.0, 1.0, 2), images=images)
     handle = result.keypoints["handle"]
     truth = true_handles(capture.gt)
@@ -64,7 +83,7 @@ def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
             "start_losses": outcome.start_losses.tolist(), "start_q": outcome.start_q.tolist(),
             "sighting_p_O": seen.get("p_O"), "handle": handle.tolist(),
             "handle_error_m": error, "keypoint_rmse_m": keypoint_rmse,
-            "confidence": result.extra.get("confidence"), "seconds": result.seconds}
+            "seconds": result.seconds}
 
 
 CALIBRATION_VARIANTS = ("clean", "clean", "few_views", "occluded", "edge_cut")

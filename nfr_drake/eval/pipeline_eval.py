@@ -1,8 +1,10 @@
 """Success rate of the whole pipeline (neural-field keypoints -> plan -> simulation), resumable.
 
 `nfr-drake eval-pipeline` runs `run_scenario` on unseen objects `index = 0 .. n-1` of a capture
-seed and appends one CSV row per object: perception errors, planning outcome, simulated outcome.
-Rows already in the CSV are kept, so a killed evaluation continues where it stopped.
+seed and appends one CSV row per object: perception errors, the fit's confidence, planning
+outcome, simulated outcome. A fit refused for its low confidence (`Scenario.min_confidence`) is
+not planned on: its row says `refused`, and the summary counts it apart from the failures. Rows
+already in the CSV are kept, so a killed evaluation continues where it stopped.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.systems.pipeline import run_scenario
 from nfr_drake.systems.scenario import Scenario
@@ -28,7 +31,9 @@ class PipelineRow:
 
     handle_error_cm: predicted against true handle at the observed state. hinge_side_correct
     (closets; empty for drawers): whether the predicted hinge lies on the true hinge's side of the
-    handle (the horizontal handle-to-hinge vectors point the same way).
+    handle (the horizontal handle-to-hinge vectors point the same way). p_handle_within_2cm: the
+    fit's confidence (nan without a calibration); refused: the fit was not planned on (`failure`
+    says why); planned, grasped and success are then False.
     """
 
     category: str
@@ -39,6 +44,8 @@ class PipelineRow:
     handle_path_rmse_cm: float
     handle_error_cm: float
     hinge_side_correct: bool | None
+    p_handle_within_2cm: float
+    refused: bool
     planned: bool
     grasped: bool
     success: bool
@@ -52,10 +59,14 @@ class PipelineRow:
 
 def _row(scenario: Scenario) -> PipelineRow:
     outcome = run_scenario(scenario)
-    task, sim = outcome.task, outcome.task.simulation
     revolute = scenario.category == "closet"
     scale = np.degrees(1.0) if revolute else 100.0
-    failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
+    task = outcome.task
+    sim = task.simulation if task is not None else None
+    if task is None:
+        failure = outcome.refused
+    else:
+        failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
     handle = [kt.point("handle", kt.q_current) for kt in (outcome.predicted, outcome.truth)]
     hinge_side = None
     if revolute:
@@ -67,13 +78,22 @@ def _row(scenario: Scenario) -> PipelineRow:
         q_estimate=outcome.q_estimate, keypoint_rmse_cm=outcome.keypoint_rmse_cm,
         handle_path_rmse_cm=outcome.handle_path_rmse_cm,
         handle_error_cm=float(100 * np.linalg.norm(handle[0] - handle[1])),
-        hinge_side_correct=hinge_side, planned=task.plan is not None,
-        grasped=bool(sim and sim.grasped), success=task.success,
+        hinge_side_correct=hinge_side,
+        p_handle_within_2cm=_probability(outcome.confidence), refused=task is None,
+        planned=task is not None and task.plan is not None,
+        grasped=bool(sim and sim.grasped), success=task is not None and task.success,
         final_error=float(sim.joint_error * scale) if sim else float("nan"),
         unit="deg" if revolute else "cm",
         max_drift_cm=float(100 * sim.max_drift) if sim else float("nan"),
         fit_seconds=outcome.perception_seconds,
-        planning_seconds=task.planning_seconds, failure=failure.replace("\n", " "))
+        planning_seconds=task.planning_seconds if task is not None else 0.0,
+        failure=failure.replace("\n", " "))
+
+
+def _probability(confidence: dict | None) -> float:
+    """P(handle within 2 cm) of a fit's confidence, nan when there is none."""
+    p = (confidence or {}).get("p_handle_within_2cm")
+    return float("nan") if p is None else float(p)
 
 
 def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
@@ -81,13 +101,18 @@ def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
     (objects of the category already there are skipped); returns the CSV's rows of the category
     (string values, as `csv.DictReader` reads them)."""
     done = set()
+    fields = list(PipelineRow.__dataclass_fields__)
     if csv_path.exists():
         with open(csv_path) as f:
-            done = {(r["category"], int(r["index"])) for r in csv.DictReader(f)}
+            reader = csv.DictReader(f)
+            if reader.fieldnames is not None and reader.fieldnames != fields:
+                raise NfrDrakeError(f"{csv_path}: written with other columns (an older version); "
+                                    "give another --csv-path")
+            done = {(r["category"], int(r["index"])) for r in reader}
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     new_file = not csv_path.exists()
     with open(csv_path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(PipelineRow.__dataclass_fields__))
+        writer = csv.DictWriter(f, fieldnames=fields)
         if new_file:
             writer.writeheader()
         for i in tqdm(range(n), desc=f"{base.category} pipeline", unit="object"):
@@ -104,7 +129,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
                           fit: FitConfig = FitConfig(), image_size: int = Scenario.image_size,
-                          threads: int | None = None) -> None:
+                          min_confidence: float = -1.0, threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
 
     Args:
@@ -119,34 +144,43 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         keypoints: keypoint source ("geometry" or "head").
         fit: options of the fit.
         image_size: square image size of the ten perception cameras, pixels.
+        min_confidence: do not plan on a fit whose P(handle within 2 cm) is below this (below 0:
+            the model's calibrated threshold, `confidence.json`; 0: never refuse); such objects
+            are counted as refused, apart from the failures.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
     if q_target is None:
         q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
-                    q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size)
+                    q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size,
+                    min_confidence=min_confidence)
     rows = evaluate_pipeline(base, n, csv_path)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
     wins = sum(r["success"] == "True" for r in rows)
+    refused = sum(r["refused"] == "True" for r in rows)
     print(f"{category}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
-          f"({100 * wins / max(len(rows), 1):.0f}%)")
+          f"({100 * wins / max(len(rows), 1):.0f}%), {refused} refused for low fit confidence, "
+          f"{len(rows) - wins - refused} failed")
 
 
-SUMMARY_HEADER = ("| category | objects | planned | grasped | success | handle error at the "
-                  "observed state, median (p10-p90) | hinge on the right side | fit s (median) |\n"
-                  "|---|---|---|---|---|---|---|---|")
+SUMMARY_HEADER = ("| category | objects | refused | planned | grasped | success | failed | handle "
+                  "error at the observed state, median (p10-p90) | hinge on the right side | "
+                  "fit s (median) |\n|---|---|---|---|---|---|---|---|---|---|")
 
 
 def summary_row(rows: list[dict]) -> str:
-    """A markdown row (columns of `SUMMARY_HEADER`) summarising the CSV rows of one category."""
+    """A markdown row (columns of `SUMMARY_HEADER`) summarising the CSV rows of one category;
+    failed: neither refused nor a success."""
     count = lambda key: sum(r[key] == "True" for r in rows)  # noqa: E731
     handle = np.array([float(r["handle_error_cm"]) for r in rows])
     p10, p50, p90 = np.percentile(handle, [10, 50, 90])
     sides = [r["hinge_side_correct"] for r in rows if r["hinge_side_correct"] != ""]
     side = f"{sum(s == 'True' for s in sides)} / {len(sides)}" if sides else "n/a"
     fit = np.median([float(r["fit_seconds"]) for r in rows])
-    return (f"| {rows[0]['category']} | {len(rows)} | {count('planned')} | {count('grasped')} | "
-            f"**{100 * count('success') / len(rows):.0f}%** | {p50:.1f} cm ({p10:.1f}-{p90:.1f}) | "
+    failed = len(rows) - count("refused") - count("success")
+    return (f"| {rows[0]['category']} | {len(rows)} | {count('refused')} | {count('planned')} | "
+            f"{count('grasped')} | **{100 * count('success') / len(rows):.0f}%** | {failed} | "
+            f"{p50:.1f} cm ({p10:.1f}-{p90:.1f}) | "
             f"{side} | {fit:.1f} |")

@@ -53,10 +53,14 @@ def uniform_background_mask(image: np.ndarray, threshold: float = 0.08) -> np.nd
 
 def code_scale(codes: torch.Tensor) -> float:
     """The training codes' own spacing: the median over codes (N, k) of the mean distance to
-    their `NEAREST_CODES` nearest other codes (the unit of the "code_distance" feature)."""
+    their `NEAREST_CODES` nearest other codes (fewer when N is small; 1 for a single code), the
+    unit of the "code_distance" feature."""
+    if len(codes) < 2:
+        return 1.0
     d = torch.cdist(codes.double(), codes.double())
     d.fill_diagonal_(math.inf)
-    return float(d.topk(NEAREST_CODES, largest=False).values.mean(-1).median())
+    nearest = d.topk(min(NEAREST_CODES, len(codes) - 1), largest=False).values
+    return max(float(nearest.mean(-1).median()), 1e-9)
 
 
 def _grid(height: int, width: int) -> np.ndarray:
@@ -199,3 +203,30 @@ def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1.0, iterations: int 
         if np.abs(step).max() < 1e-10:
             break
     return w[1:], float(w[0])
+
+
+def refusal(confidence: dict | None, threshold: float | None = None) -> str | None:
+    """Why a fit must not be acted on, in one line with what to do, or None when it may be:
+    P(handle within 2 cm) of a result's `confidence` (`inference.infer.fit_confidence`) below
+    `threshold` (None: the calibration's own). A fit without a calibration is never refused."""
+    if confidence is None or confidence.get("p_handle_within_2cm") is None:
+        return None
+    p = confidence["p_handle_within_2cm"]
+    threshold = confidence["threshold"] if threshold is None else threshold
+    if p >= threshold:
+        return None
+    f = confidence["features"]
+    if f["views"] < 3:
+        advice = f"only {int(f['views'])} view(s): photograph the object from more sides"
+    elif f["edge_contact"] > 0.05:
+        advice = "the object is cut by the image edge: step back so it is whole in every view"
+    elif f["silhouette_iou_worst_view"] < 0.75:
+        advice = (f"the fitted shape covers the object poorly (silhouette IoU "
+                  f"{f['silhouette_iou_worst_view']:.2f} in the worst view): check for occlusion "
+                  "or use a model of this kind of object")
+    elif f["sighting_missing"]:
+        advice = "the handle detector found no handle in 3 views: photograph the handle closer"
+    else:
+        advice = "take more views, closer, or use a model of this kind of object"
+    return (f"refused: P(handle within 2 cm) = {p:.2f} < {threshold:.2f} (image loss "
+            f"{f['image_loss']:.4f}, worst view {f['image_loss_worst_view']:.4f}); {advice}")

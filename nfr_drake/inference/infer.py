@@ -16,6 +16,7 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.confidence import ConfidenceModel, code_scale, fit_features
 from nfr_drake.inference.fit import (
     FitConfig,
     FitOutcome,
@@ -46,7 +47,8 @@ from nfr_drake.perception.handle_triangulation import (
 
 class FittedModel:
     """A loaded model folder: networks, the training codes (N, k) and their mean (the fit's
-    start), its metadata, and its 2D handle detector (`handle_detector/`) when it ships one."""
+    start), its metadata, its 2D handle detector (`handle_detector/`) when it ships one, and its
+    fit-confidence calibration (`confidence.json`) when it has one."""
 
     def __init__(self, folder: Path, device: str = "cpu"):
         self.folder = Path(folder)
@@ -57,6 +59,15 @@ class FittedModel:
         self.handle_detector: HandleDetector | None = None
         if (self.folder / DETECTOR_DIR).is_dir() and "handle" in self.keypoint_names:
             self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
+        self.confidence: ConfidenceModel | None = ConfidenceModel.read(self.folder)
+        self._code_scale: float | None = None
+
+    @property
+    def code_scale(self) -> float:
+        """The training codes' spacing (`confidence.code_scale`), computed once."""
+        if self._code_scale is None:
+            self._code_scale = code_scale(self.codes)
+        return self._code_scale
 
     @property
     def focus(self) -> FocusTarget | None:
@@ -94,7 +105,9 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
-    The result's `extra["warnings"]` lists what makes it doubtful (too few views).
+    The result's `extra["warnings"]` lists what makes it doubtful (too few views); its
+    `confidence` holds the fit's confidence features and, when the model folder has a calibration,
+    P(handle within 2 cm) (`fit_confidence`).
     """
     started = time.perf_counter()
     warnings = []
@@ -110,6 +123,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
                          fitted.codes)
+    confidence = fit_confidence(fitted, outcome, capture, images, handle)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -124,7 +138,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         trajectory_q=np.asarray(q_grid, float),
         trajectory={n: trajectory[:, i] for i, n in enumerate(names)},
         image_loss=outcome.image_loss, seconds=time.perf_counter() - started,
-        z=outcome.z.double().cpu().numpy(),
+        z=outcome.z.double().cpu().numpy(), confidence=confidence,
         extra={"model": str(fitted.folder), "steps": outcome.steps, "focus": outcome.focus,
                "handle_sighting": _sighting_json(fitted, fit_config, handle),
                "sighted_start": outcome.sighted_start,
@@ -132,6 +146,22 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist(),
                "warnings": warnings})
     return result, outcome
+
+
+def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
+                   images: list[np.ndarray], handle: TriangulatedHandle | None) -> dict | None:
+    """The result's `confidence`: {p_handle_within_2cm (None without a calibration), threshold,
+    features, per_view} (docs/CONVENTIONS.md); None for a model without a handle keypoint."""
+    if "handle" not in fitted.keypoint_names:
+        return None
+    features, per_view = fit_features(
+        fitted.model, outcome.z, capture.frames, images, outcome.start_losses, fitted.codes,
+        fitted.code_scale, fitted.keypoint_names.index("handle"),
+        None if handle is None else handle.p_O)
+    calibration = fitted.confidence
+    return {"p_handle_within_2cm": None if calibration is None else calibration.probability(features),
+            "threshold": None if calibration is None else calibration.threshold,
+            "features": features, "per_view": per_view}
 
 
 def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedHandle | None
@@ -145,6 +175,17 @@ def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedH
         return {"used": False, "why": f"fewer than {MIN_VIEWS} views agree on a handle"}
     return {"used": True, "p_O": handle.p_O.tolist(), "views": list(handle.views),
             "sightings": handle.sightings, "rms_px": handle.rms_px}
+
+
+def confidence_line(confidence: dict) -> str:
+    """One line on a result's `confidence`: P(handle within 2 cm) against the threshold, the
+    image loss and the silhouette agreement (worst view)."""
+    f = confidence["features"]
+    p = confidence["p_handle_within_2cm"]
+    head = ("confidence: no calibration (confidence.json) in the model folder" if p is None else
+            f"confidence: P(handle within 2 cm) = {p:.2f} (refused below {confidence['threshold']:.2f})")
+    return (f"{head}; image loss {f['image_loss']:.4f} (worst view {f['image_loss_worst_view']:.4f}), "
+            f"silhouette IoU {f['silhouette_iou']:.2f} (worst {f['silhouette_iou_worst_view']:.2f})")
 
 
 def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: CaptureSet,
@@ -233,6 +274,8 @@ def infer_command(
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
           f"({outcome.steps} steps, {fit.restarts} starts; close look at the handle: {outcome.focus})"
           f" -> {out}")
+    if result.confidence is not None:
+        print(confidence_line(result.confidence))
     for warning in result.extra["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     if report is not None:

@@ -24,6 +24,8 @@ class FitResult:
         image_loss: mean squared RGB error of the final fit on the observed pixels (0..1 scale).
         seconds: wall time of the fit.
         z: the fitted latent code [z_art, z_obj], for re-rendering.
+        confidence: how well the fit explains the photos and P(handle within 2 cm)
+            (`inference.infer.fit_confidence`), or None.
         extra: anything else worth keeping (restarts, steps, model path).
     """
 
@@ -35,6 +37,7 @@ class FitResult:
     image_loss: float
     seconds: float
     z: np.ndarray | None = None
+    confidence: dict | None = None
     extra: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
@@ -51,6 +54,8 @@ class FitResult:
         }
         if self.z is not None:
             doc["z"] = np.asarray(self.z, float).tolist()
+        if self.confidence is not None:
+            doc["confidence"] = self.confidence
         if self.extra:
             doc["extra"] = self.extra
         return doc
@@ -69,6 +74,7 @@ class FitResult:
             image_loss=float(doc["image_loss"]),
             seconds=float(doc["seconds"]),
             z=np.asarray(doc["z"], float) if "z" in doc else None,
+            confidence=doc.get("confidence"),
             extra=doc.get("extra", {}),
         )
 

@@ -14,12 +14,14 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
                  q_target: float = 0.6, views: int = 10, image_size: int = Scenario.image_size,
                  fit: FitConfig = FitConfig(),
                  replay: Path = Path("out/demo/open_closet.html"),
-                 threads: int | None = None) -> int:
+                 min_confidence: float = -1.0, threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation.
 
-    Prints the estimated q, the keypoint error against ground truth, the planning time, a success
-    line and the replay's path. Exit status 0 on success, 1 when the simulated task fails.
+    Prints the estimated q, the keypoint error against ground truth, the fit's confidence, the
+    planning time, a success line and the replay's path. Exit status 0 on success, 1 when the
+    simulated task fails, 2 when the fit is refused: its P(handle within 2 cm) lies below the
+    threshold (one line says why and what to do; nothing is planned).
 
     Args:
         model: closet model folder.
@@ -31,13 +33,18 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
         image_size: their square image size, pixels.
         fit: options of the fit.
         replay: HTML replay to write.
+        min_confidence: refuse to plan below this P(handle within 2 cm) (below 0: the model's
+            calibrated threshold, `confidence.json`; 0: never refuse).
         threads: torch CPU threads for the fit (default: the free cores,
             `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
     scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
                         q_target=q_target, views=views,
-                        image_size=image_size, fit=fit, replay=str(replay))
+                        image_size=image_size, fit=fit, replay=str(replay),
+                        min_confidence=min_confidence)
     outcome = run_scenario(scenario)
     print(outcome.report())
+    if outcome.refused:
+        return 2
     return 0 if outcome.task.success else 1

@@ -2,7 +2,8 @@
 
 `NfrPerceptionSystem` reads the colour images of N cameras, fits the model's latent code when
 triggered (at initialisation, or by `refit`), never per simulation step, and outputs the
-forward-simulated `KeypointTrajectory` in the world frame and the estimated articulation q.
+forward-simulated `KeypointTrajectory` in the world frame, the estimated articulation q and the
+fit's confidence (P(handle within 2 cm) and what it rests on, `inference.confidence`).
 
 `AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
 cameras, one RgbdSensor per camera pose, and the system. The perception render engine sees the
@@ -60,11 +61,14 @@ class NfrPerceptionSystem(LeafSystem):
         - keypoint_trajectory
         - q_estimate
         - fit_result
+        - confidence
 
     camera_i_rgb: ImageRgba8U of camera i (intrinsics `cameras[i]`, pose `X_WCs[i]`).
     keypoint_trajectory: abstract `KeypointTrajectory` in W over [0, 1], q_current = the estimate.
     q_estimate: BasicVector of size 1, the fitted articulation in [0, 1].
     fit_result: abstract `FitResult` (positions in O).
+    confidence: abstract dict, the result's `confidence` ({p_handle_within_2cm, threshold,
+    features, per_view}; p None when the model folder has no calibration), or None.
 
     The fit runs in an initialisation event and whenever `refit` is called; outputs read the stored
     result. `fit_count` counts fits. `keypoint_source` picks the keypoint head or the fitted
@@ -99,6 +103,9 @@ class NfrPerceptionSystem(LeafSystem):
         self._result_port = self.DeclareAbstractOutputPort(
             "fit_result", lambda: Value[object](None), self._CalcFitResult,
             prerequisites_of_calc=ticket)
+        self._confidence_port = self.DeclareAbstractOutputPort(
+            "confidence", lambda: Value[object](None), self._CalcConfidence,
+            prerequisites_of_calc=ticket)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._Fit)
 
     def get_camera_rgb_input_port(self, i: int):
@@ -112,6 +119,9 @@ class NfrPerceptionSystem(LeafSystem):
 
     def get_fit_result_output_port(self):
         return self._result_port
+
+    def get_confidence_output_port(self):
+        return self._confidence_port
 
     def refit(self, context) -> FitResult:
         """Fit again to the current camera images (this system's context); returns the result."""
@@ -147,6 +157,9 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _CalcFitResult(self, context, output) -> None:
         output.set_value(self._stored(context))
+
+    def _CalcConfidence(self, context, output) -> None:
+        output.set_value(self._stored(context).confidence)
 
 
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:

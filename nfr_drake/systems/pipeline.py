@@ -5,6 +5,10 @@ around it; initialising the simulator runs the fit once, giving the keypoint tra
 Phase 2 (action): the planner uses that trajectory alone; the arm is simulated on the true object
 and an HTML replay shows the predicted (planned-with) and the true keypoint paths.
 
+Between the two, the fit's confidence (`inference.confidence`) is checked: below the scenario's
+`min_confidence` (by default the model's calibrated threshold) phase 2 does not run and the outcome
+says why (`PipelineOutcome.refused`).
+
 With ground-truth keypoints (`Scenario.keypoints`) phase 1 is skipped: the planner reads the
 object's own keypoints.
 """
@@ -22,6 +26,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.inference.confidence import refusal
 from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import ArticulatedObject
@@ -36,8 +41,10 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 @dataclass
 class PipelineOutcome:
     """q_estimate / q_true in [0, 1]; keypoint_rmse_cm at the observed state; handle_path_rmse_cm
-    over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task.
-    Without perception (ground-truth keypoints, `perceived` False) the prediction is the truth."""
+    over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task
+    (None when the fit was refused). Without perception (ground-truth keypoints, `perceived`
+    False) the prediction is the truth. confidence: the fit result's `confidence` (or None);
+    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or ""."""
 
     q_estimate: float
     q_true: float
@@ -46,21 +53,27 @@ class PipelineOutcome:
     perception_seconds: float
     predicted: KeypointTrajectory
     truth: KeypointTrajectory
-    task: TaskOutcome
+    task: TaskOutcome | None
     perceived: bool = True
+    confidence: dict | None = None
+    refused: str = ""
 
     def report(self) -> str:
         task = self.task
+        p = (self.confidence or {}).get("p_handle_within_2cm")
+        confidence = "" if p is None else f"; P(handle within 2 cm) {p:.2f}"
         lines = [f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); keypoint error "
                  f"{self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]; fit "
-                 f"{self.perception_seconds:.1f} s"] if self.perceived else []
-        if task.plan is None:
+                 f"{self.perception_seconds:.1f} s{confidence}"] if self.perceived else []
+        if task is None:
+            lines.append(self.refused)
+        elif task.plan is None:
             lines.append(f"FAILURE: planning failed: {task.planning_error}")
         else:
             lines.append(f"planning time {task.planning_seconds:.2f} s")
             lines.append(task.simulation.summary())
-        if task.replay is not None:
+        if task is not None and task.replay is not None:
             lines.append(f"replay: {task.replay}")
         return "\n".join(lines)
 
@@ -70,6 +83,13 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
 
     Returns the predicted keypoint trajectory in W and the fit's wall time, s.
     """
+    trajectory, seconds, _ = perceive_with_confidence(scenario, obj)
+    return trajectory, seconds
+
+
+def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
+                             ) -> tuple[KeypointTrajectory, float, dict | None]:
+    """`perceive`, and the fit's confidence (the perception system's "confidence" port)."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
@@ -91,7 +111,8 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
     simulator.Initialize()  # the perception system fits here, once
     seconds = time.perf_counter() - started
     context = perception.GetMyContextFromRoot(simulator.get_context())
-    return perception.get_keypoint_trajectory_output_port().Eval(context), seconds
+    return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
+            perception.get_confidence_output_port().Eval(context))
 
 
 def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
@@ -115,15 +136,17 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
                                predicted=task.keypoints, truth=task.keypoints, task=task,
                                perceived=False)
-    predicted, seconds = perceive(scenario, obj)
+    predicted, seconds, confidence = perceive_with_confidence(scenario, obj)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid
-    task = run_task(scene_object, scenario.q_target, keypoints=predicted, replay=replay,
-                    reference=truth, **configs)
+    refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
+    task = None if refused else run_task(scene_object, scenario.q_target, keypoints=predicted,
+                                         replay=replay, reference=truth, **configs)
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start,
         keypoint_rmse_cm=_rmse_cm(now(predicted), now(truth)),
         handle_path_rmse_cm=_rmse_cm(predicted.point("handle", grid), truth.point("handle", grid)),
-        perception_seconds=seconds, predicted=predicted, truth=truth, task=task)
+        perception_seconds=seconds, predicted=predicted, truth=truth, task=task,
+        confidence=confidence, refused=refused or "")

@@ -75,6 +75,10 @@ class Scenario:
     """Options of the simulation."""
     replay: str = ""
     """HTML replay to write ("" for none)."""
+    min_confidence: float = -1.0
+    """The planner acts only on a fit whose P(handle within 2 cm) (`inference.confidence`) is at
+    least this: below 0, the threshold of the model's calibration (`confidence.json`; a model
+    without one is never refused); 0, never refused; 1, always refused."""
 
     def __post_init__(self):
         if self.category not in ("closet", "drawer"):
@@ -87,6 +91,8 @@ class Scenario:
         if self.keypoints not in KEYPOINT_SOURCES:
             raise ConfigError(f"keypoints must be one of {', '.join(KEYPOINT_SOURCES)}, "
                               f"got {self.keypoints!r}")
+        if self.min_confidence > 1.0:
+            raise ConfigError("min_confidence must be at most 1 (below 0: the calibrated threshold)")
         if self.views < 1 or self.image_size < 8:
             raise ConfigError("views must be >= 1 and image_size >= 8")
         object_pose(self.object_xyz, self.object_yaw_deg)  # ConfigError for a non-finite pose

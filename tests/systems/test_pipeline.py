@@ -75,13 +75,16 @@ def test_pipeline_evaluation_writes_one_row_per_object_and_resumes(tmp_path, cap
 
     model, csv_path = _needs("drawer"), tmp_path / "pipeline.csv"
     for _ in range(2):  # the second call finds the row and runs nothing
-        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, fit=FitConfig(max_steps=120))
+        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, fit=FitConfig(max_steps=120),
+                              min_confidence=0.0)  # never refused: planned and simulated
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 1 and rows[0]["index"] == "0" and rows[0]["planned"] == "True"
     assert 0.0 <= float(rows[0]["handle_error_cm"]) < 50.0
     assert rows[0]["hinge_side_correct"] == ""  # drawers have no hinge
     out = capsys.readouterr().out.strip()
-    assert out.endswith("with head keypoints (" +
-                        ("100%)" if rows[0]["success"] == "True" else "0%)"))
+    assert rows[0]["refused"] == "False"
+    assert out.endswith("with head keypoints (" + ("100%), 0 refused for low fit confidence, 0 failed"
+                                                   if rows[0]["success"] == "True" else
+                                                   "0%), 0 refused for low fit confidence, 1 failed"))
     summary = next(line for line in out.splitlines() if line.startswith("| drawer |"))
-    assert summary.startswith("| drawer | 1 | 1 |") and "| n/a |" in summary
+    assert summary.startswith("| drawer | 1 | 0 | 1 |") and "| n/a |" in summary

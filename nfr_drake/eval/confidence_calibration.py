@@ -1,0 +1,199 @@
+"""`nfr-drake calibrate-confidence`: calibrate the fit confidence and check it out of distribution.
+
+Runs the fits of `confidence_data.plan_cases` (resumable), computes each fit's features, fits a
+logistic regression P(handle within 2 cm) on the calibration split alone (held-out objects of the
+training world, capture seed 500, some with few views, occlusion or the object cut by the edge),
+picks the threshold on that split (`pick_threshold`), and reports on the two splits it never saw:
+the evaluation captures (how many good fits are refused) and the out-of-distribution ones (how many
+fits more than 5 cm off are refused). Writes OUT/features.csv, OUT/confidence.json,
+OUT/report.md and OUT/calibration.png, and with `--write-models` the calibration into the model
+folders (`confidence.json`).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import os
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from nfr_drake.cpu import set_torch_threads
+from nfr_drake.eval.confidence_data import case_features, plan_cases, run_cases
+from nfr_drake.inference.confidence import ConfidenceModel, fit_logistic
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import FittedModel
+
+TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
+         ("edge_contact", "identity"), ("sighting_missing", "identity"),
+         ("sighting_gap_m", "log10_cm"), ("code_distance", "identity")]
+"""The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`)."""
+
+SUCCESS_M = 0.02
+"""A fit succeeds when its handle is within this distance of the truth, m."""
+
+FAR_M = 0.05
+"""A fit is far off when its handle is more than this from the truth, m: those must be refused."""
+
+MAX_THRESHOLD = 0.5
+"""The threshold is at most this: a fit more likely right than wrong is never refused."""
+
+
+def pick_threshold(p: np.ndarray, success: np.ndarray, clean: np.ndarray) -> float:
+    """The refusal threshold from the calibration split: the highest t <= `MAX_THRESHOLD` that
+    refuses none of its clean fits that succeed (p (N,) their probabilities, success and clean
+    (N,) bool), i.e. just below the lowest such p, on a 0.01 grid."""
+    floor = p[success & clean].min() if (success & clean).any() else MAX_THRESHOLD
+    return float(min(MAX_THRESHOLD, np.floor(100 * floor - 1e-9) / 100))
+
+
+def featurize(lines: list[dict]) -> list[dict]:
+    """Per fit line: its split, variant, categories, handle error and features."""
+    models: dict[str, FittedModel] = {}
+    rows = []
+    for line in lines:
+        fitted = models.setdefault(line["model"], FittedModel(Path(line["model"])))
+        features, _ = case_features(line, fitted)
+        wrong = line["category"] != line["model_category"]
+        kind = (f"{line['model_category']} model on {line['category']}" if wrong
+                else line["variant"])
+        rows.append({"split": line["split"], "kind": kind, "model": line["model"],
+                     "capture": line["capture"], "variant": line["variant"],
+                     "handle_error_m": line["handle_error_m"], **features})
+    return rows
+
+
+def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: float = 1.0
+              ) -> ConfidenceModel:
+    """The logistic regression on `rows` (features and handle_error_m) with the threshold of
+    `pick_threshold`."""
+    raw = ConfidenceModel(terms, [0.0] * len(terms), [1.0] * len(terms), [0.0] * len(terms), 0.0,
+                          0.0, source)
+    X = np.array([raw.design(r) for r in rows])
+    mean, std = X.mean(0), X.std(0) + 1e-9
+    y = np.array([r["handle_error_m"] <= SUCCESS_M for r in rows], float)
+    coef, intercept = fit_logistic((X - mean) / std, y, l2)
+    model = ConfidenceModel(terms, mean.tolist(), std.tolist(), coef.tolist(), intercept, 0.0, source)
+    p = np.array([model.probability(r) for r in rows])
+    model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] == "clean" for r in rows]))
+    return model
+
+
+def refusal_table(rows: list[dict], model: ConfidenceModel) -> str:
+    """Markdown: per split and kind of capture, fits, successes (handle within 2 cm) and how many
+    of them are refused, fits far off (> 5 cm) and how many of them are refused."""
+    lines = ["| split | captures | fits | within 2 cm | of which refused | more than 5 cm off | "
+             "of which refused |", "|---|---|---|---|---|---|---|"]
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["split"], r["kind"]), []).append(r)
+        groups.setdefault((r["split"], "all"), []).append(r)
+    for (split, kind), group in sorted(groups.items(), key=lambda g: (g[0][0], g[0][1] == "all", g[0][1])):
+        error = np.array([r["handle_error_m"] for r in group])
+        refused = np.array([model.probability(r) < model.threshold for r in group])
+        good, far = error <= SUCCESS_M, error > FAR_M
+        lines.append(f"| {split} | {kind} | {len(group)} | {good.sum()} | "
+                     f"{(good & refused).sum()} | {far.sum()} | {(far & refused).sum()} |")
+    return "\n".join(lines)
+
+
+def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> None:
+    """Reliability diagram (predicted P against the observed share within 2 cm, per split) and
+    refusal curves (share of good in-distribution fits and of far-off OOD fits refused against
+    the threshold)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
+    bins = np.linspace(0, 1, 6)
+    for split, marker in (("calibration", "o"), ("evaluation", "s"), ("ood", "^")):
+        group = [r for r in rows if r["split"] == split]
+        if not group:
+            continue
+        p = np.array([model.probability(r) for r in group])
+        y = np.array([r["handle_error_m"] <= SUCCESS_M for r in group])
+        which = np.clip(np.digitize(p, bins) - 1, 0, len(bins) - 2)
+        xs, ys, ns = [], [], []
+        for b in range(len(bins) - 1):
+            if (which == b).any():
+                xs.append(p[which == b].mean())
+                ys.append(y[which == b].mean())
+                ns.append(int((which == b).sum()))
+        ax.plot(xs, ys, marker=marker, label=f"{split} ({len(group)} fits)")
+        for x, v, n in zip(xs, ys, ns, strict=True):
+            ax.annotate(str(n), (x, v), textcoords="offset points", xytext=(4, -10), fontsize=7)
+    ax.plot([0, 1], [0, 1], "k:", lw=1, label="perfect calibration")
+    ax.set(xlabel="predicted P(handle within 2 cm)", ylabel="observed share within 2 cm",
+           title="reliability (numbers: fits per bin)", xlim=(0, 1), ylim=(-0.02, 1.02))
+    ax.legend(fontsize=8, loc="upper left")
+    t = np.linspace(0, 1, 101)
+    curves = (("evaluation", lambda e: e <= SUCCESS_M, "good fits refused, evaluation captures"),
+              ("calibration", lambda e: e <= SUCCESS_M, "good fits refused, calibration captures"),
+              ("ood", lambda e: e > FAR_M, "fits > 5 cm off refused, OOD captures"))
+    for split, chosen, label in curves:
+        p = np.array([model.probability(r) for r in rows
+                      if r["split"] == split and chosen(r["handle_error_m"])])
+        if len(p):
+            bx.plot(t, [(p < v).mean() for v in t], label=f"{label} ({len(p)})")
+    bx.axvline(model.threshold, color="k", ls="--", lw=1, label=f"threshold {model.threshold:.2f}")
+    bx.set(xlabel="threshold on P(handle within 2 cm)", ylabel="share refused",
+           title="refusals against the threshold", xlim=(0, 1), ylim=(-0.02, 1.02))
+    bx.legend(fontsize=8, loc="center right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def calibrate_confidence_command(data: Path = Path("data/eval"),
+                                 out: Path = Path("runs/confidence"), calibration: int = 30,
+                                 evaluation: int = 20, ood: int = 12, furniture: int = 8,
+                                 write_models: bool = False, fit: FitConfig = FitConfig(),
+                                 threads: int | None = 1) -> None:
+    """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
+
+    Args:
+        data: folder of the capture sets C_calib, C_train_cams, C_oodsrc and furniture_oodsrc
+            (docs/EVALUATION.md, "Fit confidence").
+        out: output folder; OUT/fits.jsonl keeps the fits (a rerun fits only the missing ones).
+        calibration: calibration captures per category (seed 500).
+        evaluation: evaluation captures per category (C_train_cams, seed 0).
+        ood: out-of-distribution captures per category (seed 600).
+        furniture: furniture captures (seed 600), fitted by the closet and drawer models in turn.
+        write_models: also write the calibration to models/closet and models/drawer.
+        fit: options of the fit.
+        threads: torch CPU threads.
+    """
+    set_torch_threads(threads)
+    out.mkdir(parents=True, exist_ok=True)
+    cases = plan_cases(data, calibration, evaluation, ood, furniture)
+    keys = {c.key for c in cases}
+    lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
+    rows = featurize(lines)
+    with open(out / "features.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
+    source = {"data": "calibration split: closet_calib and drawer_calib (capture seed 500), "
+                      f"{calibration} captures each, variants by index: clean, clean, few_views, "
+                      "occluded, edge_cut; both categories pooled",
+              "fits": len([r for r in rows if r["split"] == "calibration"]),
+              "command": command, "date": datetime.date.today().isoformat(),
+              "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
+    model = calibrate([r for r in rows if r["split"] == "calibration"], TERMS, source)
+    model.write(out)
+    if write_models:
+        for folder in ("models/closet", "models/drawer"):
+            print(f"calibration -> {model.write(Path(folder))}")
+    table = refusal_table(rows, model)
+    terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))
+    report = (f"threshold {model.threshold:.2f}; standardised coefficients: {terms}; intercept "
+              f"{model.intercept:+.2f}\n\n{table}\n")
+    (out / "report.md").write_text(report)
+    plot_calibration(rows, model, out / "calibration.png")
+    print(report + f"-> {out}/report.md, {out}/calibration.png, {out}/confidence.json")

@@ -1,0 +1,128 @@
+"""Fit confidence: features of a fit, the calibration (monotone, read from confidence.json), the
+refusal line, and the capture variants it is checked on."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from nfr_drake.cli import main
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.captures import captures_command
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.eval.capture_variants import FEW_VIEWS, apply_variant
+from nfr_drake.inference.confidence import (
+    CONFIDENCE_FILE,
+    ConfidenceModel,
+    fit_logistic,
+    refusal,
+    uniform_background_mask,
+)
+
+FEATURES = ("image_loss", "image_loss_worst_view", "silhouette_iou", "silhouette_iou_worst_view",
+            "edge_contact", "sighting_missing", "sighting_gap_m", "start_loss_ratio",
+            "code_distance", "views")
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("captures")
+    captures_command("closet", n=1, out=root, views=4, size=24, seed=7)
+    return next(p for p in root.iterdir() if (p / "transforms.json").is_file())
+
+
+def _calibration(threshold=0.5) -> ConfidenceModel:
+    return ConfidenceModel([("image_loss", "log10"), ("silhouette_iou_worst_view", "one_minus")],
+                           [-2.5, 0.1], [0.5, 0.1], [-2.0, -1.0], 1.0, threshold,
+                           {"command": "test"})
+
+
+def _infer(capture, model, out):
+    return main(["infer", str(capture), "--model", str(model), "--out", str(out), "--restarts",
+                 "1", "--max-steps", "2", "--fit.explore-steps", "0", "--focus-steps", "0",
+                 "--threads", "1"])
+
+
+def test_infer_reports_the_features_and_with_a_calibration_the_probability(
+        capture, model_folder, tmp_path, capsys):
+    assert _infer(capture, model_folder, tmp_path / "plain.json") == 0
+    plain = json.loads((tmp_path / "plain.json").read_text())["confidence"]
+    assert plain["p_handle_within_2cm"] is None and "no calibration" in capsys.readouterr().out
+    assert set(plain["features"]) == set(FEATURES) and len(plain["per_view"]) == 4
+    f = plain["features"]
+    assert f["views"] == 4 and 0.0 <= f["silhouette_iou_worst_view"] <= f["silhouette_iou"] <= 1.0
+    assert 0.0 < f["image_loss"] <= f["image_loss_worst_view"] and f["code_distance"] > 0.0
+    assert f["image_loss"] == pytest.approx(np.mean([v["image_loss"] for v in plain["per_view"]]))
+
+    calibrated = tmp_path / "closet"
+    shutil.copytree(model_folder, calibrated)
+    _calibration().write(calibrated)
+    assert _infer(capture, calibrated, tmp_path / "calibrated.json") == 0
+    doc = json.loads((tmp_path / "calibrated.json").read_text())["confidence"]
+    assert doc["p_handle_within_2cm"] == pytest.approx(_calibration().probability(doc["features"]))
+    assert doc["threshold"] == 0.5
+    assert f"P(handle within 2 cm) = {doc['p_handle_within_2cm']:.2f}" in capsys.readouterr().out
+
+
+def test_logistic_calibration_recovers_a_monotone_law_and_round_trips(tmp_path):
+    rng = np.random.default_rng(0)
+    loss = 10 ** rng.uniform(-3.5, -1.0, 400)
+    p_true = 1 / (1 + np.exp(-(-3.0 * (np.log10(loss) + 2.0))))
+    y = (rng.uniform(size=400) < p_true).astype(float)
+    x = np.log10(loss)
+    coef, intercept = fit_logistic(((x - x.mean()) / x.std())[:, None], y, l2=0.1)
+    assert coef[0] < 0  # more image loss, less confidence
+    model = ConfidenceModel([("image_loss", "log10")], [x.mean()], [x.std()], coef.tolist(),
+                            intercept, 0.3, {})
+    p = [model.probability({"image_loss": v}) for v in np.logspace(-4, 0, 20)]
+    assert np.all(np.diff(p) < 0) and p[0] > 0.9 and p[-1] < 0.1
+    assert model.probability({"image_loss": 1e-2}) == pytest.approx(0.5, abs=0.12)
+    model.write(tmp_path)
+    again = ConfidenceModel.read(tmp_path)
+    assert again == model and ConfidenceModel.read(tmp_path / "none") is None
+
+
+def test_an_unreadable_calibration_is_a_one_line_error(tmp_path):
+    (tmp_path / CONFIDENCE_FILE).write_text(json.dumps({"terms": [["image_loss", "cube"]]}))
+    with pytest.raises(NfrDrakeError, match="not a readable confidence calibration"):
+        ConfidenceModel.read(tmp_path)
+
+
+def test_refusal_says_why_and_what_to_do():
+    features = dict.fromkeys(FEATURES, 0.0) | {"views": 10.0, "silhouette_iou_worst_view": 0.9,
+                                               "image_loss": 0.05, "image_loss_worst_view": 0.08}
+    confidence = {"p_handle_within_2cm": 0.2, "threshold": 0.4, "features": features}
+    line = refusal(confidence)
+    assert line.startswith("refused: P(handle within 2 cm) = 0.20 < 0.40") and "\n" not in line
+    assert "more views" in line
+    assert refusal(confidence, threshold=0.1) is None
+    assert "cut by the image edge" in refusal({**confidence, "features": features | {"edge_contact": 0.3}})
+    assert "more sides" in refusal({**confidence, "features": features | {"views": 2.0}})
+    assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
+
+
+def test_background_mask_finds_an_object_on_a_uniform_background():
+    image = np.full((20, 30, 3), 235, np.uint8)
+    image[5:12, 8:20] = (40, 90, 40)
+    mask = uniform_background_mask(image)
+    assert mask.sum() == 7 * 12 and mask[5:12, 8:20].all()
+
+
+def test_capture_variants(capture):
+    cap = read_capture_set(capture)
+    images = cap.load_images()
+    few, few_images = apply_variant("few_views", cap, images, 0)
+    assert len(few.frames) == len(few_images) == FEW_VIEWS
+    cut, cut_images = apply_variant("edge_cut", cap, images, 0)
+    for frame, new, image in zip(cut.frames, cut_images, images, strict=True):
+        assert new.shape[1] == frame.camera.width < image.shape[1]
+        assert frame.camera.cx in (cap.frames[0].camera.cx,
+                                   cap.frames[0].camera.cx - (image.shape[1] - new.shape[1]))
+    for variant in ("occluded", "background", "recoloured"):
+        same, changed = apply_variant(variant, cap, images, 0)
+        assert same is cap and any((a != b).any() for a, b in zip(images, changed, strict=True))
+    assert apply_variant("background", cap, images, 3)[1][0].tolist() == \
+        apply_variant("background", cap, images, 3)[1][0].tolist()
+    with pytest.raises(NfrDrakeError, match="unknown capture variant"):
+        apply_variant("fog", cap, images, 0)

@@ -1,0 +1,68 @@
+"""Acting on the fit confidence: the perception system's "confidence" port, the demo's refusal
+(exit status 2, one line) and eval-pipeline's count of refusals apart from failures."""
+
+import csv
+
+import pytest
+import torch
+
+from nfr_drake.cli import main
+from nfr_drake.eval.pipeline_eval import eval_pipeline_command
+from nfr_drake.inference.confidence import ConfidenceModel
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.nfr.checkpoint import write_model_folder
+from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.model import NFRAutoDecoder
+from nfr_drake.systems.pipeline import perceive_with_confidence
+from nfr_drake.systems.scenario import Scenario
+
+SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                       keypoint_hidden=16)
+FAST = FitConfig(restarts=1, explore_steps=0, max_steps=2, explore_rays=32, rays_per_step=32,
+                 eval_rays=64, lookup_rays=64, focus_steps=0)
+FIT_FLAGS = ["--restarts", "1", "--fit.explore-steps", "0", "--max-steps", "2",
+             "--focus-steps", "0", "--fit.eval-rays", "64", "--fit.lookup-rays", "64"]
+
+
+@pytest.fixture(scope="module")
+def calibrated_model(tmp_path_factory):
+    """A tiny closet model folder (random weights) with a calibration whose threshold is 0.5."""
+    folder = tmp_path_factory.mktemp("m") / "closet"
+    torch.manual_seed(0)
+    write_model_folder(folder, NFRAutoDecoder(SMALL, 3),
+                       {"category": "closet",
+                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    ConfidenceModel([("image_loss", "log10")], [-2.5], [0.5], [-2.0], 0.0, 0.5, {}).write(folder)
+    return folder
+
+
+def test_the_perception_system_outputs_the_fit_confidence(calibrated_model):
+    scenario = Scenario(category="closet", model=str(calibrated_model), views=3, image_size=24,
+                        fit=FAST)
+    _, _, confidence = perceive_with_confidence(scenario, scenario.sample_object())
+    assert 0.0 < confidence["p_handle_within_2cm"] < 1.0 and confidence["threshold"] == 0.5
+    assert len(confidence["per_view"]) == 3 and confidence["features"]["views"] == 3
+
+
+def test_the_demo_refuses_below_the_threshold_in_one_line(calibrated_model, tmp_path, capsys):
+    status = main(["demo", "--model", str(calibrated_model), "--views", "3", "--image-size", "24",
+                   "--min-confidence", "1.0", "--threads", "1", "--replay",
+                   str(tmp_path / "demo.html"), *FIT_FLAGS])
+    out = capsys.readouterr().out
+    refused = [line for line in out.splitlines() if line.startswith("refused:")]
+    assert status == 2 and len(refused) == 1, out
+    assert "< 1.00" in refused[0] and "planning" not in out and not (tmp_path / "demo.html").exists()
+
+
+def test_eval_pipeline_counts_refusals_apart_from_failures(calibrated_model, tmp_path, capsys):
+    csv_path = tmp_path / "pipeline.csv"
+    eval_pipeline_command("closet", calibrated_model, csv_path, n=2, seed=100, fit=FAST,
+                          image_size=24, min_confidence=1.0, threads=1)
+    rows = list(csv.DictReader(open(csv_path)))
+    assert [r["refused"] for r in rows] == ["True", "True"]
+    assert all(r["planned"] == "False" and r["failure"].startswith("refused:") for r in rows)
+    assert 0.0 < float(rows[0]["p_handle_within_2cm"]) < 1.0
+    out = capsys.readouterr().out
+    assert "| closet | 2 | 2 | 0 | 0 | **0%** | 0 |" in out
+    assert out.strip().endswith("2 refused for low fit confidence, 0 failed")
