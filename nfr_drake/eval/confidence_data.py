@@ -95,18 +95,19 @@ OOD_VARIANTS = ("background", "recoloured", "occluded", "edge_cut", "few_views",
 the other category's model to the clean capture."""
 
 
-def plan_cases(data: Path, calibration: int, evaluation: int, ood: int, furniture: int
-               ) -> list[Case]:
+def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, ood: int,
+               furniture: int) -> list[Case]:
     """The cases of the confidence study from the capture sets under `data` (docs/EVALUATION.md,
     "Fit confidence"): per category `calibration` captures of C_calib (seed 500), `evaluation` of
-    C_train_cams (seed 0, clean) and `ood` of C_oodsrc (seed 600), and `furniture` captures of
-    furniture_oodsrc fitted by the closet and drawer models in turn. Models are models/C."""
+    C_train_cams (seed 0) and `closed` of C_closed (seed 3), both clean, and `ood` of C_oodsrc
+    (seed 600); and `furniture` captures of furniture_oodsrc, each fitted by both models. Models
+    are models/C."""
     cases = []
     for c in ("closet", "drawer"):
         for i in range(calibration):
             cases.append(Case(f"models/{c}", str(data / f"{c}_calib" / f"{c}_{i:03d}"),
                               CALIBRATION_VARIANTS[i % 5], 500 + i, "calibration"))
-    for i in range(max(evaluation, ood, furniture)):
+    for i in range(max(evaluation, closed, ood, furniture)):
         for c, other in (("closet", "drawer"), ("drawer", "closet")):
             if i < ood:
                 variant = OOD_VARIANTS[i % 6]
@@ -114,13 +115,13 @@ def plan_cases(data: Path, calibration: int, evaluation: int, ood: int, furnitur
                 cases.append(Case(f"models/{model}", str(data / f"{c}_oodsrc" / f"{c}_{i:03d}"),
                                   "clean" if variant == "wrong_category" else variant, 600 + i,
                                   "ood"))
-            if i < evaluation:
-                cases.append(Case(f"models/{c}", str(data / f"{c}_train_cams" / f"{c}_{i:03d}"),
-                                  "clean", i, "evaluation"))
-        if i < furniture:
-            cases.append(Case(f"models/{'closet' if i % 2 == 0 else 'drawer'}",
-                              str(data / "furniture_oodsrc" / f"furniture_{i:03d}"), "clean",
-                              600 + i, "ood"))
+            for folder, count in (("train_cams", evaluation), ("closed", closed)):
+                if i < count:
+                    cases.append(Case(f"models/{c}", str(data / f"{c}_{folder}" / f"{c}_{i:03d}"),
+                                      "clean", i, "evaluation"))
+            if i < furniture:
+                cases.append(Case(f"models/{c}", str(data / "furniture_oodsrc" / f"furniture_{i:03d}"),
+                                  "clean", 600 + i, "ood"))
     return cases
 
 
