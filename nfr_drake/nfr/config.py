@@ -62,6 +62,11 @@ class NFRModelConfig:
     """Fixed number of LSTM raymarching steps."""
     march_max_step: float = 0.3
     """Largest step (m) of one marching iteration (tanh-bounded); 10 steps span the sphere."""
+    march_init_step: float = 0.0
+    """Step (m) of every marching iteration at initialisation: the step head's bias starts at
+    atanh(march_init_step / march_max_step); 0 keeps PyTorch's default bias. Furniture cameras sit
+    inside the bounding sphere, so marching starts at `min_depth` from the camera, up to 1.5 m
+    before the surface: a forward initial step lets the first renders reach it."""
     lstm_hidden: int = 16
     """State size of the LSTM raymarcher."""
     pixel_hidden: int = 64
@@ -89,6 +94,8 @@ class NFRModelConfig:
             raise ConfigError("NFRModelConfig.field_layers must be at least 2 (hidden + output)")
         if self.pe_frequencies < 0:
             raise ConfigError(f"NFRModelConfig.pe_frequencies must be >= 0, got {self.pe_frequencies}")
+        if not 0 <= self.march_init_step < self.march_max_step:
+            raise ConfigError("NFRModelConfig.march_init_step must lie in [0, march_max_step)")
         if self.hyper_offset_scale < 0:
             raise ConfigError("NFRModelConfig.hyper_offset_scale must be >= 0")
         if len(self.bound_center) != 3:

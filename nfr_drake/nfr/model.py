@@ -45,7 +45,7 @@ class NFRModel(nn.Module):
                                   c.hyper_hidden, c.hyper_offset_scale)
         self.field = Field(c.bound_center, c.pe_frequencies, c.pe_base_frequency, c.layer_norm)
         self.marcher = LSTMRaymarcher(c.feature_dim, c.lstm_hidden, c.march_steps,
-                                      c.march_max_step)
+                                      c.march_max_step, c.march_init_step)
         self.rgb_head = PixelGenerator(c.feature_dim, c.pixel_hidden, 3)
         self.seg_head = PixelGenerator(c.feature_dim, c.pixel_hidden, c.num_classes)
         self.keypoint_head = KeypointHead(c.latent_dim, c.keypoint_hidden, c.num_keypoints,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -51,7 +52,8 @@ def march_step(field: FieldFn, rays: Rays, state: MarchState, cell: nn.LSTMCell,
 class LSTMRaymarcher(nn.Module):
     """Marches `steps` times from a start depth; returns the surface points and their features."""
 
-    def __init__(self, feature_dim: int, hidden: int, steps: int, max_step: float):
+    def __init__(self, feature_dim: int, hidden: int, steps: int, max_step: float,
+                 init_step: float = 0.0):
         super().__init__()
         self.steps, self.hidden, self.max_step = steps, hidden, max_step
         self.cell = nn.LSTMCell(feature_dim, hidden)
@@ -60,6 +62,8 @@ class LSTMRaymarcher(nn.Module):
             for b in (self.cell.bias_ih, self.cell.bias_hh):
                 b.zero_()
                 b[hidden:2 * hidden].fill_(0.5)
+            if init_step:  # the first steps move forward by about init_step (m)
+                self.step_head.bias.fill_(math.atanh(init_step / max_step))
 
     def forward(self, field: FieldFn, rays: Rays, near: torch.Tensor,
                 far: torch.Tensor) -> MarchResult:

@@ -151,3 +151,20 @@ def test_fresh_runs_start_the_keypoint_head_at_the_mean_keypoints(furniture_data
     if absent:  # a slot no object has starts at the mean of all keypoints
         k = absent[0]
         assert torch.isfinite(bias[12 * k:12 * k + 12]).all()
+
+
+def test_march_init_step_moves_the_first_steps_forward(tiny_config):
+    """Furniture cameras sit inside the bounding sphere: with march_init_step the untrained
+    marcher advances about that far per step instead of staying near its start."""
+    torch.manual_seed(0)
+    R = 256
+    rays = Rays(torch.zeros(1, R, 3), torch.nn.functional.normalize(torch.randn(1, R, 3), dim=-1))
+    near, far = torch.full((1, R), 0.5), torch.full((1, R), 3.0)
+    feature = lambda p: torch.zeros(*p.shape[:-1], tiny_config.feature_dim)  # noqa: E731
+    config = replace(tiny_config, march_max_step=0.35, march_init_step=0.1)
+    with torch.no_grad():
+        trace = NFRModel(config).marcher(feature, rays, near, far).depth_trace
+    advance = (trace[..., -1] - trace[..., 0]).mean().item()
+    assert advance == pytest.approx(0.1 * config.march_steps, rel=0.3)
+    with pytest.raises(Exception, match="march_init_step"):
+        replace(tiny_config, march_max_step=0.3, march_init_step=0.3)
