@@ -151,19 +151,21 @@ def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> No
 
 def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  out: Path = Path("runs/confidence"), calibration: int = 60,
-                                 evaluation: int = 50, closed: int = 20, ood: int = 24,
+                                 evaluation: int = 50, closed: int = 20, shut128: int = 24,
+                                 ood: int = 24,
                                  furniture: int = 12,
                                  write_models: bool = False, fit: FitConfig = FitConfig(),
                                  threads: int | None = 1) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
     Args:
-        data: folder of the capture sets C_calib, C_train_cams, C_closed, C_oodsrc and
+        data: folder of the capture sets C_calib, C_train_cams, C_closed, C_shut128, C_oodsrc and
             furniture_oodsrc (docs/EVALUATION.md, "Fit confidence").
         out: output folder; OUT/fits.jsonl keeps the fits (a rerun fits only the missing ones).
         calibration: calibration captures per category (seed 500).
         evaluation: evaluation captures per category of C_train_cams (seed 0).
         closed: evaluation captures per category of C_closed (seed 3, shut).
+        shut128: evaluation captures per category of C_shut128 (seed 200, shut, 128 px).
         ood: out-of-distribution captures per category (seed 600).
         furniture: furniture captures (seed 600), each fitted by the closet and the drawer model.
         write_models: also write the calibration to models/closet and models/drawer.
@@ -172,7 +174,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     """
     set_torch_threads(threads)
     out.mkdir(parents=True, exist_ok=True)
-    cases = plan_cases(data, calibration, evaluation, closed, ood, furniture)
+    cases = plan_cases(data, calibration, evaluation, closed, shut128, ood, furniture)
     keys = {c.key for c in cases}
     lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
     rows = featurize(lines)

@@ -95,11 +95,12 @@ OOD_VARIANTS = ("background", "recoloured", "occluded", "edge_cut", "few_views",
 the other category's model to the clean capture."""
 
 
-def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, ood: int,
+def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, shut128: int, ood: int,
                furniture: int) -> list[Case]:
     """The cases of the confidence study from the capture sets under `data` (docs/EVALUATION.md,
     "Fit confidence"): per category `calibration` captures of C_calib (seed 500), `evaluation` of
-    C_train_cams (seed 0) and `closed` of C_closed (seed 3), both clean, and `ood` of C_oodsrc
+    C_train_cams (seed 0), `closed` of C_closed (seed 3) and `shut128` of C_shut128 (seed 200,
+    128 px, the pipeline's objects), all clean, and `ood` of C_oodsrc
     (seed 600); and `furniture` captures of furniture_oodsrc, each fitted by both models. Models
     are models/C."""
     cases = []
@@ -107,7 +108,7 @@ def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, ood: 
         for i in range(calibration):
             cases.append(Case(f"models/{c}", str(data / f"{c}_calib" / f"{c}_{i:03d}"),
                               CALIBRATION_VARIANTS[i % 5], 500 + i, "calibration"))
-    for i in range(max(evaluation, closed, ood, furniture)):
+    for i in range(max(evaluation, closed, shut128, ood, furniture)):
         for c, other in (("closet", "drawer"), ("drawer", "closet")):
             if i < ood:
                 variant = OOD_VARIANTS[i % 6]
@@ -115,7 +116,8 @@ def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, ood: 
                 cases.append(Case(f"models/{model}", str(data / f"{c}_oodsrc" / f"{c}_{i:03d}"),
                                   "clean" if variant == "wrong_category" else variant, 600 + i,
                                   "ood"))
-            for folder, count in (("train_cams", evaluation), ("closed", closed)):
+            for folder, count in (("train_cams", evaluation), ("closed", closed),
+                                  ("shut128", shut128)):
                 if i < count:
                     cases.append(Case(f"models/{c}", str(data / f"{c}_{folder}" / f"{c}_{i:03d}"),
                                       "clean", i, "evaluation"))
