@@ -92,7 +92,9 @@ def plan_command(
     print(f"live view: {meshcat.web_url()}")
     outcome = run_task(scene_object, q1, meshcat=meshcat, replay=replay)
     if outcome.plan is None:
-        raise PlanningError(outcome.planning_error)
+        shorter = f" (a shorter motion, --target-q between {q0:g} and {q1:g}, may be reachable)" \
+            if abs(q1 - q0) > 0.3 else ""
+        raise PlanningError(outcome.planning_error + shorter)
     print(f"{outcome.simulation.summary()}; planning {outcome.planning_seconds:.2f} s; "
           f"replay {outcome.replay}")
     if live:

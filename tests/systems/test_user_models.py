@@ -179,3 +179,12 @@ def test_a_handle_body_that_is_the_door_is_noted(models):
     model = models["base_cabinet_door_on_floor"]
     obj = SceneObject.from_model_file(model.path, "hinge", "door", RigidTransform(), 0.0)
     assert any("'door' is 0.72 m across" in note for note in obj.notes)
+
+
+def test_a_plan_out_of_reach_suggests_a_shorter_motion(models, capsys, tmp_path):
+    model = models["base_cabinet_door_on_floor"]
+    high = ["--object-xyz", "0", "0", "2.5", "--replay", str(tmp_path / "r.html")]
+    assert main([*model.plan_args(), *high]) == 2
+    captured = capsys.readouterr()
+    assert "lowest point is 250 cm above the floor" in captured.out  # a warning, not a refusal
+    assert "no feasible motion" in captured.err and "--target-q between 0 and 0.6" in captured.err
