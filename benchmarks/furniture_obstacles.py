@@ -1,10 +1,11 @@
-"""Planning time and obstacle count with a piece's geometry merged into few boxes or one box per part.
+"""Obstacle count and planning time with a piece's geometry merged into few boxes or one box per part.
 
-    python benchmarks/furniture_obstacles.py --count 10
+    python benchmarks/furniture_obstacles.py --count 100 --plan-count 10
 
 Piece i of object_rng(SEED_DOMAIN_TRAIN, seed, i), a random part of it (as benchmarks/planning_eval.py
-draws it), planned from shut to its open target with ground-truth keypoints (no simulation), once
-with `object_obstacles(merge=True)` (what the planner gets) and once with one box per part.
+draws it): the boxes of `object_obstacles` (what the planner gets) and of one box per part, over
+`count` pieces; the first `plan_count` are planned from shut to their open target with
+ground-truth keypoints (no simulation) once with each.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ from nfr_drake.systems.task import OPEN_TARGET
 from nfr_drake.world.obstacles import object_obstacles
 
 
-def main(count: int = 10, seed: int = 7) -> None:
-    """Print one line per piece and a summary: boxes, planning wall time (s), planned or not."""
-    results = {True: [], False: []}
+def main(count: int = 100, plan_count: int = 10, seed: int = 7) -> None:
+    """Print one line per planned piece and two tables: boxes, and planning wall time (s)."""
+    boxes = {True: [], False: []}
+    plans = {True: [], False: []}
     for i in range(count):
         rng = object_rng(SEED_DOMAIN_TRAIN, seed, i)
         obj = sample_object("furniture", rng)
@@ -34,26 +36,34 @@ def main(count: int = 10, seed: int = 7) -> None:
         scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0, part=part)
         line = f"{i:3d} {obj.params['kind']:13s} part {part} {obj.front(part).kind:6s}"
         for merge in (True, False):
-            boxes = object_obstacles(obj, RigidTransform(), 0.0, moving=part, merge=merge)
+            obstacles = object_obstacles(obj, RigidTransform(), 0.0, moving=part, merge=merge)
+            boxes[merge].append(len(obstacles))
+            if i >= plan_count:
+                continue
             t0 = time.perf_counter()
             try:
                 plan_articulation(scene_object.ground_truth, OPEN_TARGET[scene_object.category],
-                                  obstacles=boxes)
+                                  obstacles=obstacles)
                 planned = True
             except PlanningError:
                 planned = False
             seconds = time.perf_counter() - t0
-            results[merge].append((len(boxes), seconds, planned))
+            plans[merge].append((seconds, planned))
             name = "merged" if merge else "per part"
-            line += f" | {name}: {len(boxes):3d} boxes {seconds:6.2f} s {planned}"
-        print(line, flush=True)
-    print(f"command: python benchmarks/furniture_obstacles.py --count {count} --seed {seed}")
+            line += f" | {name}: {len(obstacles):3d} boxes {seconds:6.2f} s {planned}"
+        if i < plan_count:
+            print(line, flush=True)
+    print(f"command: python benchmarks/furniture_obstacles.py --count {count} --plan-count {plan_count} "
+          f"--seed {seed}")
     print(f"date: {datetime.date.today()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
-    print("| obstacles | boxes, median (max) | planning s, median (max) | planned |")
+    print(f"| obstacles | boxes over {count} pieces, median (min-max) | planning s over {plan_count}, "
+          "median (max) | planned |")
     print("|---|---|---|---|")
     for merge in (True, False):
-        boxes, seconds, planned = (np.array(v) for v in zip(*results[merge], strict=True))
-        print(f"| {'merged' if merge else 'one per part'} | {np.median(boxes):.0f} ({boxes.max()}) | "
+        b = np.array(boxes[merge])
+        seconds, planned = (np.array(v) for v in zip(*plans[merge], strict=True)) if plans[merge] \
+            else (np.full(1, np.nan), np.zeros(0))
+        print(f"| {'merged' if merge else 'one per part'} | {np.median(b):.0f} ({b.min()}-{b.max()}) | "
               f"{np.median(seconds):.2f} ({seconds.max():.2f}) | {int(planned.sum())} / {len(planned)} |")
 
 
