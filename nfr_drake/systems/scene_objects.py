@@ -67,6 +67,31 @@ def set_joint_value(plant: MultibodyPlant, plant_context, joint, value: float) -
     plant.SetPositions(plant_context, q)
 
 
+def _swept_keypoints(plant: MultibodyPlant, context, joint, body, p_BH: np.ndarray, moving_points: dict,
+                     shut_and_open: tuple[float, float], q: float, grid_size: int) -> KeypointTrajectory:
+    """Ground truth of a loaded model's joint over q in [0, 1] (joint values from shut to open): the
+    handle p_BH and `moving_points` (name -> point in the handle body's frame B, m) as B moves, and
+    for a revolute joint the hinge keypoints on its axis `_HINGE_HALF_SPAN` either side of the
+    handle's foot. `context` is left at q = 1."""
+    revolute = isinstance(joint, RevoluteJoint)
+    X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
+    axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
+    a = axis_W if axis_W @ _Z >= 0 else -axis_W
+    q_grid = np.linspace(0.0, 1.0, grid_size)
+    names = (("handle", "hinge_top", "hinge_bottom") if revolute else ("handle",)) + tuple(moving_points)
+    p_WK = np.zeros((grid_size, len(names), 3))
+    shut, opened = shut_and_open
+    for i, qi in enumerate(q_grid):
+        set_joint_value(plant, context, joint, shut + qi * (opened - shut))
+        X_WB = plant.EvalBodyPoseInWorld(context, body)
+        p_WK[i, 0] = X_WB @ p_BH
+        if revolute:
+            foot = X_WJ.translation() + ((p_WK[i, 0] - X_WJ.translation()) @ a) * a
+            p_WK[i, 1], p_WK[i, 2] = foot + _HINGE_HALF_SPAN * a, foot - _HINGE_HALF_SPAN * a
+        p_WK[i, len(names) - len(moving_points):] = [X_WB @ p for p in moving_points.values()]
+    return KeypointTrajectory("closet" if revolute else "drawer", q_grid, names, p_WK, q)
+
+
 GRIP_END_MARGIN = 0.02
 """Free bar kept at each end of a grip (half a finger pad plus a drawer handle's post), m."""
 
@@ -217,12 +242,12 @@ class SceneObject:
         notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
         X_WB = plant.EvalBodyPoseInWorld(context, body)
         moving = set(plant.GetBodiesKinematicallyAffectedBy([joint.index()]))
+        if body.index() not in moving:
+            raise NfrDrakeError(f"the handle body {handle_body_name!r} does not move with joint "
+                                f"{joint_name!r}; give --handle-body a body on the moving part")
         notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
         front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body,
                                                            X_WB @ p_BH, axis_W)
-        if not revolute and front_W is None and abs(axis_W @ _Z) > 0.99:
-            raise NfrDrakeError(f"prismatic joint {joint_name!r} is vertical; only horizontal "
-                                "slides (drawers, sliding doors) are supported")
         R_BW = X_WB.rotation().inverse()
         if grip_B is None:
             bar_W = _Z if front_W is not None else axis_W if revolute else np.cross(_Z, axis_W)
@@ -233,23 +258,10 @@ class SceneObject:
             moving_points[APPROACH_KEYPOINT] = p_BH + GRIP_AXIS_OFFSET * (R_BW @ front_W)
         obstacles = geometry_obstacles(plant, inspector, context,
                                        [b for b in bodies if b.index() not in moving])
-
-        q_grid = np.linspace(0.0, 1.0, grid_size)
-        names = (("handle", "hinge_top", "hinge_bottom") if revolute else ("handle",)) + tuple(moving_points)
-        p_WK = np.zeros((grid_size, len(names), 3))
-        for i, qi in enumerate(q_grid):
-            set_joint_value(plant, context, joint, shut + qi * (opened - shut))
-            X_WB = plant.EvalBodyPoseInWorld(context, body)
-            p_WK[i, 0] = X_WB @ p_BH
-            if revolute:
-                a = axis_W if axis_W @ _Z >= 0 else -axis_W
-                foot = X_WJ.translation() + ((p_WK[i, 0] - X_WJ.translation()) @ a) * a
-                p_WK[i, 1], p_WK[i, 2] = foot + _HINGE_HALF_SPAN * a, foot - _HINGE_HALF_SPAN * a
-            p_WK[i, len(names) - len(moving_points):] = [X_WB @ p for p in moving_points.values()]
-        category = "closet" if revolute else "drawer"
+        kt = _swept_keypoints(plant, context, joint, body, p_BH, moving_points, (shut, opened), q, grid_size)
         return SceneObject(
-            category, lambda plant: add_model_file(plant, path, joint_name, handle_body_name, X_WO, added),
-            joint_name, handle_body_name, p_BH, grip_B, KeypointTrajectory(category, q_grid, names, p_WK, q),
+            kt.category, lambda plant: add_model_file(plant, path, joint_name, handle_body_name, X_WO, added),
+            joint_name, handle_body_name, p_BH, grip_B, kt,
             grip_half_length=max(0.0, grip_half - GRIP_END_MARGIN),
             locked_joints=tuple(j.name() for j in others), obstacles=tuple(obstacles) or None,
             joint_range=(shut, opened), notes=tuple(notes))

@@ -188,3 +188,9 @@ def test_a_plan_out_of_reach_suggests_a_shorter_motion(models, capsys, tmp_path)
     captured = capsys.readouterr()
     assert "lowest point is 250 cm above the floor" in captured.out  # a warning, not a refusal
     assert "no feasible motion" in captured.err and "--target-q between 0 and 0.6" in captured.err
+
+
+def test_a_handle_body_that_does_not_move_is_refused(models):
+    model = models["cupboard_right_door"]
+    with pytest.raises(NfrDrakeError, match="'left_handle' does not move with joint 'right_hinge'"):
+        SceneObject.from_model_file(model.path, "right_hinge", "left_handle", RigidTransform(), 0.0)
