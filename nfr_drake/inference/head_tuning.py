@@ -159,7 +159,7 @@ def tune_head(fitted: FittedModel, dirs: list[Path], out: Path, config: HeadTuni
         q = torch.rand(config.distill_samples, generator=generator)
         z_train = torch.cat([q_to_z_art(q), codes[pick]], -1)
         with torch.no_grad():
-            keep = old_head(compose_z(z_train[:, :2], z_train[:, 2:]))
+            keep = old_head(compose_z(z_train[:, :2], z_train[:, 2:]))[0]
         fit_term = ((model.keypoints(z_all[train]) - kp_all[train]) ** 2).sum(-1).mean()
         distill = ((model.keypoints(z_train) - keep) ** 2).sum(-1).mean()
         loss = fit_term + config.distill_weight * distill
