@@ -45,8 +45,9 @@ MAX_AXIS_TILT_DEG = 30.0
 """A hinge more than this from vertical, or a slide less than 90 minus this from it, is refused."""
 CONCAVE_FILL = 0.9
 """A closed .obj mesh filling less than this fraction of its convex hull is reported as concave."""
-MAX_HANDLE_SIZE = 0.5
-"""A handle body's geometry larger than this across is noted, m."""
+MAX_HANDLE_WIDTH = 0.2
+"""A handle body whose geometry is wider than this both ways across its length (a door, not a bar)
+is noted, m."""
 _Z = np.array([0.0, 0.0, 1.0])
 _UPRIGHTS = [RotationMatrix.MakeXRotation(np.pi / 2), RotationMatrix.MakeYRotation(-np.pi / 2),
              RotationMatrix.MakeXRotation(-np.pi / 2), RotationMatrix.MakeYRotation(np.pi / 2),
@@ -218,15 +219,15 @@ def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector,
 
 
 def handle_notes(plant: MultibodyPlant, inspector: SceneGraphInspector, body) -> list[str]:
-    """Notes on a handle body that is no handle: one with no geometry, or one whose geometry is
-    more than `MAX_HANDLE_SIZE` across (the door itself?)."""
+    """Notes on a handle body that is no handle: one with no geometry, or one whose geometry's
+    box is wider than `MAX_HANDLE_WIDTH` both ways across its longest side (the door itself?)."""
     box = body_box(plant, inspector, body)
     if box is None:
         return [f"the handle body {body.name()!r} has no geometry: its origin is taken as the handle"]
-    size = float(np.max(box[1] - box[0]))
-    if size > MAX_HANDLE_SIZE:
-        return [f"the handle body {body.name()!r} is {size:.2f} m across: the hand grips the centre of its "
-                "geometry; give --handle-body a body that holds only the handle"]
+    extent = np.sort(box[1] - box[0])[::-1]
+    if extent[1] > MAX_HANDLE_WIDTH:
+        return [f"the handle body {body.name()!r} is {extent[0]:.2f} m by {extent[1]:.2f} m: the hand grips "
+                "the centre of its geometry; give --handle-body a body that holds only the handle"]
     return []
 
 

@@ -178,7 +178,8 @@ def test_sdf_writer_places_links_at_their_joints(tmp_path):
 def test_a_handle_body_that_is_the_door_is_noted(models):
     model = models["base_cabinet_door_on_floor"]
     obj = SceneObject.from_model_file(model.path, "hinge", "door", RigidTransform(), 0.0)
-    assert any("'door' is 0.72 m across" in note for note in obj.notes)
+    assert any("'door' is 0.72 m by 0.60 m" in note for note in obj.notes)
+    assert not load(model).notes  # its handle: a bar
 
 
 def test_a_plan_out_of_reach_suggests_a_shorter_motion(models, capsys, tmp_path):
