@@ -146,17 +146,29 @@ def shut_and_open(joint, closed_at: str | None) -> tuple[float, float]:
 
 
 def body_box(plant: MultibodyPlant, inspector: SceneGraphInspector, body,
-             role: Role | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+             required: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """Corners lo, hi (3,) in the body's frame of the box bounding its geometries (collision ones,
-    else visual ones; or those of `role`), m; None when it has none."""
+    else visual ones), m; None when it has none. Meshes Drake cannot measure (formats other than
+    .obj, .gltf, .vtk, which it accepts for visuals) are left out, or, when `required` and they
+    are all the body has, refused."""
     frame_id = plant.GetBodyFrameIdOrThrow(body.index())
-    roles = (role,) if role is not None else (Role.kProximity, Role.kIllustration)
-    for r in roles:
-        boxes = [geometry_box(inspector, g) for g in inspector.GetGeometries(frame_id, r)]
-        corners = [box_corners(*box) for box in boxes if box is not None]
+    unreadable = []
+    for role in (Role.kProximity, Role.kIllustration):
+        corners = []
+        for g in inspector.GetGeometries(frame_id, role):
+            try:
+                box = geometry_box(inspector, g)
+            except RuntimeError:
+                unreadable.append(Path(inspector.GetShape(g).source().path()).name)
+                continue
+            if box is not None:
+                corners.append(box_corners(*box))
         if corners:
             corners = np.concatenate(corners)
             return corners.min(axis=0), corners.max(axis=0)
+    if required and unreadable:
+        raise NfrDrakeError(f"the mesh {unreadable[0]} of body {body.name()!r} cannot be measured (Drake "
+                            "reads .obj, .gltf and .vtk meshes): convert it to .obj or .gltf")
     return None
 
 
@@ -207,7 +219,7 @@ def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector,
     """The handle in its body's frame B: centre p_BH of its geometry's bounding box (the body's
     origin when it has none), m, (3,); the unit bar axis (3,) when the box's longest side is at
     least twice the next (else None); half that side, m."""
-    box = body_box(plant, inspector, body)
+    box = body_box(plant, inspector, body, required=True)
     if box is None:
         return np.zeros(3), None, 0.0
     lo, hi = box

@@ -3,7 +3,7 @@ true keypoints or is refused with one line saying what to change."""
 
 import numpy as np
 import pytest
-from fixtures.user_models import OPENS, Joint, Link, write_models, write_sdf, write_urdf
+from fixtures.user_models import OPENS, Geom, Joint, Link, write_models, write_sdf, write_urdf
 from pydrake.math import RigidTransform
 
 from nfr_drake.cli import main
@@ -195,3 +195,15 @@ def test_a_handle_body_that_does_not_move_is_refused(models):
     model = models["cupboard_right_door"]
     with pytest.raises(NfrDrakeError, match="'left_handle' does not move with joint 'right_hinge'"):
         SceneObject.from_model_file(model.path, "right_hinge", "left_handle", RigidTransform(), 0.0)
+
+
+def test_a_handle_drawn_only_in_a_mesh_drake_cannot_measure_is_refused(tmp_path):
+    """Drake loads a COLLADA visual but cannot size it: the handle's centre would be a guess."""
+    (tmp_path / "handle.dae").write_text("<COLLADA/>")
+    links = [Link("box", (), 5.0), Link("door", (), 1.0),
+             Link("handle", (), 0.1, visual=(Geom("mesh", ("handle.dae",)),))]
+    joints = [Joint("hinge", "revolute", "box", "door", limits=(0.0, 1.5)),
+              Joint("handle_fix", "fixed", "door", "handle", (0.0, 0.3, 0.5))]
+    path = write_urdf(tmp_path / "dae_handle.urdf", "dae_handle", links, joints)
+    with pytest.raises(NfrDrakeError, match="the mesh handle.dae of body 'handle' cannot be measured"):
+        SceneObject.from_model_file(path, "hinge", "handle", RigidTransform(), 0.0)
