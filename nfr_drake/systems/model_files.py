@@ -352,7 +352,10 @@ def mesh_problems(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_c
                     "collision elements")
             if Path(name).suffix.lower() != ".obj":
                 continue
-            mesh = ReadObjToTriangleSurfaceMesh(shape.source().path(), shape.scale3())
+            try:
+                mesh = ReadObjToTriangleSurfaceMesh(shape.source().path(), shape.scale3())
+            except RuntimeError:  # e.g. several objects in one file: its concavity stays unmeasured
+                continue
             tris = np.array([[mesh.element(t).vertex(k) for k in range(3)]
                              for t in range(mesh.num_elements())])
             mesh_vertices = np.array([mesh.vertex(v) for v in range(mesh.num_vertices())])
