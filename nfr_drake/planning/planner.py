@@ -53,6 +53,9 @@ _BASE_CLEARANCE = 0.25  # base axis to the moving part's sweep, m
 _WRIST_OFFSET = 0.21  # tool point to the wrist centre, back along the approach, m
 _MIN_WRIST_RADIUS = 0.2  # wrist centres closer to the base axis than this cramp the arm, m
 _COLUMN_RADIUS = PEDESTAL_HALF_WIDTH * np.sqrt(2.0)  # the lift column's (and base plate's) reach, m
+_PLACE_SIGHT_HEIGHT = 0.3  # the line from a base to a place goal starts this far above the goal, m
+_PLACE_SIGHT_CLEARANCE = 0.1  # ... and clears the obstacles and an open door by this much, m
+_PLACE_SIGHT_FRACTION = 0.75  # ... along this fraction of its length
 _OBSTACLE_RANGE = 1.3  # obstacles farther than this from the shoulder are out of the arm's reach, m
 
 
@@ -98,6 +101,9 @@ class PlannerConfig:
     lift_reach: float = 0.9
     """The base is raised only as far as puts the handle path's highest point at most this far
     above it, m; lower paths keep the base on the floor."""
+    place_reach: float = 0.7
+    """Largest horizontal distance from the base axis to a point the arm must reach later
+    (`plan_articulation`'s `must_reach`: a goal to place an item at), m."""
     lift_offsets: tuple[float, ...] = (0.0, 0.1, -0.1)
     """Base heights tried in turn, as offsets from the one `lift_reach` gives (each within
     [0, max_lift]), m: all base positions at one height before the next."""
@@ -144,9 +150,9 @@ def _base_heights(waypoints: list[HandleWaypoint], cfg: PlannerConfig) -> list[f
 
 
 def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], obstacles: list[ObstacleBox],
-                     cfg: PlannerConfig, z_B: float) -> list[RigidTransform]:
+                     cfg: PlannerConfig, z_B: float, must_reach: np.ndarray) -> list[RigidTransform]:
     """Robot base poses facing the handle path with the base `z_B` above the floor (m), most
-    reachable first.
+    reachable first, within `cfg.place_reach` (horizontally) of the points `must_reach` (m, (M, 3)).
 
     Candidates lie on rings around the path's centroid. One is kept when its base clears the moving
     part's sweep by `_BASE_CLEARANCE`, its column (floor to shoulder) clears every obstacle by
@@ -158,6 +164,8 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ob
     """
     p = np.array([w.p_WH for w in waypoints])
     wrists = p - _WRIST_OFFSET * np.array([w.approach_W for w in waypoints])
+    door = door_panel_box(kt.with_current(waypoints[-1].q)) if len(must_reach) else None
+    in_sight_of = [*obstacles, door] if door is not None else obstacles
     swept = _swept_points(kt, waypoints)
     c = p.mean(axis=0)
     column = np.linspace(0.0, z_B + _SHOULDER_HEIGHT, 8)
@@ -174,11 +182,24 @@ def _base_candidates(kt: KeypointTrajectory, waypoints: list[HandleWaypoint], ob
             radius = np.linalg.norm((wrists - p_WB)[:, :2], axis=1)
             if reach.max() > _WRIST_REACH or radius.min() < _MIN_WRIST_RADIUS:
                 continue
+            if len(must_reach) and not _sees(p_WB, must_reach, in_sight_of, cfg):
+                continue
             yaw = np.arctan2(*(c - p_WB)[1::-1])
             score = abs(rho - _PREFERRED_DISTANCE) + 0.1 * reach.max()
             scored.append((score, RigidTransform(RollPitchYaw(0, 0, yaw), p_WB)))
     scored.sort(key=lambda item: item[0])
     return [X for _, X in scored[:cfg.max_base_candidates]]
+
+
+def _sees(p_WB: np.ndarray, points: np.ndarray, boxes: list[ObstacleBox], cfg: PlannerConfig) -> bool:
+    """Whether a base at p_WB has `points` (m, (M, 3)) within `cfg.place_reach` horizontally, and
+    the straight line to the first (from `_PLACE_SIGHT_HEIGHT` above it; all but its last quarter,
+    which ends beside the compartment) clears `boxes` by `_PLACE_SIGHT_CLEARANCE`."""
+    if np.linalg.norm((points - p_WB)[:, :2], axis=1).max() > cfg.place_reach:
+        return False
+    f = np.linspace(0.0, _PLACE_SIGHT_FRACTION, 10)[:, None]
+    line = (1 - f) * np.r_[p_WB[:2], points[0, 2] + _PLACE_SIGHT_HEIGHT] + f * points[0]
+    return all(distance_to_box(box, line).min() >= _PLACE_SIGHT_CLEARANCE for box in boxes)
 
 
 def _within_reach(obstacles: list[ObstacleBox], X_WB: RigidTransform) -> list[ObstacleBox]:
@@ -190,10 +211,13 @@ def _within_reach(obstacles: list[ObstacleBox], X_WB: RigidTransform) -> list[Ob
 @dataclass
 class _Scenes:
     """The planning scenes of one base pose: `approach` (up to the grasp: also an open door's
-    panel, `grasp.door_panel_box`) and `follow` (once grasped: the door moves with the hand)."""
+    panel, `grasp.door_panel_box`), `follow` (once grasped: the door moves with the hand) and
+    `end` (the last waypoint: when a place follows, also the door at the target, which the hand
+    holding its handle may touch and the arm must clear; else `follow`)."""
 
     approach: PlanningScene
     follow: PlanningScene
+    end: PlanningScene
 
 
 class _Stage:
@@ -248,7 +272,7 @@ def _chained_ik(scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray, cfg:
     ik_options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
     sols = []
     for k, stage in enumerate(stages):
-        stage_scene = scenes.approach if k < 2 else scenes.follow
+        stage_scene = scenes.approach if k < 2 else scenes.end if k == len(stages) - 1 else scenes.follow
         ik = InverseKinematics(stage_scene.plant, stage_scene.plant_context)
         q = ik.q()
         for _, c in _constraints(stage_scene, stage, cfg):
@@ -345,9 +369,10 @@ def _optimise_at(scenes: _Scenes, stages: list[_Stage], s_knots: np.ndarray, q_k
             described.append((name, trajopt.AddPathPositionConstraint(c, s)))
     collision = {name: MinimumDistanceLowerBoundConstraint(sc.plant, cfg.min_distance, sc.plant_context,
                                                            None, 0.05)
-                 for name, sc in (("approach", scenes.approach), ("follow", scene))}
+                 for name, sc in (("approach", scenes.approach), ("follow", scene), ("end", scenes.end))}
     for s in np.linspace(0.0, 1.0, cfg.collision_samples + 1)[1:]:
-        binding = trajopt.AddPathPositionConstraint(collision["approach" if s <= s_knots[2] else "follow"], s)
+        which = "approach" if s <= s_knots[2] else "end" if s == 1.0 else "follow"
+        binding = trajopt.AddPathPositionConstraint(collision[which], s)
         described.append((f"collision clearance at s={s:.2f}", binding))
     for name, binding in described:
         binding.evaluator().set_description(name)
@@ -364,12 +389,16 @@ def _optimise_at(scenes: _Scenes, stages: list[_Stage], s_knots: np.ndarray, q_k
 
 def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray = Q_HOME,
                       config: PlannerConfig | None = None,
-                      obstacles: list[ObstacleBox] | None = None) -> PlanResult:
+                      obstacles: list[ObstacleBox] | None = None,
+                      must_reach: np.ndarray | None = None) -> PlanResult:
     """Plan grasping the handle and moving it from `kt.q_current` to `q_target`.
 
     q_start: the arm's joint positions at t = 0, rad, shape (7,). obstacles: boxes in W that stay
     put (a true model's geometry without the moving part); None: the keypoint-derived carcass box.
-    Raises PlanningError naming the constraints that failed.
+    must_reach: points in W (m, (M, 3)) the base must stay within `config.place_reach` of
+    (horizontally), for a motion after this one, the first in sight past the obstacles and the
+    door open at q_target (a place: the pre-place point, then the goal); the arm then also ends
+    clear of that door. Raises PlanningError naming the constraints that failed.
     """
     config = config or PlannerConfig()
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -382,13 +411,16 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         onward = config.end_stop_overshoot * handle_tangent(kt, 1.0)
         waypoints.append(replace(end, p_WH=end.p_WH + onward))
     obstacles, door = list(obstacles) if obstacles is not None else [carcass_box(kt)], door_panel_box(kt)
+    door_end = door_panel_box(kt.with_current(q_target)) if must_reach is not None else None
     failures = []
     bases = [X for z_B in _base_heights(waypoints, config)
-             for X in _base_candidates(kt, waypoints, obstacles, config, z_B)]
+             for X in _base_candidates(kt, waypoints, obstacles, config, z_B,
+                                       np.zeros((0, 3)) if must_reach is None else np.atleast_2d(must_reach))]
     for X_WB in bases:
         near = _within_reach(obstacles, X_WB)
         follow = build_planning_scene(X_WB, near)
-        scenes = _Scenes(build_planning_scene(X_WB, [*near, door]) if door else follow, follow)
+        end = build_planning_scene(X_WB, near, touching=[door_end]) if door_end else follow
+        scenes = _Scenes(build_planning_scene(X_WB, [*near, door]) if door else follow, follow, end)
         for flip in (True, False):
             stages = _stages(waypoints, config, flip)
             sols, failed = _chained_ik(scenes, stages, q_start, config)
@@ -406,5 +438,6 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
                                "cpu": time.process_time() - cpu0})
     summary = "; ".join(dict.fromkeys(failures)) or (
         "no robot base position both reaches every handle waypoint (the base raised at most "
-        f"{config.max_lift:.2f} m) and clears the moving part's sweep and the obstacles")
+        f"{config.max_lift:.2f} m) and clears the moving part's sweep and the obstacles"
+        + (f", within {config.place_reach:.2f} m of the place goal" if must_reach is not None else ""))
     raise PlanningError(f"no feasible motion from q={kt.q_current:.2f} to q={q_target:.2f}: {summary}")

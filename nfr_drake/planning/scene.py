@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, ProximityProperties
+from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, ProximityProperties
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
@@ -17,8 +17,9 @@ from pydrake.planning import RobotDiagram
 from pydrake.systems.framework import Context
 
 from nfr_drake.parsing import make_robot_diagram_builder
+from nfr_drake.world.items import Item
 from nfr_drake.world.plan import ObstacleBox
-from nfr_drake.world.robot import FINGER_OPEN, TOOL_FRAME, add_floor, add_panda, add_pedestal
+from nfr_drake.world.robot import FINGER_OPEN, HAND_BODIES, TOOL_FRAME, add_floor, add_panda, add_pedestal
 
 
 @dataclass
@@ -44,17 +45,34 @@ class PlanningScene:
         return np.r_[q_arm, FINGER_OPEN, FINGER_OPEN]
 
 
-def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox]) -> PlanningScene:
+def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox],
+                         held: tuple[Item, RigidTransform] | None = None,
+                         touching: list[ObstacleBox] = ()) -> PlanningScene:
     """The arm with base pose X_WB (on a pedestal if raised), the floor, and `obstacles` welded to
-    the world."""
+    the world; `held` (an item and its pose X_GI in the tool frame G) adds the item's shapes to the
+    hand, clear of the obstacles but not of the hand that holds it; `touching` are obstacles too,
+    but the hand (palm and fingers) may touch them (the door behind a handle the hand lets go of)."""
     builder = make_robot_diagram_builder(time_step=0.0)
     plant = builder.plant()
     robot = add_panda(plant, X_WB)
     add_floor(plant)
     add_pedestal(plant, X_WB)
-    for box in obstacles:
-        plant.RegisterCollisionGeometry(plant.world_body(), box.X_WB, Box(*box.size),
-                                        f"obstacle_{box.name}", ProximityProperties())
+    box_ids = [plant.RegisterCollisionGeometry(plant.world_body(), box.X_WB, Box(*box.size),
+                                               f"obstacle_{box.name}", ProximityProperties())
+               for box in [*obstacles, *touching]]
+    hand = GeometrySet([g for name in HAND_BODIES
+                        for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName(name, robot))])
+    filters = builder.scene_graph().collision_filter_manager()
+    if touching:
+        touched = GeometrySet(box_ids[len(obstacles):])
+        filters.Apply(CollisionFilterDeclaration().ExcludeBetween(hand, touched))
+    if held is not None:
+        item, X_GI = held
+        X_HI = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame() @ X_GI
+        ids = [plant.RegisterCollisionGeometry(plant.GetBodyByName("panda_hand", robot), X_HI @ X_IS, shape,
+                                               f"held_{name}", ProximityProperties())
+               for name, shape, X_IS in item.shapes()]
+        filters.Apply(CollisionFilterDeclaration().ExcludeBetween(GeometrySet(ids), hand))
     plant.Finalize()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()

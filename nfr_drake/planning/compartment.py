@@ -1,0 +1,133 @@
+"""The opened compartment as obstacle boxes, from a keypoint trajectory alone (for placing an item
+at the `goal` keypoint).
+
+The keypoints give the front plane, the hinge line, the goal (a closet's inner floor centre, a
+drawer's inner floor centre that moves with it) and the handle; the rest comes from the categories'
+layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
+- a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
+  `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
+  shelves: a third of the way up), and its open door (`grasp.door_panel_box` at the target);
+- a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
+  behind the handle, its back as far behind the goal as the front is ahead, side walls at the
+  narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`), as high as a front with its handle at
+  mid-height, the front itself as high as the category allows for its handle's height.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.grasp import CARCASS_SETBACK, carcass_box, door_panel_box, handle_tangent
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import ObstacleBox
+
+_Z = np.array([0.0, 0.0, 1.0])
+_WALL = 0.02  # thickness of the estimated panels, m
+_DRAWER_MIN_HALF_WIDTH = 0.145  # half the narrowest drawer box's inside, m (0.35 m wide, 2.5 cm panels)
+_DRAWER_FRONT_BEHIND_HANDLE = 0.05  # the drawer front's inner face behind its grip, m (standoff + front)
+_DRAWER_FLOOR_ABOVE_BASE = 0.03  # a drawer's inner floor above its carcass's base, m (panel, gap, wall)
+_DRAWER_LOWEST_HANDLE = 0.35  # the lowest handle height as a fraction of the front's (0.5 - 0.15)
+_DRAWER_MAX_HEIGHT = 0.40  # the tallest drawer front, m
+_DOOR_GRIP_OFFSET = 0.0575  # a door's grip axis in front of its hinge line, m (door + standoff, mean)
+
+
+def _frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, RotationMatrix]:
+    """The horizontal unit front normal n, the lateral axis Z x n and the rotation [n, lateral, Z]."""
+    n = n - (n @ _Z) * _Z
+    if np.linalg.norm(n) < 1e-9:
+        raise NfrDrakeError("keypoint trajectory: the handle moves vertically; no front plane")
+    n = n / np.linalg.norm(n)
+    lateral = np.cross(_Z, n)
+    return n, lateral, RotationMatrix(np.column_stack([n, lateral, _Z]))
+
+
+def _box(name: str, R: RotationMatrix, axes: tuple[np.ndarray, ...], lo: np.ndarray,
+         hi: np.ndarray) -> ObstacleBox:
+    """A box between coordinates lo and hi (m, (3,)) along the axes (n, lateral, Z)."""
+    centre = sum(a * (l_ + h) / 2 for a, l_, h in zip(axes, lo, hi, strict=True))
+    return ObstacleBox(name, np.abs(np.asarray(hi) - np.asarray(lo)), RigidTransform(R, centre))
+
+
+def compartment_obstacles(kt: KeypointTrajectory, q: float) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
+    """Obstacle boxes in W of the compartment opened to articulation q (module docstring): those
+    that stay put, and those of the moving part (the door, the drawer's box)."""
+    if "goal" not in kt.names:
+        raise NfrDrakeError(f"the {kt.category}'s keypoint trajectory has no goal keypoint to place at")
+    if kt.category == "closet":
+        return _closet(kt, q)
+    return _drawer(kt, q)
+
+
+def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
+    """The shut door's outward normal, horizontal, unit, (3,). The handle's tangent at q = 0 is
+    perpendicular to the hinge-to-handle vector r, which leans out of the door plane by the grip's
+    offset a (`_DOOR_GRIP_OFFSET`): the normal is t cos(theta) + r/|r| sin(theta), sin(theta) = a/|r|."""
+    t = handle_tangent(kt, 0.0)
+    r = kt.point("handle", 0.0) - kt.point("hinge_bottom", 0.0)
+    r = r - (r @ _Z) * _Z
+    sin = min(_DOOR_GRIP_OFFSET / np.linalg.norm(r), 0.5)
+    return np.sqrt(1.0 - sin ** 2) * (t - (t @ _Z) * _Z) + sin * r / np.linalg.norm(r)
+
+
+def _closet(kt: KeypointTrajectory, q: float) -> list[ObstacleBox]:
+    n, lat, R = _frame(_door_normal(kt))
+    axes = (n, lat, _Z)
+    goal = kt.point("goal", q)
+    front = kt.point("handle", 0.0) @ n - CARCASS_SETBACK
+    back = goal @ n - max(front - goal @ n, 0.05)
+    half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
+    y0, floor, top = goal @ lat, goal[2], kt.point("hinge_top", 0.0)[2]
+    shelf = floor + (top - 2 * floor) / 3 - floor / 2  # underside of the lowest shelf a closet can have
+    boxes = [
+        _box("compartment_bottom", R, axes, [back, y0 - half, 0.0], [front, y0 + half, floor]),
+        _box("compartment_top", R, axes, [back, y0 - half, top - _WALL], [front, y0 + half, top]),
+        _box("compartment_back", R, axes, [back - _WALL, y0 - half, 0.0], [back, y0 + half, top]),
+        _box("compartment_side_a", R, axes, [back, y0 - half, 0.0], [front, y0 - half + _WALL, top]),
+        _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + half, top]),
+        _box("compartment_shelf", R, axes, [back, y0 - half, shelf],
+             [front - 0.01, y0 + half, shelf + _WALL]),
+    ]
+    door = door_panel_box(kt.with_current(q))
+    return boxes, [door] if door is not None else []
+
+
+def _drawer(kt: KeypointTrajectory, q: float) -> list[ObstacleBox]:
+    n, lat, R = _frame(handle_tangent(kt, q))
+    axes = (n, lat, _Z)
+    goal, handle = kt.point("goal", q), kt.point("handle", q)
+    inner_front = handle @ n - _DRAWER_FRONT_BEHIND_HANDLE
+    half_depth = max(inner_front - goal @ n, 0.05)
+    back = goal @ n - half_depth
+    top, front_top = _drawer_tops(kt, q)
+    y0, floor = goal @ lat, goal[2]
+    half = _DRAWER_MIN_HALF_WIDTH
+    return [carcass_box(kt)], [
+        _box("drawer_floor", R, axes, [back, y0 - half, 0.0], [inner_front, y0 + half, floor]),
+        _box("drawer_front", R, axes, [inner_front, y0 - half - _WALL, 0.0],
+             [inner_front + 0.02, y0 + half + _WALL, front_top]),
+        _box("drawer_back", R, axes, [back - _WALL, y0 - half - _WALL, 0.0], [back, y0 + half + _WALL, top]),
+        _box("drawer_side_a", R, axes, [back, y0 - half - _WALL, 0.0], [inner_front, y0 - half, top]),
+        _box("drawer_side_b", R, axes, [back, y0 + half, 0.0], [inner_front, y0 + half + _WALL, top]),
+    ]
+
+
+def compartment_entry(kt: KeypointTrajectory, q: float) -> tuple[np.ndarray, float]:
+    """The way into the compartment opened to q, a unit vector in W (a closet: horizontal, across
+    its front; a drawer: down), and the goal's depth behind the opening along it, m (a closet: the
+    front plane of `compartment_obstacles`; a drawer: the top of its estimated walls)."""
+    goal = kt.point("goal", q)
+    if kt.category == "closet":
+        n, _, _ = _frame(_door_normal(kt))
+        return -n, float(kt.point("handle", 0.0) @ n - CARCASS_SETBACK - goal @ n)
+    return -_Z, float(_drawer_tops(kt, q)[0] - goal[2])
+
+
+def _drawer_tops(kt: KeypointTrajectory, q: float) -> tuple[float, float]:
+    """A drawer's walls' top in W, m: the front's height were its handle at mid-height, and, for
+    its front (which the arm reaches over), the most the category allows for that handle."""
+    floor = kt.point("goal", q)[2] - _DRAWER_FLOOR_ABOVE_BASE
+    above = kt.point("handle", q)[2] - floor
+    return floor + min(2.0 * above, _DRAWER_MAX_HEIGHT), floor + min(above / _DRAWER_LOWEST_HANDLE,
+                                                                    _DRAWER_MAX_HEIGHT)

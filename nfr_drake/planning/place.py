@@ -1,0 +1,422 @@
+"""Place: after opening, pick an item from a table beside the robot and put it at the goal keypoint.
+
+The motion starts where the opening plan ends (the hand on the handle at q_target, base unchanged)
+and has three segments of knots, each knot a chained-IK pose; from knot to knot one
+`KinematicTrajectoryOptimization` (SNOPT) with minimum-distance constraints at evenly spaced
+samples, at rest at both ends:
+1. "to pick": back off the handle along its approach, to the pre-pick pose, to the pick pose;
+2. "carry": lift, up, over to above the pre-place pose outside the compartment, down to it, in
+   along a straight line (the way into the compartment: horizontal through a closet's front, down
+   into a drawer) to the place pose: the item's bottom centre `drop_height` above the goal
+   keypoint, upright;
+3. "retreat": back out along the same line, the item left behind.
+Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
+hand fits under a shelf), a drawer's from the top (vertical approach: it is open from above). The
+obstacles: those that stay put, those of the moving part at q_target (the hand may touch them
+while it backs off the handle), the table, and the item on it (until the pre-pick); the held item
+is checked against them all (not against the table while it is lifted off it). The fingers are
+open in the plan; the simulation closes them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import (
+    AngleBetweenVectorsConstraint,
+    InverseKinematics,
+    MinimumDistanceLowerBoundConstraint,
+    OrientationConstraint,
+    PositionConstraint,
+)
+from pydrake.planning import KinematicTrajectoryOptimization
+from pydrake.solvers import SnoptSolver, SolverOptions
+from pydrake.trajectories import BsplineTrajectory
+
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles
+from nfr_drake.planning.planner import _ACCEL_LIMITS, PlanningError, _initial_guess
+from nfr_drake.planning.scene import PlanningScene, build_planning_scene
+from nfr_drake.world.items import Item
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.plan import ObstacleBox, PlanResult
+from nfr_drake.world.robot import NUM_ARM_JOINTS, Q_HOME
+
+_Z = np.array([0.0, 0.0, 1.0])
+_IK_ITERATIONS = 80
+_KNOT_SLACK = 0.003  # knots clear obstacles by this much more than the trajectories between them, m
+PLACE_REACH = {"closet": 0.7, "drawer": 0.55}
+"""`PlannerConfig.place_reach` for an opening a place follows, by category, m: a closet's goal is
+reached by a level hand through its front, a drawer's from above, over the front (a forearm that
+comes down steeply: the base nearer)."""
+_EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
+
+
+@dataclass
+class PlaceConfig:
+    """Options of `plan_place`."""
+
+    retreat_distance: float = 0.10
+    """How far the tool backs off the handle along its approach, m."""
+    pregrasp_distance: float = 0.08
+    """Pre-pick: the tool this far back along its approach from the pick pose, m."""
+    lift_height: float = 0.08
+    """How far the item is lifted off the table before it is carried, m."""
+    carry_clearance: float = 0.15
+    """Side grasps: the item is carried from above the table to above the pre-place pose this far
+    above the higher of the two, m (top grasps: at the higher of the two)."""
+    entry_margin: float = 0.06
+    """Closet: the pre-place pose holds the item this far in front of the front plane, m. Drawer:
+    this far above the drawer's estimated walls."""
+    drop_height: float = 0.015
+    """The item's bottom above the goal when released, m (more than `min_distance`)."""
+    top_grip_depth: float = 0.02
+    """Top grasp: the tool origin this far below the item's top, m."""
+    side_grip_height: float = 0.065
+    """Side grasp: the tool origin this far above the item's bottom, m (the wrist, 5 cm in radius
+    about the approach, clears the surface the item stands on)."""
+    position_tolerance: float = 0.004
+    upright_tolerance_deg: float = 12.0
+    approach_cone_deg: float = 40.0
+    """Side grasp at the place: the approach within this of the way into the closet (the hand may
+    turn about the vertical)."""
+    min_distance: float = 0.01
+    collision_samples: int = 12
+    """Fewest collision samples per piece (knot to knot); at most four times as many."""
+    collision_step: float = 0.03
+    """Largest joint move between collision samples (as far as the sample count allows), rad:
+    a forearm half a metre out sweeps 1.5 cm, less than a door's thickness."""
+    num_control_points: int = 10
+    velocity_scale: float = 0.5
+    acceleration_scale: float = 0.3
+    tool_speed: float = 0.12
+    """Largest mean speed of the tool on the straight stretches (in and out, lift), m/s."""
+
+    def __post_init__(self) -> None:
+        if self.drop_height <= self.min_distance:
+            raise NfrDrakeError("place: drop_height must exceed min_distance (the held item clears "
+                                "the compartment's floor by min_distance in the plan)")
+
+
+@dataclass(frozen=True)
+class PlaceProblem:
+    """What the place planner gets. goal: the goal keypoint at q_target, m, (3,) in W; entry: unit
+    direction in W into the compartment (horizontal for a closet, -z for a drawer); entry_depth:
+    how far the pre-place pose lies back from the place along the entry, m; fixed, moving:
+    obstacle boxes that stay put and those of the moving part at q_target; table: the item's
+    support; X_WI: the item's pose on it (frame I: `nfr_drake.world.items`)."""
+
+    grasp: str
+    goal: np.ndarray
+    entry: np.ndarray
+    entry_depth: float
+    fixed: list[ObstacleBox]
+    moving: list[ObstacleBox]
+    table: ObstacleBox
+    item: Item
+    X_WI: RigidTransform
+
+
+def place_problem(kt: KeypointTrajectory, q_target: float, item: Item, X_WI: RigidTransform,
+                  table: ObstacleBox, obstacles: tuple[list[ObstacleBox], list[ObstacleBox]] | None = None,
+                  config: PlaceConfig | None = None) -> PlaceProblem:
+    """The problem of placing `item` (at X_WI on `table`) at the goal of `kt` opened to q_target:
+    a side grasp into a closet, a top grasp into a drawer. obstacles: (fixed, moving) boxes, e.g.
+    of a true model; None: from the keypoints (`compartment_obstacles`)."""
+    entry, depth = _entry(kt, q_target, item, config or PlaceConfig())
+    fixed, moving = obstacles if obstacles is not None else compartment_obstacles(kt, q_target)
+    return PlaceProblem("side" if kt.category == "closet" else "top", kt.point("goal", q_target), entry,
+                        depth, list(fixed), list(moving), table, item, X_WI)
+
+
+def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig) -> tuple[np.ndarray, float]:
+    """The way in (unit, (3,)) and the pre-place point's distance from the place along it, m."""
+    entry, opening = compartment_entry(kt, q_target)
+    along = item.half_extents[0] if kt.category == "closet" else 0.0
+    return entry, opening + along + cfg.entry_margin
+
+
+def place_reach_points(kt: KeypointTrajectory, q_target: float, item: Item,
+                       config: PlaceConfig | None = None) -> np.ndarray:
+    """The held item's origin at the pre-place pose and at the goal, m, (2, 3) in W: what the
+    opening plan's base must reach (`plan_articulation`'s `must_reach`)."""
+    entry, depth = _entry(kt, q_target, item, config or PlaceConfig())
+    goal = kt.point("goal", q_target)
+    return np.stack([goal - depth * entry, goal])
+
+
+@dataclass
+class PlaceSegment:
+    """One planned segment: trajectories of the planning plant's positions (7 arm joints, 2
+    fingers) one after another, each over t in [0, its duration], s, at rest at both ends."""
+
+    name: str
+    pieces: list[BsplineTrajectory]
+
+    @property
+    def duration(self) -> float:
+        return sum(float(p.end_time() - p.start_time()) for p in self.pieces)
+
+    def value(self, t: float) -> np.ndarray:
+        """Positions at time t into the segment (clamped to [0, duration]), shape (9,)."""
+        for piece in self.pieces:
+            if t <= piece.end_time():
+                return piece.value(max(t, 0.0)).ravel()
+            t -= piece.end_time()
+        return self.pieces[-1].value(self.pieces[-1].end_time()).ravel()
+
+
+@dataclass
+class PlacePlan:
+    """The planned pick and place. X_GI: the item in the tool frame while held; X_WI_pick: its pose
+    on the table; X_WI_place: where the plan leaves it (at release, before the drop), in W."""
+
+    segments: list[PlaceSegment]
+    X_WB: RigidTransform
+    X_GI: RigidTransform
+    X_WI_pick: RigidTransform
+    X_WI_place: RigidTransform
+    goal: np.ndarray
+    seconds: float
+
+    @property
+    def duration(self) -> float:
+        return sum(s.duration for s in self.segments)
+
+    def place_error(self) -> float:
+        """Horizontal distance of the planned item's bottom centre from the goal, m."""
+        return float(np.linalg.norm((self.X_WI_place.translation() - self.goal)[:2]))
+
+
+def grasp_in_item(item: Item, grasp: str, cfg: PlaceConfig, flip: bool = False) -> RigidTransform:
+    """X_IG: the tool frame G in the item frame I for a "top" or "side" grasp; `flip` turns the
+    hand 180 degrees about its approach."""
+    e1, e2, e3 = np.eye(3)
+    if grasp == "top":  # approach down, pads along the item's x
+        R, p = np.column_stack([e1, -e2, -e3]), [0.0, 0.0, item.height - cfg.top_grip_depth]
+    elif grasp == "side":  # approach along the item's x, pads vertical
+        R, p = np.column_stack([e3, -e2, e1]), [0.0, 0.0, min(cfg.side_grip_height, item.height - 0.015)]
+    else:
+        raise NfrDrakeError(f"grasp must be top or side, got {grasp!r}")
+    X = RigidTransform(RotationMatrix(R), p)
+    return X @ RigidTransform(RotationMatrix.MakeZRotation(np.pi)) if flip else X
+
+
+class _Stage:
+    """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
+    aims at (for its timing)."""
+
+    def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints):
+        self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
+
+
+def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
+    def make(sc: PlanningScene):
+        tol = np.full(3, cfg.position_tolerance)
+        p = X_WG.translation()
+        return [PositionConstraint(sc.plant, sc.plant.world_frame(), p - tol, p + tol, sc.tool_frame,
+                                   np.zeros(3), sc.plant_context),
+                OrientationConstraint(sc.plant, sc.plant.world_frame(), X_WG.rotation(), sc.tool_frame,
+                                      RotationMatrix(), np.radians(angle_deg), sc.plant_context)]
+    return make
+
+
+def _tool_at(p_W: np.ndarray, tol: float):
+    def make(sc: PlanningScene):
+        return [PositionConstraint(sc.plant, sc.plant.world_frame(), p_W - tol, p_W + tol, sc.tool_frame,
+                                   np.zeros(3), sc.plant_context)]
+    return make
+
+
+def _item_at(p_WI: np.ndarray, X_GI: RigidTransform, entry: np.ndarray, side: bool, cfg: PlaceConfig):
+    """The held item's origin at p_WI, upright; a side grasp's approach within the cone of `entry`."""
+    def make(sc: PlanningScene):
+        W, G, ctx = sc.plant.world_frame(), sc.tool_frame, sc.plant_context
+        tol = np.full(3, cfg.position_tolerance)
+        out = [PositionConstraint(sc.plant, W, p_WI - tol, p_WI + tol, G, X_GI.translation(), ctx),
+               AngleBetweenVectorsConstraint(sc.plant, W, _Z, G, X_GI.rotation().col(2), 0.0,
+                                             np.radians(cfg.upright_tolerance_deg), ctx)]
+        if side:
+            out.append(AngleBetweenVectorsConstraint(sc.plant, W, entry, G, np.array([0.0, 0.0, 1.0]), 0.0,
+                                                     np.radians(cfg.approach_cone_deg), ctx))
+        return out
+    return make
+
+
+def _seeds(sc: PlanningScene, p_W: np.ndarray, q_prev: np.ndarray):
+    """IK seeds: q_prev, then the home posture turned about the base axis to face p_W, then that
+    perturbed (a fixed random stream: plans are repeatable); fingers of q_prev."""
+    yield q_prev
+    p_B = sc.X_WB.inverse() @ p_W
+    facing = np.r_[np.arctan2(p_B[1], p_B[0]), Q_HOME[1:], q_prev[NUM_ARM_JOINTS:]]
+    yield facing
+    rng = np.random.default_rng(0)
+    for _ in range(_EXTRA_SEEDS):
+        yield facing + np.r_[rng.normal(0.0, 0.5, NUM_ARM_JOINTS), np.zeros(len(q_prev) - NUM_ARM_JOINTS)]
+
+
+def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray,
+                 cfg: PlaceConfig) -> tuple[list[np.ndarray] | None, str]:
+    """IK of each stage in turn, seeded by and kept close to the last; fingers fixed."""
+    options = SolverOptions()
+    options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
+    q_prev, sols = q0, []
+    for stage in stages:
+        sc = scenes[stage.scene]
+        ik = InverseKinematics(sc.plant, sc.plant_context)
+        q = ik.q()
+        for c in stage.constraints(sc):
+            ik.prog().AddConstraint(c, q)
+        ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
+        ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
+        ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
+        for seed in _seeds(sc, stage.p_W, q_prev):
+            result = SnoptSolver().Solve(ik.prog(), seed, options)
+            if result.is_success():
+                break
+        else:
+            return None, stage.name
+        q_prev = result.GetSolution(q)
+        sols.append(q_prev)
+    return sols, ""
+
+
+def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.ndarray, q_to: np.ndarray,
+                    p_from: np.ndarray, cfg: PlaceConfig) -> tuple[BsplineTrajectory | None, list[str]]:
+    """One trajectory from q_from (exactly) to the stage's constraints, warm-started from the
+    straight line to its IK solution q_to, at rest at both ends; the collision samples clear the
+    stage's scene. Retried once at 1.6 times the duration."""
+    sc = scenes[stage.scene]
+    plant = sc.plant
+    nq = plant.num_positions()
+    vmax = cfg.velocity_scale * plant.GetVelocityUpperLimits()
+    tau = max(1.5 * float(np.max(np.abs(q_to - q_from)[:NUM_ARM_JOINTS] / vmax[:NUM_ARM_JOINTS])),
+              float(np.linalg.norm(stage.p_W - p_from)) / cfg.tool_speed, 0.5)
+    check = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, sc.plant_context, None, 0.05)
+    travel = float(np.max(np.abs(q_to - q_from)[:NUM_ARM_JOINTS]))
+    samples = int(np.clip(np.ceil(travel / cfg.collision_step), cfg.collision_samples,
+                          4 * cfg.collision_samples))
+    failed: list[str] = []
+    for scale in (1.0, 1.6):
+        duration = scale * tau
+        trajopt = KinematicTrajectoryOptimization(nq, cfg.num_control_points, spline_order=4)
+        prog = trajopt.get_mutable_prog()
+        trajopt.AddPathEnergyCost(1.0)
+        lower, upper = plant.GetPositionLowerLimits().copy(), plant.GetPositionUpperLimits().copy()
+        lower[NUM_ARM_JOINTS:] = upper[NUM_ARM_JOINTS:] = q_from[NUM_ARM_JOINTS:]
+        trajopt.AddPositionBounds(lower, upper)
+        trajopt.AddVelocityBounds(-vmax, vmax)
+        amax = np.r_[cfg.acceleration_scale * _ACCEL_LIMITS, np.ones(nq - NUM_ARM_JOINTS)]
+        trajopt.AddAccelerationBounds(-amax, amax)
+        trajopt.AddDurationConstraint(duration, duration)
+        described = [("start configuration", trajopt.AddPathPositionConstraint(q_from, q_from, 0.0))]
+        for s in (0.0, 1.0):
+            described.append((f"at rest at s={s:.0f}", trajopt.AddPathVelocityConstraint(
+                np.zeros(nq), np.zeros(nq), s)))
+        described += [(stage.name, trajopt.AddPathPositionConstraint(c, 1.0)) for c in stage.constraints(sc)]
+        described += [(f"collision clearance at s={s:.2f} ({stage.scene})",
+                       trajopt.AddPathPositionConstraint(check, s))
+                      for s in np.linspace(0.0, 1.0, samples + 1)[1:]]
+        for name, binding in described:
+            binding.evaluator().set_description(name)
+        trajopt.SetInitialGuess(_initial_guess(trajopt, np.array([0.0, 1.0]), np.stack([q_from, q_to]),
+                                               duration))
+        options = SolverOptions()
+        options.SetOption(SnoptSolver.id(), "Major iterations limit", 500)
+        result = SnoptSolver().Solve(prog, None, options)
+        if result.is_success():
+            return trajopt.ReconstructTrajectory(result), []
+        failed = sorted(set(result.GetInfeasibleConstraintNames(prog, 1e-4))) or [
+            f"solver status {result.get_solution_result()}"]
+    return None, failed
+
+
+def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
+    sc.plant.SetPositions(sc.plant_context, q)
+    return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
+
+
+def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig | None = None) -> PlacePlan:
+    """Plan the pick and place (module docstring) from the end of `open_plan`. Raises PlanningError
+    naming the stage or the constraints that failed, for each grasp tried (the hand either way
+    round about its approach)."""
+    cfg = config or PlaceConfig()
+    t0 = time.perf_counter()
+    pb, X_WB = problem, open_plan.X_WB
+    side = pb.grasp == "side"
+    q0 = open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel()
+    item_box = ObstacleBox("item", 2 * pb.item.half_extents,
+                           pb.X_WI @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
+    everything = [*pb.fixed, *pb.moving, pb.table]
+    base_scenes = {"off handle": build_planning_scene(X_WB, [*pb.fixed, pb.table], touching=pb.moving),
+                   "to pre-pick": build_planning_scene(X_WB, [*everything, item_box]),
+                   "free": build_planning_scene(X_WB, everything)}
+    end = open_plan.waypoints[-1]
+    p_off = end.p_WH - cfg.retreat_distance * end.approach_W
+    p_place = pb.goal + cfg.drop_height * _Z
+    failures = []
+    for flip in (False, True):
+        X_IG = grasp_in_item(pb.item, pb.grasp, cfg, flip)
+        X_GI = X_IG.inverse()
+        X_WG = pb.X_WI @ X_IG
+        approach = X_WG.rotation().col(2)
+        X_WGpre = RigidTransform(X_WG.rotation(), X_WG.translation() - cfg.pregrasp_distance * approach)
+        X_WGlift = RigidTransform(X_WG.rotation(), X_WG.translation() + cfg.lift_height * _Z)
+        scenes = {**base_scenes,
+                  "held off table": build_planning_scene(X_WB, [*pb.fixed, *pb.moving], (pb.item, X_GI)),
+                  "held": build_planning_scene(X_WB, everything, (pb.item, X_GI))}
+        to_pick = [_Stage("backing off the handle", "off handle", p_off, _tool_at(p_off, 0.01)),
+                   _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg)),
+                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg))]
+        sols_a, failed = _solve_chain(scenes, to_pick, q0, cfg)
+        if sols_a is None:
+            failures.append(f"IK of {failed}")
+            continue
+        line = [p_place - f * pb.entry_depth * pb.entry for f in (1.0, 2 / 3, 1 / 3, 0.0)]
+        p_lift = pb.X_WI.translation() + cfg.lift_height * _Z
+        z_high = max(p_lift[2], line[0][2]) + (cfg.carry_clearance if side else 0.0)
+        high = [p_lift * [1, 1, 0] + [0, 0, z_high], line[0] * [1, 1, 0] + [0, 0, z_high]]
+        names = ("carry up", "carry over", "pre-place", "entering 1", "entering 2", "place")
+        points = [*high, *line]
+        keep = [k for k in range(len(points))  # a carry point on the lift or pre-place is left out
+                if k >= 2 or min(np.linalg.norm(points[k] - p) for p in (p_lift, line[0])) > 1e-2]
+        carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg))]
+        carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg))
+                  for k in keep]
+        sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
+        if sols_b is None:
+            failures.append(f"IK of {failed}")
+            continue
+        X_WGplace = _tool_pose_at(scenes["free"], sols_b[-1])
+        outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
+        retreat = [_Stage(f"retreat {k}", "free", p, _tool_pose(RigidTransform(X_WGplace.rotation(), p), cfg,
+                                                                angle_deg=5.0))
+                   for k, p in enumerate(outs, start=1)]
+        sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
+        if sols_c is None:
+            failures.append(f"IK of {failed}")
+            continue
+        segments, q, p = [], q0, end.p_WH
+        for name, stages, sols in (("to pick", to_pick, sols_a), ("carry", carry, sols_b),
+                                   ("retreat", retreat, sols_c)):
+            pieces = []
+            for stage, q_to in zip(stages, sols, strict=True):
+                traj, failed = _optimise_piece(scenes, stage, q, q_to, p, cfg)
+                if traj is None:
+                    failures.append(f"trajectory optimisation to {stage.name}: " + ", ".join(failed))
+                    break
+                pieces.append(traj)
+                q, p = traj.value(traj.end_time()).ravel(), stage.p_W
+            else:
+                segments.append(PlaceSegment(name, pieces))
+                continue
+            break
+        else:
+            carry_end = segments[1].value(segments[1].duration)
+            X_WGend = _tool_pose_at(scenes["free"], carry_end)
+            return PlacePlan(segments, X_WB, X_GI, pb.X_WI, X_WGend @ X_GI, pb.goal,
+                             time.perf_counter() - t0)
+    raise PlanningError("no feasible pick and place: " + "; ".join(dict.fromkeys(failures)))

@@ -1,0 +1,389 @@
+"""Open, then place: the paper's last step (its Fig. 1e), planned and simulated on the true object.
+
+The scene: the object, the arm where the opening plan put its base, a small table beside the
+arm (`table_beside`) with an item on it (`nfr_drake.world.items`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.controllers import InverseDynamics
+from pydrake.systems.framework import BasicVector, DiagramBuilder
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from nfr_drake.errors import ConfigError
+from nfr_drake.objects.articulated import ArticulatedObject
+from nfr_drake.planning.place import PlaceConfig, PlacePlan
+from nfr_drake.planning.planner import PlanningError
+from nfr_drake.systems.articulation import (
+    _KD,
+    _KP,
+    CompliantCommand,
+    SimulationConfig,
+    _desired_state_trajectory,
+    grip_points,
+)
+from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.world.items import Item
+from nfr_drake.world.obstacles import distance_to_box
+from nfr_drake.world.plan import ObstacleBox, PlanResult
+from nfr_drake.world.robot import (
+    FINGER_OPEN,
+    HAND_BODIES,
+    NUM_ARM_JOINTS,
+    TOOL_FRAME,
+    add_floor,
+    add_panda,
+    add_pedestal,
+)
+
+TABLE_TOP = (0.3, 0.3)
+"""The table top's extent, m."""
+TABLE_ABOVE_BASE = 0.35
+"""The table top's height above the robot base, m (a level hand reaches the item more easily
+there than near the shoulder's height, 0.33 m)."""
+_TABLE_BEARINGS_DEG = (90.0, 70.0, 110.0, 50.0, 130.0)
+"""Directions of the table from the base tried, from its forward axis, degrees (both sides)."""
+ITEM_REACH = {"side": 0.6, "top": 0.5}
+"""The item's horizontal distance from the base axis, by grasp, m: a horizontal hand needs room."""
+_TABLE_CLEARANCE = 0.08
+
+
+def table_beside(X_WB: RigidTransform, obstacles: list[ObstacleBox], reach: float
+                 ) -> tuple[ObstacleBox, RigidTransform]:
+    """A table at the robot's side clear of `obstacles` by `_TABLE_CLEARANCE`, its centre `reach`
+    from the base axis, and the pose X_WI of an item at its centre, its x axis pointing away from
+    the base. Raises PlanningError when no spot is clear."""
+    z_top = X_WB.translation()[2] + TABLE_ABOVE_BASE
+    size = np.array([*TABLE_TOP, z_top])
+    yaw = RollPitchYaw(X_WB.rotation()).yaw_angle()
+    for bearing in np.radians(_TABLE_BEARINGS_DEG):
+        for side in (1.0, -1.0):
+            p_BT = reach * np.array([np.cos(bearing), side * np.sin(bearing), 0.0])
+            p_WT = X_WB.translation() * [1, 1, 0] + X_WB.rotation() @ p_BT
+            X_WT = RigidTransform(RollPitchYaw(0, 0, yaw), p_WT + [0, 0, z_top / 2])
+            table = ObstacleBox("table", size, X_WT)
+            grid = np.linspace(-1.0, 1.0, 5)
+            pts = np.array([[a, b, c] for a in grid for b in grid for c in (-1, 1)]) * size / 2
+            pts = (table.X_WB.rotation().matrix() @ pts.T).T + table.X_WB.translation()
+            if all(distance_to_box(box, pts).min() >= _TABLE_CLEARANCE for box in obstacles):
+                radial = p_WT - X_WB.translation() * [1, 1, 0]
+                X_WI = RigidTransform(RollPitchYaw(0, 0, np.arctan2(radial[1], radial[0])),
+                                      [p_WT[0], p_WT[1], z_top])
+                return table, X_WI
+    raise PlanningError("no spot beside the robot for the table clears the object")
+
+
+@dataclass
+class PlaceSimulationConfig:
+    """Options of `simulate_open_and_place`; `opening` are those of the opening's simulation
+    (`SimulationConfig`: time step, dwell, grasp capture, tolerances)."""
+
+    grasp: str = "constraint"
+    """"constraint": the hand holds the handle with a ball constraint and the item with a weld,
+    switched on when the fingers close on them (hand-handle and hand-item contact filtered out;
+    the arm compliant while it pulls, `SimulationConfig.grasped_stiffness`). "contact": the
+    fingers squeeze with `squeeze_force` and friction holds (no constraints, no filters, the
+    arm at its full stiffness throughout)."""
+    opening: SimulationConfig = field(default_factory=SimulationConfig)
+    squeeze_force: float = 40.0
+    """Contact grasp: force of each finger's PD on what it closes on, N (the Panda hand: 70 N)."""
+    release: float = 0.4
+    """Time the fingers take to open on the handle, then on the item, s."""
+    pick_dwell: float = 0.6
+    """Time the hand rests on the item while the fingers close, s."""
+    settle: float = 1.0
+    """Time after the last motion before the outcome is measured, s."""
+    place_tolerance: float = 0.03
+    """Largest distance from the item's bottom centre to the goal keypoint, m."""
+    rest_speed: float = 0.01
+    """The item rests when its speed is below this, m/s."""
+
+    def __post_init__(self) -> None:
+        if self.grasp not in GRASPS:
+            raise ConfigError(f"grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
+
+
+GRASPS = ("constraint", "contact")
+
+
+@dataclass
+class PlaceSimulationResult:
+    """What the simulated arm did. The opening (attributes as `SimulationResult`'s): grasped (the
+    handle), q_opened (articulation in [0, 1] when the opening ends), joint_error there (rad or
+    m), max_drift (hand to held grip point while pulling, m). The place: picked (the item left the
+    table in the hand), item_error (its bottom centre to the true goal at the end, m), inside (its
+    centre in the compartment's inner box), resting (speed under `rest_speed`), q_final
+    (articulation at the end; `still_open`: within the opening's tolerance of the target). times
+    (s, (M,)), q_object ((M,)), p_W_item (m, (M, 3)): the samples."""
+
+    grasp: str
+    joint_type: str
+    q_target: float
+    grasped: bool
+    q_opened: float
+    joint_error: float
+    max_drift: float
+    picked: bool
+    item_error: float
+    inside: bool
+    resting: bool
+    q_final: float
+    still_open: bool
+    opened: bool
+    success: bool
+    times: np.ndarray = field(repr=False)
+    q_object: np.ndarray = field(repr=False)
+    p_W_item: np.ndarray = field(repr=False)
+
+    def summary(self) -> str:
+        unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
+        verdict = "SUCCESS" if self.success else "FAILURE"
+        return (f"{verdict} ({self.grasp} grasp): opened {self.opened} (articulation {self.q_opened:.3f}, "
+                f"target {self.q_target:.3f}, error {self.joint_error * scale:.1f} {unit}, handle grasped "
+                f"{self.grasped}); item picked {self.picked}, {self.item_error * 100:.1f} cm from the goal, "
+                f"inside {self.inside}, resting {self.resting}; front still open {self.still_open} "
+                f"(articulation {self.q_final:.3f})")
+
+
+class _Stiffening(CompliantCommand):
+    """`CompliantCommand` whose gains come back in full at `t_stiff` (the handle let go)."""
+
+    def __init__(self, num_positions: int, num_scaled: int, t_soft: float, t_stiff: float, stiffness: float):
+        super().__init__(num_positions, num_scaled, t_soft, stiffness)
+        self._t_stiff = t_stiff
+
+    def _calc_command(self, context, output: BasicVector) -> None:
+        if context.get_time() >= self._t_stiff:
+            output.SetFromVector(self.get_input_port(0).Eval(context))
+            return
+        super()._calc_command(context, output)
+
+
+@dataclass
+class _Timeline:
+    """Times of the combined run, s: the opening's (grasp switched on, pull from, end), the
+    release of the handle, the item's grasp (switched on) and release, the end."""
+
+    t_activate: float
+    t_pull: float
+    t_opened: float
+    t_item: float
+    t_item_release: float
+    t_end: float
+
+
+def _desired_states(open_plan: PlanResult, place: PlacePlan, cfg: PlaceSimulationConfig, finger_closed: float,
+                    finger_item: float) -> tuple[PiecewisePolynomial, _Timeline]:
+    """[q; v] of the robot (9 + 9) over the whole run: the opening as `simulate_articulation`
+    plays it, the fingers opening, the segments with the fingers closing on the item after the
+    first and opening after the second, the settling time."""
+    opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
+    t_o = opening.end_time()
+    to_pick, carry, retreat = place.segments
+    t1 = t_o + cfg.release
+    t2 = t1 + to_pick.duration
+    t3 = t2 + cfg.pick_dwell
+    t4 = t3 + carry.duration
+    t5 = t4 + cfg.release
+    t6 = t5 + retreat.duration
+    end = t6 + cfg.settle
+    dt = 0.01
+    times = np.unique(np.r_[np.arange(t_o, end, dt), t1, t2, t3, t4, t5, t6, end])
+    q_end_open = opening.value(t_o).ravel()[:9]
+
+    def arm(t: float) -> np.ndarray:
+        for start, seg in ((t1, to_pick), (t3, carry), (t5, retreat)):
+            if t < start:
+                break
+            last = (start, seg)
+        else:
+            last = (t5, retreat)
+        if t < t1:
+            return q_end_open
+        start, seg = last
+        return seg.value(min(t - start, seg.duration))
+
+    def fingers(t: float) -> float:
+        ramp = lambda a, b, t0, d: a + np.clip((t - t0) / d, 0.0, 1.0) * (b - a)  # noqa: E731
+        if t < t2:
+            return ramp(finger_closed, FINGER_OPEN, t_o, cfg.release)
+        if t < t4:
+            return ramp(FINGER_OPEN, finger_item, t2, cfg.pick_dwell)
+        return ramp(finger_item, FINGER_OPEN, t4, cfg.release)
+
+    q = np.array([arm(t) for t in times])
+    v = np.gradient(q, times, axis=0)
+    q[:, NUM_ARM_JOINTS:] = np.array([fingers(t) for t in times])[:, None]
+    v[:, NUM_ARM_JOINTS:] = 0.0
+    head_t = np.array(opening.get_segment_times())
+    head_t = head_t[head_t < t_o]
+    head = np.array([opening.value(t).ravel() for t in head_t])
+    knots = np.r_[head_t, times]
+    values = np.vstack([head, np.hstack([q, v])]).T
+    t_g = open_plan.t_grasp
+    timeline = _Timeline(t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o,
+                         t2 + 0.5 * cfg.pick_dwell, t4, end)
+    return PiecewisePolynomial.FirstOrderHold(knots, values), timeline
+
+
+def _interior(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> tuple[RigidTransform, np.ndarray]:
+    """The compartment's inner box (pose X_WC of its centre, half extents, m) of a closet, or of a
+    drawer pulled out to q, from the sampled parameters."""
+    p = obj.params
+    W, D, H, t = p["width"], p["depth"], p["height"], p["panel_thickness"]
+    if obj.category == "closet":
+        centre, half = [0.0, 0.0, H / 2], [D / 2 - t, W / 2 - t, H / 2 - t]
+    else:
+        box_d = p["box_depth"]
+        x_front = D / 2 + q * obj.front(0).joint_upper
+        centre, half = [x_front - box_d / 2, 0.0, H / 2], [box_d / 2, W / 2 - t, H / 2 - t]
+    return X_WO @ RigidTransform(centre), np.array(half)
+
+
+def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float,
+                            open_plan: PlanResult, place: PlacePlan, item: Item, table: ObstacleBox,
+                            meshcat: Meshcat | None = None,
+                            config: PlaceSimulationConfig | None = None) -> PlaceSimulationResult:
+    """Open front 0 of `obj` (at X_WO, shut at q_start) with `open_plan`, then pick `item` from
+    `table` and place it with `place`, in one SAP simulation; records into `meshcat` if given."""
+    cfg = config or PlaceSimulationConfig()
+    sim = cfg.opening
+    contact = cfg.grasp == "contact"
+    scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=sim.time_step, discrete_contact_approximation="sap"), builder)
+    robot = add_panda(plant, open_plan.X_WB)
+    add_floor(plant)
+    add_pedestal(plant, open_plan.X_WB)
+    model = scene_object.add_to(plant)
+    shape = Box(*table.size)
+    world = plant.world_body()
+    plant.RegisterCollisionGeometry(world, table.X_WB, shape, "table", CoulombFriction(0.8, 0.8))
+    plant.RegisterVisualGeometry(world, table.X_WB, shape, "table", np.array([0.55, 0.4, 0.3, 1.0]))
+    item_body = item.add_to(plant)
+    robot_actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
+    for actuator, kp, kd in zip([a for a in robot_actuators if a.model_instance() == robot], _KP, _KD,
+                                strict=True):
+        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    hand = plant.GetBodyByName("panda_hand", robot)
+    handle_body = plant.GetBodyByName(scene_object.handle_body_name, model)
+    X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
+    bar_B = scene_object.bar_B / np.linalg.norm(scene_object.bar_B)
+    grips_B = grip_points(scene_object.p_BH, bar_B, scene_object.grip_half_length, sim.grip_spacing)
+    handle_ids, item_id = [], None
+    if not contact:
+        handle_ids = [plant.AddBallConstraint(hand, X_HT.translation(), handle_body, p_BG)
+                      for p_BG in grips_B]
+        item_id = plant.AddWeldConstraint(hand, X_HT @ place.X_GI, item_body, RigidTransform())
+    plant.Finalize()
+
+    joint = plant.GetJointByName(scene_object.joint_name, model)
+    if not contact:  # the constraints are the grasps
+        hand_bodies = [plant.GetBodyByName(name, robot) for name in HAND_BODIES]
+        moving = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])]
+        hand_set, held = (GeometrySet([g for b in bodies for g in plant.GetCollisionGeometriesForBody(b)])
+                          for bodies in (hand_bodies, [*moving, item_body]))
+        scene_graph.collision_filter_manager().Apply(
+            CollisionFilterDeclaration().ExcludeBetween(hand_set, held))
+
+    controller_plant = MultibodyPlant(0.0)
+    add_panda(controller_plant, open_plan.X_WB)
+    controller_plant.Finalize()
+    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
+        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+    builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
+    builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
+    squeeze = -cfg.squeeze_force / _KP[NUM_ARM_JOINTS]  # a finger target that far past the closed pads
+    desired, times = _desired_states(open_plan, place, cfg, squeeze if contact else sim.finger_closed,
+                                     squeeze if contact else item.width / 2)
+    source = builder.AddNamedSystem("plan", TrajectorySource(desired))
+    command = builder.AddNamedSystem("compliance", _Stiffening(
+        plant.num_positions(robot), NUM_ARM_JOINTS, times.t_activate, times.t_opened,
+        1.0 if contact else sim.grasped_stiffness))
+    builder.Connect(source.get_output_port(), command.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
+    builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    ctx = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    lower = joint.position_lower_limits()[0]
+    span = joint.position_upper_limits()[0] - lower
+    set_joint_value(plant, ctx, joint, lower + q_start * span)
+    plant.SetPositions(ctx, robot, open_plan.trajectory.value(0.0).ravel())
+    plant.SetFreeBodyPose(ctx, item_body, place.X_WI_pick)
+    for cid in [*handle_ids, *([item_id] if item_id is not None else [])]:
+        plant.SetConstraintActiveStatus(ctx, cid, False)
+    if meshcat is not None:
+        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=False)
+    simulator.Initialize()
+
+    tool = plant.GetFrameByName(TOOL_FRAME, robot)
+    samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_activate,
+                              times.t_opened, times.t_item, times.t_item_release, times.t_end])
+    grip, held_handle, drift, p_item, q_object, q_opened, lifted = 0, [], [], [], [], float("nan"), 0.0
+    for t in samples:
+        simulator.AdvanceTo(t)
+        X_WT = tool.CalcPoseInWorld(ctx)
+        X_WH = plant.EvalBodyPoseInWorld(ctx, handle_body)
+        if t <= times.t_activate:
+            grip = int(np.argmin(np.linalg.norm(grips_B - X_WH.inverse() @ X_WT.translation(), axis=1)))
+        p_grip = X_WH @ grips_B[grip]
+        if t == times.t_activate:  # the fingers have closed on the handle
+            held_handle = [bool(np.all(np.abs(X_WT.inverse() @ p_grip) <= sim.capture_half_extents))]
+            if held_handle[0] and not contact:
+                plant.SetConstraintActiveStatus(ctx, handle_ids[grip], True)
+        if times.t_pull <= t <= times.t_opened:
+            drift.append(np.linalg.norm(X_WT.translation() - p_grip))
+        if t == times.t_opened:
+            q_opened = (joint.GetOnePosition(ctx) - lower) / span
+            if not contact and held_handle[0]:
+                plant.SetConstraintActiveStatus(ctx, handle_ids[grip], False)
+        X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
+        if t == times.t_item and not contact:
+            offset = np.linalg.norm((X_WT.inverse() @ X_WI).translation() - place.X_GI.translation())
+            if offset <= np.linalg.norm(sim.capture_half_extents):
+                plant.SetConstraintActiveStatus(ctx, item_id, True)
+        if t == times.t_item_release and not contact:
+            plant.SetConstraintActiveStatus(ctx, item_id, False)
+        if times.t_item < t <= times.t_item_release:
+            lifted = max(lifted, X_WI.translation()[2] - place.X_WI_pick.translation()[2])
+        p_item.append(X_WI.translation())
+        q_object.append((joint.GetOnePosition(ctx) - lower) / span)
+    if meshcat is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+
+    revolute = joint.type_name() == "revolute"
+    tolerance = sim.revolute_tolerance if revolute else sim.prismatic_tolerance
+    q_final = (joint.GetOnePosition(ctx) - lower) / span
+    joint_error = abs(q_opened - q_target) * span
+    max_drift = float(max(drift)) if drift else float("nan")
+    grasped = bool(held_handle and held_handle[0])
+    opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
+    X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
+    goal = scene_object.ground_truth.point("goal", q_final)
+    item_error = float(np.linalg.norm(X_WI.translation() - goal))
+    X_WC, half = _interior(obj, X_WO, q_final)
+    inside = bool(np.all(np.abs(X_WC.inverse() @ (X_WI @ [0.0, 0.0, item.height / 2])) <= half))
+    resting = float(np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(ctx, item_body).translational())) \
+        < cfg.rest_speed
+    still_open = abs(q_final - q_target) * span <= tolerance
+    picked = lifted >= 0.5 * PlaceConfig().lift_height
+    success = opened and picked and inside and resting and still_open and item_error <= cfg.place_tolerance
+    return PlaceSimulationResult(cfg.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
+                                 float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
+                                 resting, float(q_final), still_open, opened, success, samples,
+                                 np.array(q_object), np.array(p_item))
