@@ -227,6 +227,46 @@ def _detector_view(image: np.ndarray, prob: np.ndarray, frame: CaptureFrame, siz
     return cv2.resize(overlay, size, interpolation=cv2.INTER_NEAREST)
 
 
+def write_report(path: Path, fitted: FittedModel, capture: CaptureSet, result: FitResult,
+                 outcome: FitOutcome, with_detector: bool = True) -> np.ndarray:
+    """Write `observed_vs_rendered` of the fit, pixels doubled, as a PNG at `path`; the detector's
+    row when `with_detector` and the model ships one. Returns the written uint8 RGB image."""
+    figure = observed_vs_rendered(
+        fitted.model, outcome.z, outcome.q, capture,
+        detector=fitted.handle_detector if with_detector else None,
+        sighted_p_O=result.extra["handle_sighting"].get("p_O"),
+        handle_p_O=result.keypoints.get("handle"))
+    figure = np.repeat(np.repeat(figure, 2, 0), 2, 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(figure, cv2.COLOR_RGB2BGR))
+    return figure
+
+
+def write_point_cloud(path: Path, fitted: FittedModel, capture: CaptureSet, outcome: FitOutcome) -> int:
+    """Write the fitted object's semantically labelled points at the fitted q, seen from the
+    capture's cameras, as a PLY at `path`. Returns the number of points."""
+    from nfr_drake.perception.pointcloud import write_semantic_ply
+
+    views = [(f.camera, f.X_OC) for f in capture.frames]
+    points, classes = semantic_point_cloud(fitted.model, outcome.z, outcome.q, views)
+    write_semantic_ply(path, points, classes)
+    return len(points)
+
+
+def handle_path_on(q: np.ndarray, result: FitResult) -> np.ndarray:
+    """The result's handle path (N, 3) in O, m, linearly interpolated at the articulations q (N,)."""
+    return np.array([np.interp(q, result.trajectory_q, result.trajectory["handle"][:, j])
+                     for j in range(3)]).T
+
+
+def write_handle_plot(path: Path, capture: CaptureSet, result: FitResult) -> None:
+    """Plot the result's handle path against the capture's true one (its gt.json) as a PNG at `path`."""
+    grid = np.asarray(capture.gt["trajectory"]["q"])
+    plot_handle_paths(grid, np.asarray(capture.gt["trajectory"]["keypoints"]["handle"]),
+                      {"neural field": handle_path_on(grid, result)}, path,
+                      f"{capture.root.name}: true q = {capture.gt['q']:.2f}, fitted q = {result.q:.2f}")
+
+
 def infer_command(
     capture: Annotated[Path, tyro.conf.Positional],
     model: Path = Path("models/closet"),
@@ -279,27 +319,11 @@ def infer_command(
     for warning in result.extra["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
     if report is not None:
-        seen = result.extra["handle_sighting"]
-        figure = observed_vs_rendered(
-            fitted.model, outcome.z, outcome.q, cap,
-            detector=fitted.handle_detector if fit.handle_detector else None,
-            sighted_p_O=seen.get("p_O"), handle_p_O=result.keypoints.get("handle"))
-        report.parent.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(report), cv2.cvtColor(np.repeat(np.repeat(figure, 2, 0), 2, 1),
-                                              cv2.COLOR_RGB2BGR))
+        write_report(report, fitted, cap, result, outcome, fit.handle_detector)
         print(f"report: {report}")
     if point_cloud is not None:
-        from nfr_drake.perception.pointcloud import write_semantic_ply
-
-        views = [(f.camera, f.X_OC) for f in cap.frames]
-        points, classes = semantic_point_cloud(fitted.model, outcome.z, outcome.q, views)
-        write_semantic_ply(point_cloud, points, classes)
-        print(f"point cloud: {point_cloud} ({len(points)} points)")
+        count = write_point_cloud(point_cloud, fitted, cap, outcome)
+        print(f"point cloud: {point_cloud} ({count} points)")
     if handle_plot is not None:
-        grid = np.asarray(cap.gt["trajectory"]["q"])
-        predicted = np.array([np.interp(grid, result.trajectory_q, result.trajectory["handle"][:, j])
-                              for j in range(3)]).T
-        plot_handle_paths(grid, np.asarray(cap.gt["trajectory"]["keypoints"]["handle"]),
-                          {"neural field": predicted}, handle_plot,
-                          f"{cap.root.name}: true q = {cap.gt['q']:.2f}, fitted q = {result.q:.2f}")
+        write_handle_plot(handle_plot, cap, result)
         print(f"handle plot: {handle_plot}")

@@ -48,3 +48,38 @@ def test_unwritable_outputs_fail_before_the_fit(one_view, model_folder, tmp_path
                                                   for x in (k, v)])
         err = capsys.readouterr().err
         assert status == 2 and f"{option} {bad}" in err and err.count("\n") == 1
+
+
+@pytest.fixture(scope="module")
+def three_views(tmp_path_factory):
+    return _capture(tmp_path_factory.mktemp("three_views"), 3)
+
+
+def test_report_point_cloud_and_handle_plot_are_written(three_views, model_folder, tmp_path, capsys):
+    import cv2
+
+    from nfr_drake.perception.pointcloud import read_semantic_ply
+
+    out = {name: tmp_path / "sub" / name for name in ("r.json", "report.png", "cloud.ply", "handle.png")}
+    assert _infer(three_views, model_folder, "--out", out["r.json"], "--report", out["report.png"],
+                  "--point-cloud", out["cloud.ply"], "--handle-plot", out["handle.png"]) == 0
+    stdout = capsys.readouterr().out
+    points, classes = read_semantic_ply(out["cloud.ply"])
+    assert f"point cloud: {out['cloud.ply']} ({len(points)} points)" in stdout
+    assert len(points) == len(classes) and set(classes.tolist()) <= {1, 2, 3}
+    report = cv2.imread(str(out["report.png"]))
+    # three rows (photos, renders, segmentation) of 16 px views, 2 px gaps, pixels doubled
+    assert report.shape[:2] == (2 * (3 * 18 + 2), 2 * (3 * 18 + 2))
+    assert cv2.imread(str(out["handle.png"])) is not None
+    assert f"report: {out['report.png']}" in stdout and f"handle plot: {out['handle.png']}" in stdout
+
+
+def test_handle_path_on_interpolates_the_trajectory():
+    import numpy as np
+
+    from nfr_drake.inference.result import FitResult
+
+    path = np.array([[0.0, 0.0, 0.0], [1.0, -2.0, 4.0]])
+    result = FitResult("closet", 0.5, {}, np.array([0.0, 1.0]), {"handle": path}, 0.0, 0.0)
+    np.testing.assert_allclose(infer_module.handle_path_on(np.array([0.0, 0.25, 1.0]), result),
+                               [[0, 0, 0], [0.25, -0.5, 1.0], [1, -2, 4]])
