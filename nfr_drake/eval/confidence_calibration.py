@@ -30,7 +30,8 @@ from nfr_drake.inference.infer import FittedModel
 TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
          ("edge_contact", "identity"), ("sighting_missing", "identity"),
          ("sighting_gap_m", "log10_cm"), ("code_distance", "identity")]
-"""The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`)."""
+"""The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`), each
+oriented so that more means a worse fit: its coefficient is held <= 0 (`calibrate`)."""
 
 SUCCESS_M = 0.02
 """A fit succeeds when its handle is within this distance of the truth, m."""
@@ -69,13 +70,23 @@ def featurize(lines: list[dict]) -> list[dict]:
 def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: float = 1.0
               ) -> ConfidenceModel:
     """The logistic regression on `rows` (features and handle_error_m) with the threshold of
-    `pick_threshold`."""
+    `pick_threshold`. Monotone: every term is oriented so that more is worse, and a term whose
+    coefficient comes out > 0 (more of it, more confidence: the sample's quirk, e.g. occluded
+    fits that are right in spite of a high image loss) is dropped (coefficient 0), the most
+    positive first, until none is."""
     raw = ConfidenceModel(terms, [0.0] * len(terms), [1.0] * len(terms), [0.0] * len(terms), 0.0,
                           0.0, source)
     X = np.array([raw.design(r) for r in rows])
     mean, std = X.mean(0), X.std(0) + 1e-9
+    X = (X - mean) / std
     y = np.array([r["handle_error_m"] <= SUCCESS_M for r in rows], float)
-    coef, intercept = fit_logistic((X - mean) / std, y, l2)
+    active = np.ones(len(terms), bool)
+    while True:
+        coef = np.zeros(len(terms))
+        coef[active], intercept = fit_logistic(X[:, active], y, l2)
+        if coef.max() <= 0:
+            break
+        active[int(np.argmax(coef))] = False
     model = ConfidenceModel(terms, mean.tolist(), std.tolist(), coef.tolist(), intercept, 0.0, source)
     p = np.array([model.probability(r) for r in rows])
     model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] == "clean" for r in rows]))

@@ -1,0 +1,37 @@
+"""The fit-confidence calibration: monotone in every term, threshold from the calibration split."""
+
+import numpy as np
+
+from nfr_drake.eval.confidence_calibration import calibrate, pick_threshold, refusal_table
+
+TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus")]
+
+
+def _rows(n=300, seed=0):
+    """Fits whose handle error grows with 1 - silhouette IoU, and whose image loss is *lower* on
+    the bad fits (the wrong direction, as a sample's quirk may have it)."""
+    rng = np.random.default_rng(seed)
+    iou = rng.uniform(0.5, 1.0, n)
+    error = np.where(rng.uniform(size=n) < (iou - 0.5) * 2, 0.01, 0.10)
+    loss = np.where(error > 0.02, 10 ** rng.uniform(-3.5, -3, n), 10 ** rng.uniform(-3, -2, n))
+    return [{"image_loss_worst_view": float(a), "silhouette_iou_worst_view": float(b),
+             "handle_error_m": float(e), "variant": "clean", "split": "calibration", "kind": "clean"}
+            for a, b, e in zip(loss, iou, error, strict=True)]
+
+
+def test_a_term_that_would_raise_confidence_with_a_worse_fit_is_dropped():
+    rows = _rows()
+    model = calibrate(rows, TERMS, {})
+    assert model.coef[0] == 0.0 and model.coef[1] < 0.0  # image loss dropped; IoU kept
+    p = [model.probability({"image_loss_worst_view": 1e-3, "silhouette_iou_worst_view": v})
+         for v in np.linspace(0.5, 1.0, 11)]
+    assert np.all(np.diff(p) > 0)  # a better silhouette, more confidence
+    table = refusal_table(rows, model)
+    assert "| calibration | clean | 300 |" in table
+
+
+def test_the_threshold_refuses_no_clean_success_of_the_calibration_split():
+    p = np.array([0.9, 0.37, 0.2, 0.8])
+    success = np.array([True, True, False, True])
+    assert pick_threshold(p, success, np.ones(4, bool)) == 0.36
+    assert pick_threshold(p, success, np.array([True, False, True, True])) == 0.5  # at most 0.5
