@@ -20,6 +20,7 @@ what to change (`SceneObject.from_model_file` composes these).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +44,9 @@ FLOAT_NOTICE = 0.05
 """A model whose lowest point is higher above the floor than this is noted (a wall cabinet?), m."""
 MAX_AXIS_TILT_DEG = 30.0
 """A hinge more than this from vertical, or a slide less than 90 minus this from it, is refused."""
+SHUT_EVIDENCE = 0.05
+"""How much nearer the rest of the model the handle must be at the open limit than at the shut one
+the rule picks for the geometry to overrule it, m."""
 CONCAVE_FILL = 0.9
 """A closed .obj mesh filling less than this fraction of its convex hull is reported as concave."""
 MAX_HANDLE_WIDTH = 0.2
@@ -143,6 +147,22 @@ def shut_and_open(joint, closed_at: str | None) -> tuple[float, float]:
                 "--closed-at lower or --closed-at upper")
         closed_at = "lower" if abs(lower) < abs(upper) else "upper"
     return (lower, upper) if closed_at == "lower" else (upper, lower)
+
+
+def shut_by_geometry(handle_at: Callable[[float], np.ndarray], static_box: tuple[np.ndarray, np.ndarray],
+                     shut: float, opened: float, joint_name: str) -> tuple[float, float, list[str]]:
+    """The rule's (shut, open) joint values, swapped when the handle is more than `SHUT_EVIDENCE`
+    nearer the box bounding the parts that do not move (lo, hi in W, m) at the open one (a model
+    drawn open), with a note saying so. `handle_at(value)`: the handle in W, m, at a joint value."""
+    lo, hi = static_box
+    distances = [float(np.linalg.norm(np.maximum(lo - p, 0.0) + np.maximum(p - hi, 0.0)))
+                 for p in (handle_at(shut), handle_at(opened))]
+    if distances[0] <= distances[1] + SHUT_EVIDENCE:
+        return shut, opened, []
+    return opened, shut, [
+        f"joint {joint_name!r} is taken as shut at {opened:.3g}, where its handle is "
+        f"{(distances[0] - distances[1]) * 100:.0f} cm nearer the rest of the model than at {shut:.3g} "
+        "(the model is drawn open?); --closed-at says otherwise"]
 
 
 def body_box(plant: MultibodyPlant, inspector: SceneGraphInspector, body,

@@ -19,6 +19,7 @@ from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJ
 from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.objects.articulated import ArticulatedObject, Front
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.systems.model_files import (
@@ -32,6 +33,7 @@ from nfr_drake.systems.model_files import (
     massless_parts,
     mesh_problems,
     shut_and_open,
+    shut_by_geometry,
     slide_front_normal,
 )
 from nfr_drake.world.keypoints import (
@@ -104,6 +106,17 @@ def grip_half_length(front: Front) -> float:
 def random_part(obj: ArticulatedObject, rng: np.random.Generator) -> int:
     """A front index of `obj` drawn uniformly from `rng` (the piece's own stream, after the piece)."""
     return int(rng.integers(obj.num_fronts))
+
+
+def sampled_part(category: str, seed: int, index: int, X_WO: RigidTransform, part: int | None = None
+                 ) -> tuple[ArticulatedObject, int, SceneObject]:
+    """Object `index` of `category` drawn from object_rng(SEED_DOMAIN_TRAIN, seed, index), the part
+    to open (`part`, else `random_part` from the object's stream) and that part shut at pose X_WO."""
+    rng = object_rng(SEED_DOMAIN_TRAIN, seed, index)
+    obj = sample_object(category, rng)
+    drawn = random_part(obj, rng)
+    part = drawn if part is None else part
+    return obj, part, SceneObject.from_articulated_object(obj, X_WO, 0.0, part=part)
 
 
 @dataclass(frozen=True)
@@ -226,25 +239,39 @@ class SceneObject:
         context = plant.CreateDefaultContext()
         for other in others:
             set_joint_value(plant, context, plant.GetJointByName(other.name(), model), 0.0)
-        set_joint_value(plant, context, joint, shut)
         body = plant.GetBodyByName(handle_body_name, model)
-        p_BH, grip_B, grip_half = handle_grip(plant, inspector, body)
-        notes += handle_notes(plant, inspector, body)
-        revolute = isinstance(joint, RevoluteJoint)
-        X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
-        axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
-        bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
-        corners = [box_corners(plant.EvalBodyPoseInWorld(context, b) @ RigidTransform((box[0] + box[1]) / 2),
-                               box[1] - box[0])
-                   for b in bodies for box in [body_box(plant, inspector, b)] if box is not None]
-        if not corners:
-            raise NfrDrakeError(f"{path} has no geometry")
-        notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
-        X_WB = plant.EvalBodyPoseInWorld(context, body)
         moving = set(plant.GetBodiesKinematicallyAffectedBy([joint.index()]))
         if body.index() not in moving:
             raise NfrDrakeError(f"the handle body {handle_body_name!r} does not move with joint "
                                 f"{joint_name!r}; give --handle-body a body on the moving part")
+        p_BH, grip_B, grip_half = handle_grip(plant, inspector, body)
+        notes += handle_notes(plant, inspector, body)
+        bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
+
+        def corners_W(of) -> list[np.ndarray]:  # the corners (8, 3) in W of each geometry box of `of`
+            return [box_corners(plant.EvalBodyPoseInWorld(context, b) @ RigidTransform((box[0] + box[1]) / 2),
+                                box[1] - box[0])
+                    for b in of for box in [body_box(plant, inspector, b)] if box is not None]
+
+        def handle_at(value: float) -> np.ndarray:
+            set_joint_value(plant, context, joint, value)
+            return plant.EvalBodyPoseInWorld(context, body) @ p_BH
+
+        static = corners_W([b for b in bodies if b.index() not in moving])
+        if closed_at is None and static:
+            static = np.concatenate(static)
+            shut, opened, drawn_open = shut_by_geometry(handle_at, (static.min(0), static.max(0)),
+                                                        shut, opened, joint_name)
+            notes += drawn_open
+        set_joint_value(plant, context, joint, shut)
+        corners = corners_W(bodies)
+        if not corners:
+            raise NfrDrakeError(f"{path} has no geometry")
+        revolute = isinstance(joint, RevoluteJoint)
+        X_WJ = joint.frame_on_parent().CalcPoseInWorld(context)
+        axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
+        notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
+        X_WB = plant.EvalBodyPoseInWorld(context, body)
         notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
         front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body,
                                                            X_WB @ p_BH, axis_W)

@@ -61,6 +61,17 @@ def test_a_joint_shut_at_its_upper_limit_starts_shut(models):
     assert load(fridge, closed_at="lower").joint_range == (-1.9, 0.0)
 
 
+def test_a_model_drawn_open_is_shut_where_its_handle_meets_the_rest(models):
+    """Joint value 0 is the door open 90 degrees; the rule (the limit nearer 0) would call that shut."""
+    model = models["base_cabinet_drawn_open"]
+    obj = load(model)
+    assert obj.joint_range == pytest.approx((-np.pi / 2, 0.0), abs=1e-5)
+    assert any("taken as shut at -1.57" in note for note in obj.notes)
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3235, 0.24, 0.6], atol=1e-5)
+    forced = load(model, closed_at="upper")  # the user's word stands
+    assert forced.joint_range == pytest.approx((0.0, -np.pi / 2), abs=1e-5) and not forced.notes
+
+
 def test_a_joint_with_no_clear_shut_limit_asks_for_closed_at(tmp_path):
     links = [Link("box", (), 5.0), Link("door", (), 1.0)]
     joints = [Joint("hinge", "revolute", "box", "door", limits=(-1.0, 1.0))]
