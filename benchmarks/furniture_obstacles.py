@@ -18,9 +18,8 @@ import numpy as np
 import tyro
 from pydrake.math import RigidTransform
 
-from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlanningError, plan_articulation
-from nfr_drake.systems.scene_objects import SceneObject, random_part
+from nfr_drake.systems.scene_objects import sampled_part
 from nfr_drake.systems.task import OPEN_TARGET
 from nfr_drake.world.obstacles import object_obstacles
 
@@ -30,10 +29,7 @@ def main(count: int = 100, plan_count: int = 10, seed: int = 7) -> None:
     boxes = {True: [], False: []}
     plans = {True: [], False: []}
     for i in range(count):
-        rng = object_rng(SEED_DOMAIN_TRAIN, seed, i)
-        obj = sample_object("furniture", rng)
-        part = random_part(obj, rng)
-        scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0, part=part)
+        obj, part, scene_object = sampled_part("furniture", seed, i, RigidTransform())
         line = f"{i:3d} {obj.params['kind']:13s} part {part} {obj.front(part).kind:6s}"
         for merge in (True, False):
             obstacles = object_obstacles(obj, RigidTransform(), 0.0, moving=part, merge=merge)

@@ -14,8 +14,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.systems.scene_objects import SceneObject, random_part
+from nfr_drake.systems.scene_objects import sampled_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 
 FIELDS = ("category", "seed", "index", "kind", "part", "part_type", "handle_height", "width", "height",
@@ -39,10 +38,7 @@ class PlanningEvalConfig:
 def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float]) -> dict:
     """Open one sampled object (a random part of it) from q = 0 to the target of its part's joint
     (`targets` by SceneObject category, "closet" or "drawer"); one CSV row."""
-    rng = object_rng(SEED_DOMAIN_TRAIN, seed, index)
-    obj = sample_object(category, rng)
-    part = random_part(obj, rng)
-    scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0, part=part)
+    obj, part, scene_object = sampled_part(category, seed, index, RigidTransform())
     q_target = targets[scene_object.category]
     outcome = run_task(scene_object, q_target)
     sim = outcome.simulation

@@ -7,10 +7,9 @@ from pathlib import Path
 from typing import Literal
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlanningError
-from nfr_drake.systems.scene_objects import SceneObject, object_pose, random_part
-from nfr_drake.systems.task import OPEN_TARGET, run_task
+from nfr_drake.systems.scene_objects import SceneObject, object_pose, sampled_part
+from nfr_drake.systems.task import run_task, task_span
 
 
 def plan_command(
@@ -70,20 +69,11 @@ def plan_command(
         for note in scene_object.notes:
             print(f"warning: {note}")
     else:
-        rng = object_rng(SEED_DOMAIN_TRAIN, seed, 0)
-        obj = sample_object(category, rng)
-        drawn = random_part(obj, rng)
-        part = drawn if part is None else part
-        scene_object = SceneObject.from_articulated_object(obj, X_WO, 0.0, part=part)
+        obj, part, scene_object = sampled_part(category, seed, 0, X_WO, part)
         if obj.num_fronts > 1:
             print(f"{obj.params.get('kind', obj.category)} with {obj.num_fronts} parts; opening part "
                   f"{part} ({obj.front(part).kind})")
-    open_q = OPEN_TARGET[scene_object.category]
-    q0 = start_q if start_q is not None else (0.0 if task == "open" else open_q)
-    q1 = target_q if target_q is not None else (open_q if task == "open" else 0.0)
-    for name, value in (("start_q", q0), ("target_q", q1)):
-        if not 0.0 <= value <= 1.0:
-            raise NfrDrakeError(f"{name} {value} is outside [0, 1]")
+    q0, q1 = task_span(scene_object.category, task, start_q, target_q)
     scene_object = replace(scene_object, ground_truth=scene_object.ground_truth.with_current(q0))
 
     from pydrake.geometry import Meshcat

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.planning.grasp import carcass_box, door_panel_box
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
@@ -21,6 +23,19 @@ from nfr_drake.world.plan import PlanResult
 
 OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
 """Default articulation an `open` task reaches (and a `close` task starts from)."""
+
+
+def task_span(category: str, task: Literal["open", "close"], start_q: float | None = None,
+              target_q: float | None = None) -> tuple[float, float]:
+    """(start q, target q) of opening or closing a SceneObject of `category`: the given values, by
+    default 0 -> OPEN_TARGET to open and OPEN_TARGET -> 0 to close. NfrDrakeError outside [0, 1]."""
+    open_q = OPEN_TARGET[category]
+    q0 = start_q if start_q is not None else (0.0 if task == "open" else open_q)
+    q1 = target_q if target_q is not None else (open_q if task == "open" else 0.0)
+    for name, value in (("start_q", q0), ("target_q", q1)):
+        if not 0.0 <= value <= 1.0:
+            raise NfrDrakeError(f"{name} {value} is outside [0, 1]")
+    return q0, q1
 
 
 @dataclass

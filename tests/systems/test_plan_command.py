@@ -88,3 +88,41 @@ def test_a_scenario_with_a_non_finite_pose_is_refused():
         Scenario(object_xyz=[0.0, float("nan"), 0.0])
     with pytest.raises(ConfigError, match="finite"):
         Scenario(object_yaw_deg=float("-inf"))
+
+
+@pytest.mark.parametrize("category,task,given,span", [
+    ("closet", "open", (None, None), (0.0, 0.6)),
+    ("drawer", "open", (None, None), (0.0, 1.0)),
+    ("drawer", "close", (None, None), (1.0, 0.0)),
+    ("closet", "close", (0.3, None), (0.3, 0.0)),
+    ("closet", "open", (0.2, 0.9), (0.2, 0.9)),
+])
+def test_task_span_defaults_and_given_values(category, task, given, span):
+    from nfr_drake.systems.task import task_span
+
+    assert task_span(category, task, *given) == span
+
+
+def test_task_span_refuses_q_outside_the_unit_interval():
+    from nfr_drake.errors import NfrDrakeError
+    from nfr_drake.systems.task import task_span
+
+    with pytest.raises(NfrDrakeError, match="target_q 1.2 is outside"):
+        task_span("closet", "open", None, 1.2)
+
+
+def test_sampled_part_draws_the_part_from_the_pieces_stream_unless_given():
+    from pydrake.math import RigidTransform
+
+    from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+    from nfr_drake.systems.scene_objects import random_part, sampled_part
+
+    rng = object_rng(SEED_DOMAIN_TRAIN, 7, 3)
+    expected = sample_object("furniture", rng)
+    drawn = random_part(expected, rng)
+    obj, part, scene_object = sampled_part("furniture", 7, 3, RigidTransform())
+    assert obj.params == expected.params and part == drawn
+    assert scene_object.joint_name == obj.front(part).joint_name
+    other = (drawn + 1) % obj.num_fronts
+    _, part, scene_object = sampled_part("furniture", 7, 3, RigidTransform(), other)
+    assert part == other and scene_object.joint_name == obj.front(other).joint_name
