@@ -49,6 +49,8 @@ SHUT_EVIDENCE = 0.05
 the rule picks for the geometry to overrule it, m."""
 CONCAVE_FILL = 0.9
 """A closed .obj mesh filling less than this fraction of its convex hull is reported as concave."""
+MIN_HANDLE_REACH = 0.01
+"""How far a handle's geometry must reach out of its part's for the fingers to close on it, m."""
 MAX_HANDLE_WIDTH = 0.2
 """A handle body whose geometry is wider than this both ways across its length (a door, not a bar)
 is noted, m."""
@@ -263,22 +265,49 @@ def handle_notes(plant: MultibodyPlant, inspector: SceneGraphInspector, body) ->
     return []
 
 
-def slide_front_normal(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
-                       handle_body, p_WH: np.ndarray, axis_W: np.ndarray) -> np.ndarray | None:
-    """The outward normal (3,) in W of a sliding door's front, or None for a drawer.
-
-    The handle stands out of the box bounding the part's other geometry (in the joint's child
-    frame) along one of its axes: across the slide and horizontally for a sliding door, along the
-    slide for a drawer. No such side (the handle inside the box, or no other geometry): a drawer."""
+def _part_frame_boxes(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
+                      handle_body) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray],
+                                            RigidTransform] | None:
+    """In the joint's child frame C: the box (lo, hi) bounding the moving part's geometry without
+    the handle body, the handle body's box, and X_WC; None when either has no geometry."""
     child = joint.child_body()
     bodies = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])
               if b != handle_body.index()]
-    box = _bodies_box(plant, inspector, plant_context, bodies, child.body_frame())
-    if box is None:
+    part = _bodies_box(plant, inspector, plant_context, bodies, child.body_frame())
+    handle = _bodies_box(plant, inspector, plant_context, [handle_body], child.body_frame())
+    if part is None or handle is None:
         return None
-    lo, hi = box
-    X_WC = plant.EvalBodyPoseInWorld(plant_context, child)
-    p_CH = X_WC.inverse() @ p_WH
+    return part, handle, plant.EvalBodyPoseInWorld(plant_context, child)
+
+
+def check_handle_stands_out(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
+                            handle_body) -> None:
+    """Refuse a handle whose geometry reaches less than `MIN_HANDLE_REACH` out of the box of the
+    part's other geometry: a flush or recessed pull, which a parallel gripper cannot close on."""
+    boxes = _part_frame_boxes(plant, inspector, plant_context, joint, handle_body)
+    if boxes is None:
+        return
+    (lo, hi), (h_lo, h_hi), _ = boxes
+    reach = float(np.max(np.maximum(h_hi - hi, lo - h_lo)))
+    if reach < MIN_HANDLE_REACH:
+        raise NfrDrakeError(
+            f"the handle body {handle_body.name()!r} reaches {max(reach, 0.0) * 100:.1f} cm out of its part "
+            f"(a flush or recessed pull): the gripper closes on handles standing at least "
+            f"{MIN_HANDLE_REACH * 100:.0f} cm out; give --handle-body such a handle")
+
+
+def slide_front_normal(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
+                       handle_body, axis_W: np.ndarray) -> np.ndarray | None:
+    """The outward normal (3,) in W of a sliding door's front, or None for a drawer.
+
+    The centre of the handle's box stands out of the box bounding the part's other geometry (in
+    the joint's child frame) along one of its axes: across the slide and horizontally for a sliding
+    door, along the slide for a drawer. No such side (or no geometry): a drawer."""
+    boxes = _part_frame_boxes(plant, inspector, plant_context, joint, handle_body)
+    if boxes is None:
+        return None
+    (lo, hi), (h_lo, h_hi), X_WC = boxes
+    p_CH = (h_lo + h_hi) / 2
     excess = np.maximum(np.maximum(p_CH - hi, lo - p_CH), 0.0)
     side = int(np.argmax(excess))
     if excess[side] < 0.005:

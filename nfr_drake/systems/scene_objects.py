@@ -27,6 +27,7 @@ from nfr_drake.systems.model_files import (
     AddedMass,
     add_model_file,
     body_box,
+    check_handle_stands_out,
     check_placement,
     handle_grip,
     handle_notes,
@@ -258,10 +259,9 @@ class SceneObject:
             return plant.EvalBodyPoseInWorld(context, body) @ p_BH
 
         static = corners_W([b for b in bodies if b.index() not in moving])
-        if closed_at is None and static:
-            static = np.concatenate(static)
-            shut, opened, drawn_open = shut_by_geometry(handle_at, (static.min(0), static.max(0)),
-                                                        shut, opened, joint_name)
+        static_box = (np.concatenate(static).min(0), np.concatenate(static).max(0)) if static else None
+        if closed_at is None and static_box is not None:
+            shut, opened, drawn_open = shut_by_geometry(handle_at, static_box, shut, opened, joint_name)
             notes += drawn_open
         set_joint_value(plant, context, joint, shut)
         corners = corners_W(bodies)
@@ -273,8 +273,8 @@ class SceneObject:
         notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
         X_WB = plant.EvalBodyPoseInWorld(context, body)
         notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
-        front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body,
-                                                           X_WB @ p_BH, axis_W)
+        check_handle_stands_out(plant, inspector, context, joint, body)
+        front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body, axis_W)
         R_BW = X_WB.rotation().inverse()
         if grip_B is None:
             bar_W = _Z if front_W is not None else axis_W if revolute else np.cross(_Z, axis_W)
