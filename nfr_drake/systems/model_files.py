@@ -4,12 +4,14 @@ what to change (`SceneObject.from_model_file` composes these).
 - Loading (`add_model_file`): one model; the root of the articulated joint's tree welded at X_WO
   (not the joint's parent, which may sit deeper); bodies without a joint to that tree fixed to it
   as drawn; a model attached to Drake's world (a root link named `world`) refused.
-- The joint (`shut_and_open`): which limit is shut. Rule: the limit nearer the joint's zero, the
-  position the model is drawn in; refused as unclear when both are about as near (`--closed-at`).
-- Massless moving parts (`massless_parts`): a door or drawer whose bodies have no mass gets the mass
-  of its geometry's bounding box at `MASSLESS_DENSITY` (Drake's solver needs a positive mass matrix).
-- The handle (`handle_grip`): the centre of its geometry's bounding box in its body frame, and its
-  bar axis when the geometry is elongated.
+- The joint (`shut_and_open`, `shut_by_geometry`): which limit is shut. Rule: the limit nearer the
+  joint's zero, the position the model is drawn in; refused as unclear when both are about as near
+  (`--closed-at`); overruled when the handle is clearly nearer the rest of the model at the other.
+- Massless moving parts (`massless_parts`): a door or drawer whose bodies have no mass gets
+  `MASSLESS_DENSITY` over its geometry's boxes (Drake's solver needs a positive mass matrix).
+- The handle (`handle_grip`, `handle_notes`, `check_handle_stands_out`): the centre of its
+  geometry's bounding box in its body frame, and its bar axis when the geometry is elongated; a
+  flush pull refused.
 - Sliding doors (`slide_front_normal`): a prismatic joint whose handle stands out of its part
   across the slide axis slides sideways: the hand comes from the front.
 - Placement (`check_placement`): height, up axis (the joint's axis), floor; a refusal suggests the
