@@ -11,7 +11,7 @@ SEMANTIC_PALETTE = np.array([[0, 0, 0], [70, 110, 200], [240, 170, 40], [230, 40
 
 
 def colorize_labels(label: np.ndarray) -> np.ndarray:
-    """Semantic class image (H, W) of ints in [0, 3] -> uint8 RGB (H, W, 3)."""
+    """Semantic class images (..., H, W) of ints in [0, 3] -> uint8 RGB (..., H, W, 3)."""
     return SEMANTIC_PALETTE[np.clip(label, 0, len(SEMANTIC_PALETTE) - 1)]
 
 
@@ -25,15 +25,24 @@ def colorize_parts(part: np.ndarray) -> np.ndarray:
     return PART_PALETTE[np.where(part < 0, len(PART_PALETTE) - 1, np.clip(part, 0, len(PART_PALETTE) - 2))]
 
 
-def image_grid(rows: list[list[np.ndarray]], pad: int = 2, fill: int = 255) -> np.ndarray:
-    """Tile uint8 RGB images (each (h, w, 3), equal sizes) into one image, rows of equal length."""
-    h, w = rows[0][0].shape[:2]
+def as_uint8(image: np.ndarray) -> np.ndarray:
+    """An RGB image as uint8: uint8 unchanged, float in [0, 1] (clipped) scaled to [0, 255]."""
+    image = np.asarray(image)
+    if image.dtype == np.uint8:
+        return image
+    return (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def image_grid(rows: list[list[np.ndarray]], pad: int = 2, fill: int = 255, scale: int = 1) -> np.ndarray:
+    """Tile RGB images (each (h, w, 3) or RGBA, equal sizes; uint8, or float in [0, 1]) into one uint8
+    image: rows of columns, each pixel repeated `scale` times both ways, `pad` px of `fill` between."""
+    h, w = rows[0][0].shape[0] * scale, rows[0][0].shape[1] * scale
     n_cols = max(len(r) for r in rows)
     grid = np.full((len(rows) * (h + pad) + pad, n_cols * (w + pad) + pad, 3), fill, np.uint8)
     for i, row in enumerate(rows):
         for j, image in enumerate(row):
             y, x = pad + i * (h + pad), pad + j * (w + pad)
-            grid[y:y + h, x:x + w] = image
+            grid[y:y + h, x:x + w] = np.repeat(np.repeat(as_uint8(image)[..., :3], scale, 0), scale, 1)
     return grid
 
 

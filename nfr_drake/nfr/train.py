@@ -40,6 +40,7 @@ from tqdm import tqdm
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.data.slot_dataset import SlotDataset, SlotTargets, open_dataset
+from nfr_drake.data.visualize import colorize_labels, image_grid
 from nfr_drake.errors import ConfigError, Interrupted
 from nfr_drake.nfr.checkpoint import (
     CheckpointError,
@@ -54,7 +55,7 @@ from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.nfr.rays import pixel_rays
 from nfr_drake.nfr.render import render_images
 from nfr_drake.nfr.sampling import RaySampler
-from nfr_drake.nfr.viz import colorize_labels, image_grid, plot_curves, save_png
+from nfr_drake.nfr.viz import plot_curves, save_png
 
 TRAIN_FIELDS = ["step", "seconds", "lr_scale", "total", "image", "seg", "keypoint", "latent",
                 "depth", "psnr", "rays_per_s", "slots"]
@@ -192,7 +193,7 @@ def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[in
     ious = [_iou(lab, gt_lab, c) for c in range(model.config.num_classes)]
     rows = [[gt_rgb[i], rgb[i], colorize_labels(lab[i]), colorize_labels(gt_lab[i])]
             for i in range(len(items))]
-    save_png(run / "val" / f"step_{step:07d}.png", image_grid(rows))
+    save_png(run / "val" / f"step_{step:07d}.png", image_grid(rows, scale=2))
     # q sweep of the first validation object, camera of its first item.
     # (furniture: every existing front of the object swept together, absent slots shut).
     qs = torch.linspace(0, 1, 5, device=device)
@@ -203,7 +204,7 @@ def validate(module: NFRAutoDecoder, data: RenderedDataset, items: list[tuple[in
                           S, S)
     save_png(run / "val" / f"qsweep_{step:07d}.png",
              image_grid([list(sweep.rgb.cpu().numpy()),
-                         list(colorize_labels(sweep.labels.cpu().numpy()))]))
+                         list(colorize_labels(sweep.labels.cpu().numpy()))], scale=2))
     # Keypoints of every training object at every articulation.
     A = data.spec.articulations
     all_obj = torch.arange(data.num_objects, device=device).repeat_interleave(A)

@@ -1,4 +1,5 @@
-"""Pictures of training: validation grids (ground truth | render | segmentation) and loss curves."""
+"""Pictures of training: PNG writing for the validation grids (`data.visualize.image_grid`) and loss
+curves."""
 
 from __future__ import annotations
 
@@ -12,35 +13,11 @@ import matplotlib.image as mpimg  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nfr_drake.data.visualize import SEMANTIC_PALETTE  # noqa: E402
-
-CLASS_COLORS = SEMANTIC_PALETTE.astype(np.float32) / 255.0
-"""Display colours of classes 0 background, 1 carcass, 2 door/drawer, 3 handle: the project's
-one palette (`nfr_drake.data.visualize.SEMANTIC_PALETTE`), as floats."""
-
-
-def colorize_labels(labels: np.ndarray) -> np.ndarray:
-    """int (..., H, W) classes -> float RGB (..., H, W, 3)."""
-    return CLASS_COLORS[np.clip(labels, 0, len(CLASS_COLORS) - 1)]
-
-
-def image_grid(rows: list[list[np.ndarray]], scale: int = 2, pad: int = 2) -> np.ndarray:
-    """Tile equally sized float RGB images (H, W, 3) in [0, 1]: rows of columns, white gaps."""
-    H, W = rows[0][0].shape[:2]
-    n_c = max(len(r) for r in rows)
-    h, w = H * scale, W * scale
-    grid = np.ones((len(rows) * (h + pad) + pad, n_c * (w + pad) + pad, 3), np.float32)
-    for i, row in enumerate(rows):
-        for j, img in enumerate(row):
-            big = np.repeat(np.repeat(np.asarray(img, np.float32), scale, 0), scale, 1)
-            y, x = pad + i * (h + pad), pad + j * (w + pad)
-            grid[y:y + h, x:x + w] = big[..., :3]
-    return grid
-
 
 def save_png(path: Path, image: np.ndarray) -> None:
+    """Write a uint8 RGB image (H, W, 3) as a PNG, making its folder."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    mpimg.imsave(str(path), np.clip(image, 0, 1))
+    mpimg.imsave(str(path), image)
 
 
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
@@ -88,29 +65,3 @@ def plot_curves(run_dir: Path, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=90)
     plt.close(fig)
-
-
-def q_sweep_figure(model, codes, data, objects: list[int], out: Path, steps: int = 5,
-                   view: int = 0) -> None:
-    """For each training object: its true image at q = 0 and the model's RGB and segmentation at
-    `steps` values of q in [0, 1], from the camera of articulation 0, `view`. One PNG."""
-    import torch
-
-    from nfr_drake.nfr.latent import q_to_z_art
-    from nfr_drake.nfr.render import render_images
-
-    S = data.spec.size
-    qs = torch.linspace(0, 1, steps)
-    K = torch.from_numpy(data.camera.K.astype(np.float32)).expand(steps, 3, 3)
-    rows = []
-    for j in objects:
-        rec = data.records[j]
-        X = torch.from_numpy(np.asarray(rec.X_OC[0, view])).expand(steps, 4, 4)
-        z = torch.cat([q_to_z_art(qs), codes[j].expand(steps, -1)], dim=-1)
-        with torch.no_grad():
-            img = render_images(model, z, K, X, S, S)
-        gt = np.asarray(rec.rgb[0, view], np.float32) / 255.0
-        rows.append([gt] + list(img.rgb.numpy()))
-        rows.append([colorize_labels(np.asarray(rec.label[0, view]))]
-                    + list(colorize_labels(img.labels.numpy())))
-    save_png(Path(out), image_grid(rows))
