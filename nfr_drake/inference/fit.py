@@ -54,37 +54,43 @@ class FitConfig:
     the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
 
     preset: Literal["fast", "thorough"] = "fast"
-    """The stages' lengths: "fast", the defaults below (starts looked up, short exploration and
-    refinement), or "thorough", the longer fit kept for comparison (`THOROUGH`: 4 starts spread
-    over q explored for 120 steps, at most 400 steps, patience 60, a close look of 150 steps).
+    """"fast", the defaults below (starts looked up, short exploration and refinement, early
+    stopping on fixed rays), or "thorough", the longer fit of before, kept for comparison
+    (`THOROUGH`: 4 starts spread over q explored for 120 steps at lr 0.01 with 128 rays, at most
+    400 steps of 256 rays, patience 60 on the smoothed step loss, a close look of 150 steps).
     Fields left at their default take the preset's value."""
     start: Literal["lookup", "spread"] = "lookup"
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
     part the keypoint head puts nearest it at that articulation, are scored by one forward pass on
-    `lookup_rays` rays (no gradient); the best per articulation, of those the best `restarts`
-    are explored. "spread": `restarts`
-    codes at q = (i + 0.5) / restarts, and the sighted start after the exploration."""
+    `lookup_rays` rays (no gradient); the best candidate of each of `restarts` equal bands of q
+    is explored. "spread": `restarts` codes at q = (i + 0.5) / restarts, and the sighted start
+    after the exploration."""
     lookup_q: int = 12
     """Articulations of the lookup's candidates, q = (i + 0.5) / lookup_q."""
     lookup_rays: int = 512
     """Rays (edge-weighted like the steps') on which the lookup scores its candidates."""
-    restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 2
-    """Codes explored in parallel (see `start`); the lowest image loss wins."""
-    explore_steps: int = 10
+    restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
+    """Codes explored in parallel (see `start`); the lowest image loss wins. At most `lookup_q`
+    with start "lookup"."""
+    explore_steps: int = 30
     """Adam steps of the exploration phase (all starts), at most `max_steps`."""
-    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 70
+    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 120
     """Adam steps at most, exploration included."""
-    explore_rays: int = 128
-    """Random pixels (over all views) per exploration step, shared by the starts."""
-    rays_per_step: int = 256
+    explore_rays: int = 64
+    """Random pixels (over all views) per exploration step and start, shared by the starts."""
+    rays_per_step: int = 128
     """Random pixels per refinement step."""
     lr: float = 1e-2
-    """Adam learning rate of z."""
+    """Adam learning rate of z in the refinement."""
+    explore_lr: float = 3e-2
+    """Adam learning rate of the exploration (all starts, and the sighted start): larger than `lr`,
+    so that z_obj leaves its start within a few tens of steps and the starts' losses can be
+    compared sooner."""
     latent_weight: float = 1e-3
     """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
     seen them)."""
-    patience: int = 20
+    patience: int = 30
     """Refinement steps without an improvement of `min_improvement` that end the fit."""
     min_improvement: float = 0.01
     """Relative improvement of the refinement's loss that counts as progress."""
@@ -100,7 +106,7 @@ class FitConfig:
     decide q and the hinge side weigh more in the loss."""
     seed: int = 0
     """Seed of ray sampling."""
-    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 30
+    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 20
     """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
     """Rays passing within this distance of the part take part in the close look, m."""
@@ -124,7 +130,8 @@ class FitConfig:
     candidates, or (start "spread") a second start at the exploration's winner's q that the two
     explore for half of `explore_steps` (within `max_steps`)."""
 
-    THOROUGH: ClassVar[dict] = dict(start="spread", restarts=4, explore_steps=120, max_steps=400,
+    THOROUGH: ClassVar[dict] = dict(start="spread", explore_steps=120, max_steps=400,
+                                    explore_rays=128, rays_per_step=256, explore_lr=1e-2,
                                     patience=60, stop_every=0, focus_steps=150)
     """The "thorough" preset's values."""
 
@@ -157,8 +164,9 @@ class FitConfig:
             raise ConfigError("FitConfig.detail_fraction must lie in [0, 1]")
         if self.stop_every < 0:
             raise ConfigError("FitConfig.stop_every must be >= 0")
-        if self.lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
-            raise ConfigError("FitConfig: lr must be > 0, latent_weight and min_improvement >= 0")
+        if self.lr <= 0 or self.explore_lr <= 0 or self.latent_weight < 0 or self.min_improvement < 0:
+            raise ConfigError("FitConfig: lr and explore_lr must be > 0, latent_weight and "
+                              "min_improvement >= 0")
         if self.sighting_weight < 0 or self.sighting_scale_m <= 0 or self.sighting_codes < 0:
             raise ConfigError("FitConfig: sighting_weight and sighting_codes must be >= 0, "
                               "sighting_scale_m > 0")
@@ -467,10 +475,11 @@ def _nearest_codes(model: NFRModel, z_art: torch.Tensor, codes: torch.Tensor,
 def _lookup_starts(model: NFRModel, rays: ObservedRays, config: FitConfig,
                    generator: torch.Generator, z_obj: torch.Tensor, sighting: PartSighting | None,
                    codes: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-    """The starts (S, D) of the lookup (`FitConfig.start`), each at another articulation: the
-    best candidate per articulation by image loss on `lookup_rays` rays plus the sighting term,
-    from one forward pass without gradient, and of those the best `restarts`; and whether each
-    came from the codes near the sighting (S,) bool. z_obj (k,): the starts' object code."""
+    """The starts (S, D) of the lookup (`FitConfig.start`) and whether each came from the codes
+    near the sighting (S,) bool. Candidates at `lookup_q` articulations, z_obj (k,) and (with a
+    sighting and training codes (N, k)) the mean of the codes nearest the sighting, are scored
+    by image loss on `lookup_rays` rays plus the sighting term in one forward pass without
+    gradient; the best of each of `restarts` equal bands of q is kept."""
     q = (torch.arange(config.lookup_q, dtype=z_obj.dtype, device=z_obj.device) + 0.5) / config.lookup_q
     z_art = q_to_z_art(q)
     candidates = [torch.cat([z_art, z_obj.expand(len(q), -1)], -1)]
@@ -480,12 +489,18 @@ def _lookup_starts(model: NFRModel, rays: ObservedRays, config: FitConfig,
     z = torch.cat(candidates)
     index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
     with torch.no_grad():
-        batch_rays, target = rays.take(index, z.shape[0])
+        batch_rays, target = rays.take(index, len(z))
         losses = _per_code_mse(model, z, batch_rays, target) + _sighting_loss(model, z, sighting,
                                                                                config)
-    per_q, source = losses.view(len(candidates), len(q)).min(0)  # the better code per q
-    best = torch.argsort(per_q)[:config.restarts]
-    return z[source[best] * len(q) + best].clone(), source[best] > 0
+    losses = losses.view(len(candidates), len(q))
+    band = torch.arange(len(q)) * config.restarts // len(q)
+    best = []
+    for b in range(config.restarts):
+        in_band = losses[:, band == b]  # (candidates, articulations in the band)
+        flat = int(in_band.argmin())
+        best.append((flat // in_band.shape[1], int(torch.nonzero(band == b)[flat % in_band.shape[1]])))
+    source = torch.tensor([c for c, _ in best])
+    return z[source * len(q) + torch.tensor([i for _, i in best])].clone(), source > 0
 
 
 def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: torch.Tensor | None,
@@ -515,7 +530,8 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
             eval_rays, eval_target = rays.take(index.to(device), candidates.shape[0])
             return _per_code_mse(model, candidates.detach(), eval_rays, eval_target).cpu()
 
-    steps = _adam(model, z, rays, config, generator, config.explore_steps, config.explore_rays,
+    explore = replace(config, lr=config.explore_lr)
+    steps = _adam(model, z, rays, explore, generator, config.explore_steps, config.explore_rays,
                   stop_early=False, sighting=sighting)
     with torch.no_grad():
         start_losses = eval_losses(z, select_index) + _sighting_loss(model, z, sighting, config).cpu()
@@ -526,7 +542,7 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     second = min(config.explore_steps // 2, config.max_steps - steps)
     if (config.start == "spread" and sighting is not None and codes is not None
             and config.sighting_codes > 0 and second > 0):
-        z_best, sighted_start = _sighted_start(model, rays, config, generator, z_best, sighting,
+        z_best, sighted_start = _sighted_start(model, rays, explore, generator, z_best, sighting,
                                                codes, second,
                                                lambda c: eval_losses(c, select_index))
         steps += second

@@ -1,5 +1,5 @@
-"""The fast fit's mechanics on a small untrained model: the looked-up start, early stopping on
-fixed rays, and the presets."""
+"""The fast fit's mechanics on a small untrained model: the looked-up starts, the codes nearest a
+sighting, early stopping on fixed rays, and the presets."""
 
 from dataclasses import replace
 
@@ -20,7 +20,7 @@ from nfr_drake.inference.fit import (
     observed_rays,
 )
 from nfr_drake.inference.infer import FittedModel
-from nfr_drake.nfr.latent import q_to_z_art
+from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
 
 SMALL = FitConfig(restarts=2, explore_steps=2, max_steps=6, explore_rays=32, rays_per_step=32,
                   eval_rays=64, lookup_q=6, lookup_rays=256, focus_steps=0)
@@ -45,31 +45,35 @@ def test_nearest_codes_are_those_whose_part_is_nearest_the_sighting(model_folder
     torch.testing.assert_close(everything, fitted.codes.mean(0).expand(2, -1))
 
 
-def test_the_lookup_keeps_the_candidates_of_lowest_loss(model_folder, capture):
-    """Photos rendered by the model at one candidate code: the lookup ranks that code first."""
+def test_the_lookup_keeps_the_best_candidate_of_each_band_of_q(model_folder, capture):
+    """Photos rendered by the model at one candidate code: the lookup keeps that code for its band
+    of q, and one start per band."""
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    config = replace(SMALL, restarts=3)
+    config = replace(SMALL, restarts=3)  # 6 articulations: bands {0, 1}, {2, 3}, {4, 5}
     q = (torch.arange(config.lookup_q) + 0.5) / config.lookup_q
     truth = torch.cat([q_to_z_art(q[4]), fitted.z_obj_mean])
     with torch.no_grad():
         all_rays, _ = rays.take(torch.arange(rays.rgb.shape[0]), 1)
         rgb = fitted.model.render(truth[None], all_rays).rgb[0]
-    rendered = replace(rays, rgb=rgb)
-    starts, sighted = _lookup_starts(fitted.model, rendered, config, torch.Generator().manual_seed(0),
-                                     fitted.z_obj_mean, None, fitted.codes)
+    starts, sighted = _lookup_starts(fitted.model, replace(rays, rgb=rgb), config,
+                                     torch.Generator().manual_seed(0), fitted.z_obj_mean, None,
+                                     fitted.codes)
     assert starts.shape == (3, truth.shape[0]) and not sighted.any()  # no sighting: no codes
-    torch.testing.assert_close(starts[0], truth)
-    assert len({round(float(torch.atan2(s[1], s[0])), 6) for s in starts}) == 3  # distinct q
+    torch.testing.assert_close(starts[2], truth)
+    start_q = z_art_to_q(starts[:, :2])
+    for band, q_start in enumerate(start_q):
+        assert band / 3 <= float(q_start) <= (band + 1) / 3
+    torch.testing.assert_close(starts[:, 2:], fitted.z_obj_mean.expand(3, -1))
 
 
 def test_a_sighting_adds_candidates_from_the_codes_near_it(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    z = torch.cat([q_to_z_art(torch.tensor(0.25)), fitted.codes[1]])
+    z = torch.cat([q_to_z_art(torch.tensor(0.25)), fitted.codes[1]])  # q = 0.25: candidate 1
     with torch.no_grad():
         p = fitted.model.keypoints(z[None])[0, 0]
-    # A sighting term that outweighs any image loss: the start must be a code near the sighting.
+    # A sighting term that outweighs any image loss: the start must be the code near the sighting.
     config = replace(SMALL, restarts=1, sighting_codes=1, sighting_weight=100.0,
                      sighting_scale_m=1e-4)
     starts, sighted = _lookup_starts(fitted.model, rays, config, torch.Generator().manual_seed(0),
@@ -79,6 +83,9 @@ def test_a_sighting_adds_candidates_from_the_codes_near_it(model_folder, capture
     outcome = fit_latent(fitted.model, rays, config, fitted.z_obj_mean, sighting=PartSighting(0, p),
                          codes=fitted.codes)
     assert outcome.sighted_start
+    without_codes = fit_latent(fitted.model, rays, config, fitted.z_obj_mean,
+                               sighting=PartSighting(0, p))
+    assert not without_codes.sighted_start
 
 
 def test_early_stopping_on_fixed_rays_checks_every_stop_every_steps(model_folder, capture):
@@ -134,3 +141,8 @@ def test_presets():
         FitConfig(lookup_q=0)
     with pytest.raises(ConfigError, match="stop_every"):
         FitConfig(stop_every=-1)
+    with pytest.raises(ConfigError, match="lookup_q"):
+        FitConfig(restarts=5, lookup_q=4)  # a band of q without a candidate
+    assert FitConfig(start="spread", restarts=5, lookup_q=4).restarts == 5
+    with pytest.raises(ConfigError, match="explore_lr"):
+        FitConfig(explore_lr=0.0)
