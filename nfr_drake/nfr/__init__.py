@@ -5,7 +5,8 @@ Modules, one role each: `config` (dataclasses), `latent` (z = [z_art, z_obj]), `
 `field` (Phi), `rays` (camera rays), `raymarcher` (LSTM marcher), `heads` (psi_1, psi_2, Gamma),
 `model` (NFRModel taking z explicitly; NFRAutoDecoder with the code table), `render` (whole
 images), `losses`, `sampling` (training rays), `checkpoint` (safetensors model folders), `viz`,
-`train` (the loop and `nfr-drake train`). See docs/NEURAL_FIELD.md.
+`train` (the loop and `nfr-drake train`), `resumable` (the resumable loop of the small 2D
+networks: handle detector, segmenter). See docs/NEURAL_FIELD.md.
 """
 
 from nfr_drake.nfr.checkpoint import CheckpointError, load_model, write_model_folder

@@ -3,26 +3,18 @@ sizes, and the held-out handle IoU and offset error it reports."""
 
 from __future__ import annotations
 
-import json
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
-from nfr_drake.jsonio import read_json
-from nfr_drake.nfr.checkpoint import (
-    TRAINER_FILE,
-    CheckpointError,
-    read_training_checkpoint,
-    write_training_checkpoint,
-)
+from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.nfr.resumable import ResumableRun
 from nfr_drake.perception.handle_detector.data import sample_batch
 from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, save_detector
 
@@ -129,44 +121,16 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
-    options = json.loads(json.dumps({"model": asdict(model), "train": train_options}))
-    step, seconds, losses = 0, 0.0, []
-    if resume and ckpt_path.is_dir():
-        saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
-        if not isinstance(saved, dict) or {k: saved.get(k) for k in options} != options:
-            raise ConfigError(f"{ckpt_path}: --resume with other options than the run's")
-        state = read_training_checkpoint(ckpt_path, net, opt)
-        try:
-            sched.load_state_dict(state["sched"])
-            rng.bit_generator.state = state["rng"]
-            step, seconds, losses = int(state["step"]), float(state["seconds"]), list(state["losses"])
-        except (KeyError, TypeError, ValueError) as err:
-            raise CheckpointError(f"{ckpt_path / TRAINER_FILE}: bad training state ({err})") from None
+    run = ResumableRun(ckpt_path, net, opt, sched, rng, {"model": asdict(model), "train": train_options},
+                       resume)
     out.mkdir(parents=True, exist_ok=True)
 
-    def checkpoint() -> None:
-        write_training_checkpoint(ckpt_path, net, opt, {
-            **options, "sched": sched.state_dict(), "rng": rng.bit_generator.state, "step": step,
-            "seconds": seconds, "losses": losses})
-
-    bar = tqdm(total=config.steps, initial=step, desc="train handle detector", mininterval=5.0)
-    while step < config.steps:
-        t0 = time.perf_counter()
-        loss = sum(_loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
+    def loss() -> torch.Tensor:  # crops from every dataset
+        return sum(_loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
                    for rgb, mask, offsets in
                    (sample_batch(s, config.images_per_batch, config.crop, rng) for s in train_sets))
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        losses.append(loss.item())
-        step += 1
-        seconds += time.perf_counter() - t0
-        bar.update(1)
-        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.3f}", refresh=False)
-        if step % config.checkpoint_every == 0 or step == config.steps:
-            checkpoint()
-    bar.close()
+
+    run.train(config.steps, config.checkpoint_every, loss, "train handle detector")
     val_rng = np.random.default_rng(12345)
     net.eval()
     with torch.no_grad():
@@ -177,8 +141,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
             ious[str(v.root)] = _iou(logits, mask)
             offset_errors[str(v.root)] = _offset_error_px(offsets, mask, true_offsets)
     record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
-              "data": [str(d) for d in data_dirs], "command": command, "seconds": seconds,
-              "final_loss": float(np.mean(losses[-100:])), "held_out_handle_iou": ious,
+              "data": [str(d) for d in data_dirs], "command": command, "seconds": run.seconds,
+              "final_loss": float(np.mean(run.losses[-100:])), "held_out_handle_iou": ious,
               "held_out_offset_error_px": offset_errors}
     save_detector(out, net, record)
     return record

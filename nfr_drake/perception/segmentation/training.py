@@ -7,25 +7,16 @@ moments, torch RNG; trainer.json: step, scheduler, the sampler's RNG, losses), w
 
 from __future__ import annotations
 
-import json
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import ConfigError
-from nfr_drake.jsonio import read_json
-from nfr_drake.nfr.checkpoint import (
-    TRAINER_FILE,
-    CheckpointError,
-    read_training_checkpoint,
-    write_training_checkpoint,
-)
+from nfr_drake.nfr.resumable import ResumableRun
 from nfr_drake.perception.segmentation.data import RoomImages, sample_batch
 from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig, save_segmenter
 
@@ -89,46 +80,17 @@ def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConf
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
-    options = json.loads(json.dumps({"model": asdict(model), "train": train_options,
-                                     "images": len(data)}))
-    step, seconds, losses = 0, 0.0, []
-    if resume and ckpt_path.is_dir():
-        saved = read_json(ckpt_path / TRAINER_FILE, CheckpointError, "checkpoint state")
-        if not isinstance(saved, dict) or {k: saved.get(k) for k in options} != options:
-            raise ConfigError(f"{ckpt_path}: --resume with other options or data than the run's")
-        state = read_training_checkpoint(ckpt_path, net, opt)
-        try:
-            sched.load_state_dict(state["sched"])
-            rng.bit_generator.state = state["rng"]
-            step, seconds, losses = int(state["step"]), float(state["seconds"]), list(state["losses"])
-        except (KeyError, TypeError, ValueError) as err:
-            raise CheckpointError(f"{ckpt_path / TRAINER_FILE}: bad training state ({err})") from None
+    run = ResumableRun(ckpt_path, net, opt, sched, rng,
+                       {"model": asdict(model), "train": train_options, "images": len(data)}, resume)
     out.mkdir(parents=True, exist_ok=True)
 
-    def checkpoint() -> None:
-        write_training_checkpoint(ckpt_path, net, opt, {
-            **options, "sched": sched.state_dict(), "rng": rng.bit_generator.state, "step": step,
-            "seconds": seconds, "losses": losses})
+    def loss() -> torch.Tensor:
+        rgb, labels = sample_batch(data, config.batch, config.crop, rng)
+        return segmentation_loss(net(rgb), labels, config.dice_weight)
 
     net.train()
-    bar = tqdm(total=config.steps, initial=step, desc="train segmenter", mininterval=10.0)
-    while step < config.steps:
-        t0 = time.perf_counter()
-        rgb, labels = sample_batch(data, config.batch, config.crop, rng)
-        loss = segmentation_loss(net(rgb), labels, config.dice_weight)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        losses.append(loss.item())
-        step += 1
-        seconds += time.perf_counter() - t0
-        bar.update(1)
-        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.3f}", refresh=False)
-        if step % config.checkpoint_every == 0 or step == config.steps:
-            checkpoint()
-    bar.close()
+    run.train(config.steps, config.checkpoint_every, loss, "train segmenter")
     record = {"data": [str(d) for d in data_dirs], "images": len(data), "train": asdict(config),
-              "command": command, "seconds": seconds, "final_loss": float(np.mean(losses[-100:]))}
+              "command": command, "seconds": run.seconds, "final_loss": float(np.mean(run.losses[-100:]))}
     save_segmenter(out, net, record)
     return record
