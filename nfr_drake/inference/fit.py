@@ -2,10 +2,19 @@
 
 The networks stay frozen; only z moves, by Adam on the image loss (paper: lambda_1 = lambda_2 = 0)
 plus SRN's latent prior. The image loss has local minima in q, so the fit explores first: several
-codes, their z_art started at evenly spread articulations, are fitted together for
-`explore_steps`; the one with the lowest image loss on a fixed evaluation set of rays is then
-refined alone until its loss has not improved by `min_improvement` for `patience` steps, or
-`max_steps` steps in all have run.
+codes are fitted together for `explore_steps`, and the one with the lowest image loss on a fixed
+evaluation set of rays is then refined alone until its loss has not improved by `min_improvement`
+for `patience` steps, or `max_steps` steps in all have run.
+
+The starts (`FitConfig.start`) are looked up by default: candidate codes at a grid of
+articulations, with the mean training code and with the training codes whose keypoint head puts
+the handle where the handle detector saw it, are scored by one forward pass without gradient, and
+the best candidate of each band of q is explored (at a larger learning rate, so that z_obj leaves
+its start quickly). The exploration's loss falls tenfold within its first few tens of steps,
+while z_obj adapts; a start already near the object, at its band's best q, needs fewer steps. The
+refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
+from the noise of the steps' random rays, so the fit stops when it has converged. The "thorough"
+preset keeps the longer fit of before (starts spread evenly over q).
 
 A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
 steps, a `detail_fraction` share of the rays (half by default) is drawn among those passing within
@@ -17,10 +26,11 @@ focused rays' surface points labelled with the part's class) stay within `focus_
 
 A part seen by other means (`PartSighting`: the handle triangulated from a 2D detector's masks,
 `nfr_drake.perception.handle_triangulation`) adds a robust term w log(1 + d^2 / s^2) on the keypoint
-head's distance d to it, in every stage and in the choice among the starts, and after the
-exploration the winner meets one more start, from the training codes whose head puts the part
-nearest the sighting at the winner's q. It is what fixes the hinge side of a shut door, which the
-image loss alone, with a handle of a few pixels, leaves open.
+head's distance d to it, in every stage and in the choice among the starts, and brings starts
+from the training codes whose head puts the part nearest the sighting: among the lookup's
+candidates, or (starts spread) one more start after the exploration at the winner's q. It is
+what fixes the hinge side of a shut door, which the image loss alone, with a handle of a few
+pixels, leaves open.
 
 Rays come from each frame's own intrinsics and pose, so any resolution, field of view or number of
 views works (the paper's claim of robustness to camera parameters never seen in training).
