@@ -49,7 +49,8 @@ class PosedImage(NamedTuple):
 
 @dataclass
 class ObjectRecord:
-    """One object's folder; arrays are memory-mapped lazily."""
+    """One object's folder (or a room's of `nfr-drake generate-rooms`: rgb and label, the label
+    the target's class, 0 elsewhere); arrays are memory-mapped lazily."""
 
     path: Path
 

@@ -7,36 +7,15 @@ gains, a random swap of colour channels, and more noise or blur.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
 from pathlib import Path
 
 import cv2
 import numpy as np
 import torch
 
+from nfr_drake.data.dataset import ObjectRecord
 from nfr_drake.data.room_dataset import read_room_spec, room_dirs
 from nfr_drake.errors import DatasetError
-
-
-@dataclass
-class RoomRecord:
-    """One room folder; arrays memory-mapped on first use."""
-
-    path: Path
-
-    @cached_property
-    def rgb(self) -> np.ndarray:
-        """uint8 (A, V, S, S, 3)."""
-        return np.load(self.path / "rgb.npy", mmap_mode="r")
-
-    @cached_property
-    def label(self) -> np.ndarray:
-        """uint8 (A, V, S, S): the target's class, 0 elsewhere."""
-        return np.load(self.path / "label.npy", mmap_mode="r")
-
-    def __getstate__(self):  # memory maps are reopened in each process
-        return {"path": self.path}
 
 
 class RoomImages:
@@ -48,11 +27,11 @@ class RoomImages:
 
     def __init__(self, roots: list[Path]):
         self.roots = [Path(r) for r in roots]
-        self.index: list[tuple[RoomRecord, int, int]] = []
+        self.index: list[tuple[ObjectRecord, int, int]] = []
         self.category: list[str] = []
         for root in self.roots:
             spec = read_room_spec(root)
-            records = [RoomRecord(p) for p in room_dirs(root)]
+            records = [ObjectRecord(p) for p in room_dirs(root)]
             if not records:
                 raise DatasetError(f"{root}: no complete rooms yet")
             for rec in records:
