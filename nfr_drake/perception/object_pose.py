@@ -1,0 +1,322 @@
+"""The object's pose on the floor from its masks in posed views: a visual hull, its footprint, X_WO.
+
+World frame W: metric, z up, the floor at z = 0 (a ChArUco board lying on the floor, a room
+capture). Object frame O (docs/CONVENTIONS.md): origin on the floor under the centre of the
+carcass footprint, +x out of the front, +z up; so X_WO is (x, y, yaw) with z = 0.
+
+1. **Hull**: voxel centres on a floor-aligned grid are projected into every view; a voxel is kept
+   when the views whose image holds it (at least `min_views`) all see it inside the object's mask,
+   all but `max_misses` of them (a bad mask, an occluder). Views that do not hold a voxel (an image
+   edge cutting the object) say nothing about it. A coarse pass over the cameras' surroundings finds
+   the object (its largest connected part); a fine pass over that part's bounds measures it.
+2. **Height**: the top of the hull (the highest slice with at least half the typical slice area).
+3. **Footprint**: the columns occupied just under the top (`top_band_m`): cameras look at the
+   object from its front and from above, so the hull's back is bounded well only near its top, and
+   a door or drawer opened forward lies lower or is thin; a morphological opening
+   (`opening_m`) removes thin panels (an open door) and the handles.
+4. **Yaw**: the minimum-area rectangle of the footprint; +x of O is the rectangle's side facing the
+   cameras' mean position (cameras see the front). Fronts are mounted on the carcass, so the
+   carcass footprint is the rectangle less `front_thickness_m` at the front.
+
+Pure numpy and OpenCV; no Drake.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.errors import NfrDrakeError
+
+
+class ObjectPoseError(NfrDrakeError):
+    """The masks and camera poses give no object on the floor."""
+
+
+@dataclass(frozen=True)
+class HullConfig:
+    """Options of the hull and footprint (lengths in m)."""
+
+    voxel_m: float = 0.02
+    """Voxel size of the fine pass."""
+    coarse_voxel_m: float = 0.08
+    """Voxel size of the coarse pass that finds the object."""
+    search_margin_m: float = 1.5
+    """The coarse pass covers the cameras' xy bounds widened by this, from the floor to the
+    highest camera."""
+    mask_threshold: float = 0.5
+    """A pixel is on the object when its mask value exceeds this."""
+    min_views: int = 3
+    """Views whose image must hold a voxel for it to be kept."""
+    max_misses: int = 1
+    """Views holding a voxel that may see it outside the mask (one bad mask, an occluder)."""
+    top_band_m: tuple[float, float] = (0.015, 0.06)
+    """Slices between these depths under the hull's top make the footprint."""
+    opening_m: float = 0.06
+    """Width of the morphological opening of the footprint (removes open doors and handles)."""
+    front_thickness_m: float = 0.02
+    """Thickness of the fronts mounted on the carcass (the generators' 15-25 mm)."""
+    refine: bool = True
+    """Fit a box to the masks from the hull's footprint (`fit_box`); else the hull's box."""
+
+    def __post_init__(self):
+        if not 0.0 < self.voxel_m <= self.coarse_voxel_m:
+            raise ValueError("object pose: need 0 < voxel_m <= coarse_voxel_m")
+        if self.min_views < 1 or self.max_misses < 0:
+            raise ValueError("object pose: min_views >= 1 and max_misses >= 0")
+
+
+@dataclass(frozen=True)
+class ObjectPoseEstimate:
+    """X_WO (4, 4): the object frame O in W (z = 0, yaw about z only); size (3,) m: the
+    carcass's depth (along O's x), width (y) and height (z); box (6,) and hull_box (6,): the fitted
+    floor box and the hull's (x, y, yaw, depth, width, height; m, rad; fronts included);
+    voxels: occupied voxels of the fine hull."""
+
+    X_WO: np.ndarray
+    size: np.ndarray
+    box: np.ndarray
+    hull_box: np.ndarray
+    voxels: int
+
+    @classmethod
+    def from_box(cls, box: np.ndarray, front_thickness_m: float, voxels: int, hull_box: np.ndarray
+                 ) -> ObjectPoseEstimate:
+        """From a floor box with the fronts: O lies under the carcass's centre, behind them."""
+        x, y, yaw, depth, width, height = box
+        x_O = np.array([np.cos(yaw), np.sin(yaw)])
+        X_WO = np.eye(4)
+        X_WO[:2, 0], X_WO[:2, 1] = x_O, [-x_O[1], x_O[0]]
+        X_WO[:2, 3] = np.array([x, y]) - front_thickness_m / 2 * x_O
+        size = np.array([depth - front_thickness_m, width, height])
+        return cls(X_WO, size, np.asarray(box, float), np.asarray(hull_box, float), voxels)
+
+    @property
+    def yaw(self) -> float:
+        """Rotation of O about W's z, rad."""
+        return float(np.arctan2(self.X_WO[1, 0], self.X_WO[0, 0]))
+
+    def size_problem(self, category: str) -> str | None:
+        """One line naming the size when it lies outside the category's ranges (with a 25 % margin
+        for the hull's coarseness), else None."""
+        ranges = category_size_ranges(category)
+        for (lo, hi), value, name in zip(ranges, self.size, ("depth", "width", "height"), strict=True):
+            if not 0.75 * lo <= value <= 1.25 * hi:
+                return (f"estimated {category} {name} {value:.2f} m lies outside the category's "
+                        f"{lo:.2f}-{hi:.2f} m (size {self.size[0]:.2f} x {self.size[1]:.2f} x "
+                        f"{self.size[2]:.2f} m): wrong masks, camera poses not in metres, or another "
+                        "category")
+        return None
+
+
+def category_size_ranges(category: str) -> tuple[tuple[float, float], ...]:
+    """The generators' (min, max) carcass depth, width and height of a category, m."""
+    from nfr_drake.objects.closet import ClosetRanges
+    from nfr_drake.objects.drawer import DrawerRanges
+    from nfr_drake.objects.layouts import FurnitureRanges
+
+    if category == "closet":
+        r = ClosetRanges()
+    elif category == "drawer":
+        r = DrawerRanges()
+    elif category == "furniture":
+        r = FurnitureRanges()
+        return (0.25, 0.8), r.width, r.height
+    else:
+        raise NfrDrakeError(f"unknown category {category!r}")
+    return r.depth, r.width, r.height
+
+
+def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (n, 2) (top-left pixel centre at (0.5, 0.5)) of points p_W (n, 3) in a camera at
+    X_WC (4, 4, OpenCV axes), with its distortion; and whether each lies in front of it (n,)."""
+    X_CW = np.linalg.inv(X_WC)
+    p_C = p_W @ X_CW[:3, :3].T + X_CW[:3, 3]
+    front = p_C[:, 2] > 1e-3
+    z = np.where(front, p_C[:, 2], 1.0)
+    xy = p_C[:, :2] / z[:, None]
+    if camera.has_distortion:
+        uv = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3), np.zeros(3),
+                               camera.K_opencv, camera.dist_opencv)[0].reshape(-1, 2) + 0.5
+    else:
+        uv = xy * [camera.fx, camera.fy] + [camera.cx, camera.cy]
+    return uv, front
+
+
+def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
+          cameras: list[PinholeCamera], config: HullConfig = HullConfig()) -> np.ndarray:
+    """Which points p_W (n, 3) the hull keeps, (n,) bool: held by at least `min_views` images
+    and inside the mask in all of them but `max_misses`."""
+    held = np.zeros(len(p_W), np.int32)
+    missed = np.zeros(len(p_W), np.int32)
+    for mask, X_WC, camera in zip(masks, X_WCs, cameras, strict=True):
+        h, w = mask.shape
+        uv, front = project_points(p_W, X_WC, camera)
+        col, row = np.floor(uv[:, 0] * w / camera.width), np.floor(uv[:, 1] * h / camera.height)
+        inside = front & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        on = np.zeros(len(p_W), bool)
+        on[inside] = mask[row[inside].astype(int), col[inside].astype(int)] > config.mask_threshold
+        held += inside
+        missed += inside & ~on
+    return (held >= config.min_views) & (missed <= config.max_misses)
+
+
+def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Voxel centres (nx * ny * nz, 3) covering [lo, hi] with voxels of `step`, and (nx, ny, nz)."""
+    n = np.maximum(np.ceil((hi - lo) / step).astype(int), 1)
+    axes = [lo[i] + (np.arange(n[i]) + 0.5) * step for i in range(3)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3), tuple(n)
+
+
+def _hull(lo: np.ndarray, hi: np.ndarray, step: float, masks, X_WCs, cameras, config: HullConfig
+          ) -> np.ndarray:
+    """The occupancy (nx, ny, nz) bool of the grid of `step` over [lo, hi], carved in slabs."""
+    points, shape = _grid(lo, hi, step)
+    keep = np.zeros(len(points), bool)
+    chunk = 1 << 20
+    for start in range(0, len(points), chunk):
+        keep[start:start + chunk] = carve(points[start:start + chunk], masks, X_WCs, cameras, config)
+    return keep.reshape(shape)
+
+
+def _largest_part(occupied: np.ndarray) -> np.ndarray:
+    labels, count = ndimage.label(occupied)
+    if count == 0:
+        return occupied
+    sizes = np.bincount(labels.ravel())[1:]
+    return labels == (int(np.argmax(sizes)) + 1)
+
+
+def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
+                         cameras: list[PinholeCamera], config: HullConfig = HullConfig()
+                         ) -> ObjectPoseEstimate:
+    """The object's pose X_WO and carcass size from per-view masks.
+
+    masks: (H, W) each, object probability or 0/1 (any size: scaled to its camera's image);
+    X_WCs: camera poses (4, 4) in W, OpenCV axes, metres, W's floor at z = 0 with z up;
+    cameras: their intrinsics. ObjectPoseError when the masks agree on no object.
+    """
+    if not len(masks) == len(X_WCs) == len(cameras):
+        raise ValueError("need one mask and one camera pose per view")
+    if len(masks) < config.min_views:
+        raise ObjectPoseError(f"object pose: {len(masks)} views, need at least {config.min_views}")
+    X_WCs = [np.asarray(X, float) for X in X_WCs]
+    p_WC = np.stack([X[:3, 3] for X in X_WCs])
+    lo = np.array([*(p_WC[:, :2].min(0) - config.search_margin_m), 0.0])
+    hi = np.array([*(p_WC[:, :2].max(0) + config.search_margin_m), max(p_WC[:, 2].max(), 0.5)])
+    coarse = _largest_part(_hull(lo, hi, config.coarse_voxel_m, masks, X_WCs, cameras, config))
+    if not coarse.any():
+        raise ObjectPoseError("object pose: the masks agree on no object in front of the cameras "
+                              "(empty masks, or camera poses not in a floor frame, z up)")
+    index = np.argwhere(coarse)
+    fine_lo = np.maximum(lo + (index.min(0) - 1) * config.coarse_voxel_m, [-np.inf, -np.inf, 0.0])
+    fine_hi = lo + (index.max(0) + 2) * config.coarse_voxel_m
+    step = config.voxel_m
+    fine = _largest_part(_hull(fine_lo, fine_hi, step, masks, X_WCs, cameras, config))
+    area = fine.sum((0, 1))
+    typical = np.median(area[area > 0])
+    top_slice = int(np.nonzero(area >= 0.5 * typical)[0].max())
+    height = fine_lo[2] + (top_slice + 1) * step
+    band = [k for k in range(top_slice + 1)
+            if config.top_band_m[0] <= height - fine_lo[2] - (k + 0.5) * step <= config.top_band_m[1]]
+    columns = (fine[:, :, band].mean(2) >= 0.5) if band else fine[:, :, top_slice]
+    radius = max(int(round(config.opening_m / step / 2)), 1)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    opened = cv2.morphologyEx(columns.astype(np.uint8), cv2.MORPH_OPEN, disk) > 0
+    cells = np.argwhere(opened if opened.sum() >= 3 else columns)
+    if len(cells) < 3:
+        raise ObjectPoseError("object pose: the hull has no footprint")
+    xy = fine_lo[:2] + (cells + 0.5) * step
+    rect = cv2.minAreaRect(xy.astype(np.float32))
+    centre = np.array(rect[0], float)
+    box = cv2.boxPoints(rect).astype(float)
+    edges = [box[1] - box[0], box[2] - box[1]]
+    lengths = [float(np.linalg.norm(e)) for e in edges]
+    toward = p_WC[:, :2].mean(0) - centre
+    facing = [(s * edges[i] / max(lengths[i], 1e-9), lengths[i] + step, lengths[1 - i] + step)
+              for i in (0, 1) for s in (1.0, -1.0)]
+    x_O, depth, width = max(facing, key=lambda f: float(f[0] @ toward))
+    hull_box = np.array([*centre, np.arctan2(x_O[1], x_O[0]), depth, width, height])
+    fitted = hull_box
+    if config.refine:
+        side = min(depth, width)
+        starts = [hull_box + [0.0, 0.0, turn, 0.0, 0.0, 0.0] for turn in np.deg2rad((0.0, -25.0, 25.0))]
+        starts.append(np.array([*centre, np.arctan2(toward[1], toward[0]), side, side, height]))
+        fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras), toward)
+    return ObjectPoseEstimate.from_box(fitted, config.front_thickness_m, int(fine.sum()), hull_box)
+
+
+def box_corners_W(box: np.ndarray) -> np.ndarray:
+    """The 8 corners (8, 3) in W of a floor box (x, y, yaw, depth, width, height): centre of its
+    footprint at (x, y), its depth along the yawed x, standing on z = 0."""
+    x, y, yaw, d, w, h = box
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = np.array([[sx * d / 2, sy * w / 2, z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, h)])
+    return np.column_stack([local[:, 0] * c - local[:, 1] * s + x, local[:, 0] * s + local[:, 1] * c + y,
+                            local[:, 2]])
+
+
+def box_silhouette(box: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera, shape: tuple[int, int]
+                   ) -> np.ndarray:
+    """The floor box's silhouette (shape) float32 in [0, 1], anti-aliased, in an image of `shape`
+    (H, W) taken by `camera` (scaled) at X_WC; empty when a corner lies behind the camera."""
+    h, w = shape
+    uv, front = project_points(box_corners_W(box), X_WC, camera)
+    image = np.zeros(shape, np.uint8)
+    if front.all():
+        uv = (uv * [w / camera.width, h / camera.height] - 0.5) * 16
+        hull = cv2.convexHull(np.round(uv).astype(np.int32))
+        cv2.fillConvexPoly(image, hull, 255, lineType=cv2.LINE_AA, shift=4)
+    return image.astype(np.float32) / 255.0
+
+
+def silhouette_score(box: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
+                     cameras: list[PinholeCamera], outside_weight: float = 2.0) -> float:
+    """How well the floor box's silhouettes lie on the masks, at most 1: (covered mask - weight x
+    silhouette off the mask) / mask, summed over views. Mask outside the box (an open door, a
+    handle) costs nothing but the cover it does not add, so the box settles on the carcass."""
+    covered = off = total = 0.0
+    for mask, X_WC, camera in zip(masks, X_WCs, cameras, strict=True):
+        sil = box_silhouette(box, X_WC, camera, mask.shape)
+        inter = float(np.minimum(sil, mask).sum())
+        covered += inter
+        off += float(sil.sum()) - inter
+        total += float(mask.sum())
+    return (covered - outside_weight * off) / max(total, 1e-9)
+
+
+def _front_facing(box: np.ndarray, toward: np.ndarray) -> np.ndarray:
+    """The same floor box turned by a multiple of 90 degrees (depth and width swapped on odd
+    turns) so that its +x faces `toward` (2,), xy."""
+    x, y, yaw, d, w, h = box
+    turns = [(k, np.array([np.cos(yaw + k * np.pi / 2), np.sin(yaw + k * np.pi / 2)])) for k in range(4)]
+    k = max(turns, key=lambda t: float(t[1] @ toward))[0]
+    d, w = (w, d) if k % 2 else (d, w)
+    return np.array([x, y, np.angle(np.exp(1j * (yaw + k * np.pi / 2))), d, w, h])
+
+
+def fit_box(starts: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
+            cameras: list[PinholeCamera]) -> np.ndarray:
+    """The floor box (x, y, yaw, depth, width, height) whose silhouettes best lie on the masks
+    (`silhouette_score`): Nelder-Mead from each start (an open door turns the hull's footprint),
+    restarted from its result with a smaller simplex; the best of them."""
+    from scipy.optimize import minimize
+
+    masks = [np.clip(np.asarray(m, np.float32), 0.0, 1.0) for m in masks]
+    cost = lambda b: -silhouette_score(b, masks, X_WCs, cameras)  # noqa: E731
+    fits = []
+    for start in starts:
+        best = np.asarray(start, float)
+        for scale in (1.0, 0.3):
+            steps = scale * np.array([0.05, 0.05, 0.1, 0.08, 0.08, 0.05])
+            result = minimize(cost, best, method="Nelder-Mead",
+                              options={"initial_simplex": np.vstack([best, best + np.diag(steps)]),
+                                       "xatol": 1e-4, "fatol": 1e-6, "maxfev": 600})
+            best = result.x
+        fits.append((result.fun, tuple(best)))
+    return np.array(min(fits)[1])
