@@ -29,7 +29,7 @@ from nfr_drake.inference.infer import FittedModel
 
 TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
          ("edge_contact", "identity"), ("sighting_missing", "identity"),
-         ("sighting_gap_m", "log10_cm"), ("code_distance", "identity")]
+         ("sighting_gap_m", "log10_cm"), ("code_distance", "identity"), ("views", "inverse")]
 """The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`), each
 oriented so that more means a worse fit: its coefficient is held <= 0 (`calibrate`)."""
 

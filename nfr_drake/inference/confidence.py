@@ -130,6 +130,7 @@ TRANSFORMS = {
     "log10": lambda x: math.log10(max(x, 1e-6)),
     "one_minus": lambda x: 1.0 - x,
     "log10_cm": lambda x: math.log10(100.0 * x + 0.5),
+    "inverse": lambda x: 1.0 / max(x, 1.0),
 }
 """Transforms of a feature before the logistic regression (`ConfidenceModel.terms`)."""
 
