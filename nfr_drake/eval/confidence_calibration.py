@@ -161,8 +161,8 @@ def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> No
 
 
 def calibrate_confidence_command(data: Path = Path("data/eval"),
-                                 out: Path = Path("runs/confidence"), calibration: int = 60,
-                                 evaluation: int = 50, closed: int = 20, shut128: int = 24,
+                                 out: Path = Path("runs/confidence"), calibration: int = 40,
+                                 evaluation: int = 30, closed: int = 20, shut128: int = 12,
                                  ood: int = 24,
                                  furniture: int = 12,
                                  write_models: bool = False, fit: FitConfig = FitConfig(),
