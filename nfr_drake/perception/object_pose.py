@@ -131,6 +131,15 @@ def category_size_ranges(category: str) -> tuple[tuple[float, float], ...]:
     return r.depth, r.width, r.height
 
 
+def background_mask(image: np.ndarray, background_rgb: tuple[float, float, float],
+                    tolerance: float = 0.03) -> np.ndarray:
+    """The object's mask (H, W) float32 0/1 in a photo of the object alone against a uniform
+    background: pixels of a uint8 RGB image (H, W, 3) whose colour differs from `background_rgb`
+    (in [0, 1]) by more than `tolerance` in some channel."""
+    rgb = np.asarray(image[..., :3], np.float32) / 255.0
+    return (np.abs(rgb - np.asarray(background_rgb, np.float32)).max(-1) > tolerance).astype(np.float32)
+
+
 def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (n, 2) (top-left pixel centre at (0.5, 0.5)) of points p_W (n, 3) in a camera at
@@ -193,13 +202,15 @@ def _largest_part(occupied: np.ndarray) -> np.ndarray:
 
 
 def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
-                         cameras: list[PinholeCamera], config: HullConfig = HullConfig()
-                         ) -> ObjectPoseEstimate:
+                         cameras: list[PinholeCamera], config: HullConfig = HullConfig(),
+                         category: str | None = None) -> ObjectPoseEstimate:
     """The object's pose X_WO and carcass size from per-view masks.
 
     masks: (H, W) each, object probability or 0/1 (any size: scaled to its camera's image);
     X_WCs: camera poses (4, 4) in W, OpenCV axes, metres, W's floor at z = 0 with z up;
-    cameras: their intrinsics. ObjectPoseError when the masks agree on no object.
+    cameras: their intrinsics; category: when known, the fitted box keeps within its size
+    ranges (`category_size_ranges`, 10 % slack), else within 0.1 m and the hull's box + 0.1 m.
+    ObjectPoseError when the masks agree on no object.
     """
     if not len(masks) == len(X_WCs) == len(cameras):
         raise ValueError("need one mask and one camera pose per view")
@@ -247,7 +258,14 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
         side = min(depth, width)
         starts = [hull_box + [0.0, 0.0, turn, 0.0, 0.0, 0.0] for turn in np.deg2rad((0.0, -25.0, 25.0))]
         starts.append(np.array([*centre, np.arctan2(toward[1], toward[0]), side, side, height]))
-        fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras), toward)
+        if category is None:
+            bounds = [(0.1, hull_box[i] + 0.1) for i in (3, 4, 5)]
+        else:
+            bounds = [(0.9 * lo, 1.1 * hi) for lo, hi in category_size_ranges(category)]
+            bounds[0] = (bounds[0][0] + config.front_thickness_m, bounds[0][1] + config.front_thickness_m)
+        starts = [np.concatenate([b[:3], np.clip(b[3:], [lo for lo, _ in bounds], [hi for _, hi in bounds])])
+                  for b in starts]
+        fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras, bounds), toward)
     return ObjectPoseEstimate.from_box(fitted, config.front_thickness_m, int(fine.sum()), hull_box)
 
 
@@ -301,14 +319,21 @@ def _front_facing(box: np.ndarray, toward: np.ndarray) -> np.ndarray:
 
 
 def fit_box(starts: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
-            cameras: list[PinholeCamera]) -> np.ndarray:
+            cameras: list[PinholeCamera], bounds: list[tuple[float, float]]) -> np.ndarray:
     """The floor box (x, y, yaw, depth, width, height) whose silhouettes best lie on the masks
-    (`silhouette_score`): Nelder-Mead from each start (an open door turns the hull's footprint),
-    restarted from its result with a smaller simplex; the best of them."""
+    (`silhouette_score`) with its depth, width and height within `bounds` ((min, max) each, m;
+    a box outside costs 10 per m): Nelder-Mead from each start (an open door turns the hull's
+    footprint), restarted from its result with a smaller simplex; the best of them."""
     from scipy.optimize import minimize
 
     masks = [np.clip(np.asarray(m, np.float32), 0.0, 1.0) for m in masks]
-    cost = lambda b: -silhouette_score(b, masks, X_WCs, cameras)  # noqa: E731
+    lo, hi = np.array(bounds).T
+
+    def cost(box: np.ndarray) -> float:
+        size = np.clip(box[3:], lo, hi)
+        excess = float(np.abs(box[3:] - size).sum())
+        return -silhouette_score(np.concatenate([box[:3], size]), masks, X_WCs, cameras) + 10.0 * excess
+
     fits = []
     for start in starts:
         best = np.asarray(start, float)
@@ -319,4 +344,5 @@ def fit_box(starts: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.nd
                                        "xatol": 1e-4, "fatol": 1e-6, "maxfev": 600})
             best = result.x
         fits.append((result.fun, tuple(best)))
-    return np.array(min(fits)[1])
+    best = np.array(min(fits)[1])
+    return np.concatenate([best[:3], np.clip(best[3:], lo, hi)])

@@ -2,15 +2,18 @@
 
 `NfrPerceptionSystem` reads the colour images of N cameras, fits the model's latent code when
 triggered (at initialisation, or by `refit`), never per simulation step, and outputs the
-forward-simulated `KeypointTrajectory` in the world frame, the estimated articulation q and the
-fit's confidence (P(handle within 2 cm) and what it rests on, `inference.confidence`).
+forward-simulated `KeypointTrajectory` in the world frame, the estimated articulation q, the
+fit's confidence (P(handle within 2 cm) and what it rests on, `inference.confidence`) and the
+object's pose X_WO.
 
 `AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
 cameras, one RgbdSensor per camera pose, and the system. The perception render engine sees the
 object alone (the robot, the floor and any other geometry lose their perception role), against the
 background colour and lighting of the training renders: a stand-in for segmenting the object out
-of a real photo. Frame O of the model is the object's frame; its pose X_WO in the world is given
-(as it is for real photos through `nfr-drake poses --object-pose`).
+of a real photo. Frame O of the model is the object's frame. Its pose X_WO in the world is
+estimated from the views (W's floor at z = 0, z up): the object's masks against the uniform
+background give a visual hull and a floor box (`perception.object_pose`), and the fit runs in that
+O. The paper's setting passes a known X_WO instead.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, KeypointSource, infer
 from nfr_drake.inference.result import FitResult
+from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 PERCEPTION_RENDERER = "nfr_perception"
@@ -62,6 +66,7 @@ class NfrPerceptionSystem(LeafSystem):
         - q_estimate
         - fit_result
         - confidence
+        - X_WO
 
     camera_i_rgb: ImageRgba8U of camera i (intrinsics `cameras[i]`, pose `X_WCs[i]`).
     keypoint_trajectory: abstract `KeypointTrajectory` in W over [0, 1], q_current = the estimate.
@@ -69,25 +74,30 @@ class NfrPerceptionSystem(LeafSystem):
     fit_result: abstract `FitResult` (positions in O).
     confidence: abstract dict, the result's `confidence` ({p_handle_within_2cm, threshold,
     features, per_view}; p None when the model folder has no calibration), or None.
+    X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
 
-    The fit runs in an initialisation event and whenever `refit` is called; outputs read the stored
-    result. `fit_count` counts fits. `keypoint_source` picks the keypoint head or the fitted
-    geometry (see `nfr_drake.inference.infer.KeypointSource`).
+    X_WO None: the pose is estimated at each fit from the images' object masks (pixels off
+    `background_rgb`), the result's `extra["object_pose"]` says how (and `extra["warnings"]` names a
+    size outside the model's category). The fit runs in an initialisation event and whenever
+    `refit` is called; outputs read the stored result. `fit_count` counts fits.
+    `keypoint_source` picks the keypoint head or the fitted geometry (see
+    `nfr_drake.inference.infer.KeypointSource`).
     """
 
     def __init__(self, model: FittedModel, cameras: list[PinholeCamera],
-                 X_WCs: list[RigidTransform], X_WO: RigidTransform,
+                 X_WCs: list[RigidTransform], X_WO: RigidTransform | None = None,
                  fit_config: FitConfig = FitConfig(), trajectory_points: int = 21,
-                 keypoint_source: KeypointSource = "head"):
+                 keypoint_source: KeypointSource = "head", hull_config: HullConfig | None = None,
+                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
             raise ValueError("need one camera per pose, and at least one")
         self._model, self._fit_config = model, fit_config
         self._cameras = list(cameras)
-        X_OW = X_WO.inverse()
-        self._X_OCs = [(X_OW @ X_WC).GetAsMatrix4() for X_WC in X_WCs]
+        self._X_WCs = list(X_WCs)
         self._X_WO = X_WO
+        self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self.fit_count = 0
         self._image_ports = [
@@ -106,6 +116,8 @@ class NfrPerceptionSystem(LeafSystem):
         self._confidence_port = self.DeclareAbstractOutputPort(
             "confidence", lambda: Value[object](None), self._CalcConfidence,
             prerequisites_of_calc=ticket)
+        self._X_WO_port = self.DeclareAbstractOutputPort(
+            "X_WO", lambda: Value[object](None), self._CalcX_WO, prerequisites_of_calc=ticket)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._Fit)
 
     def get_camera_rgb_input_port(self, i: int):
@@ -123,43 +135,66 @@ class NfrPerceptionSystem(LeafSystem):
     def get_confidence_output_port(self):
         return self._confidence_port
 
+    def get_X_WO_output_port(self):
+        return self._X_WO_port
+
     def refit(self, context) -> FitResult:
         """Fit again to the current camera images (this system's context); returns the result."""
-        result = self._run_fit(context)
-        context.get_mutable_abstract_state(self._result_index).set_value(result)
-        return result
+        fitted = self._run_fit(context)
+        context.get_mutable_abstract_state(self._result_index).set_value(fitted)
+        return fitted[0]
 
-    def _run_fit(self, context) -> FitResult:
+    def _object_pose(self, images: list[np.ndarray]) -> tuple[RigidTransform, dict, list[str]]:
+        """X_WO (given, or estimated from the images' masks), what the result's extra says of it,
+        and warnings."""
+        if self._X_WO is not None:
+            return self._X_WO, {"estimated": False}, []
+        masks = [background_mask(image, self._background_rgb) for image in images]
+        estimate = estimate_object_pose(masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
+                                        self._hull_config, self._model.category)
+        problem = estimate.size_problem(self._model.category)
+        return (RigidTransform(estimate.X_WO),
+                {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist()},
+                [problem] if problem else [])
+
+    def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
-        frames = [CaptureFrame(Path(f"camera_{i}"), X_OC, camera)
-                  for i, (X_OC, camera) in enumerate(zip(self._X_OCs, self._cameras, strict=True))]
+        X_WO, pose, warnings = self._object_pose(images)
+        X_OW = X_WO.inverse()
+        frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
+                  for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
         result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
                           self._keypoint_source)
+        result.extra["object_pose"] = pose
+        result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1
-        return result
+        return result, X_WO
 
     def _Fit(self, context, state) -> None:
         state.get_mutable_abstract_state(self._result_index).set_value(self._run_fit(context))
 
-    def _stored(self, context) -> FitResult:
-        result = context.get_abstract_state(self._result_index).get_value()
-        if result is None:
+    def _stored(self, context) -> tuple[FitResult, RigidTransform]:
+        fitted = context.get_abstract_state(self._result_index).get_value()
+        if fitted is None:
             raise RuntimeError("NfrPerceptionSystem: no fit yet; initialise the simulator first")
-        return result
+        return fitted
 
     def _CalcKeypointTrajectory(self, context, output) -> None:
-        output.set_value(KeypointTrajectory.from_fit_result(self._stored(context).to_json(),
-                                                            self._X_WO))
+        result, X_WO = self._stored(context)
+        output.set_value(KeypointTrajectory.from_fit_result(result.to_json(), X_WO))
 
     def _CalcQ(self, context, output) -> None:
-        output.SetAtIndex(0, self._stored(context).q)
+        output.SetAtIndex(0, self._stored(context)[0].q)
 
     def _CalcFitResult(self, context, output) -> None:
-        output.set_value(self._stored(context))
+        output.set_value(self._stored(context)[0])
 
     def _CalcConfidence(self, context, output) -> None:
-        output.set_value(self._stored(context).confidence)
+        output.set_value(self._stored(context)[0].confidence)
+
+    def _CalcX_WO(self, context, output) -> None:
+        output.set_value(self._stored(context)[1])
 
 
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:
@@ -179,14 +214,15 @@ def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInsta
 
 
 def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph: SceneGraph,
-                     model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform,
+                     model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform | None,
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
                      fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
                      keypoint_source: KeypointSource = "head") -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene; render engines then see the
-    object alone (`render_only`). Returns the system; its RgbdSensors are named `nfr_camera_{i}`.
+    object alone (`render_only`). X_WO: the object's known pose, or None to estimate it from the
+    views (`NfrPerceptionSystem`). Returns the system; its RgbdSensors are named `nfr_camera_{i}`.
     """
     params = RenderEngineVtkParams(default_clear_color=list(DEFAULT_BACKGROUND_RGB),
                                    lights=(lighting or Lighting()).drake_lights())

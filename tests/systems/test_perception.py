@@ -39,7 +39,7 @@ def model_dir(tmp_path_factory):
     return folder
 
 
-def _scene(model_dir, obj, X_WO, X_OCs, camera):
+def _scene(model_dir, obj, X_WO, X_OCs, camera, known_pose=True):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     model = add_articulated_object(plant, obj, X_WO)
@@ -52,8 +52,8 @@ def _scene(model_dir, obj, X_WO, X_OCs, camera):
                      X_WO @ RigidTransform([0.9, 0.0, 0.5]))
     plant.Finalize()
     X_WCs = [X_WO @ RigidTransform(X) for X in X_OCs]
-    system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO, X_WCs, camera,
-                              FAST)
+    system = AddNfrPerception(builder, plant, scene_graph, model_dir, model,
+                              X_WO if known_pose else None, X_WCs, camera, FAST)
     return builder.Build(), system
 
 
@@ -95,3 +95,24 @@ def test_perception_cameras_see_the_object_as_the_training_renderer_does(model_d
         expected = reference.render_rgb(0.0, X_OC).astype(int)
         # Same object, pose, background and lights; the red distractor box is not seen.
         assert np.abs(seen - expected).mean() < 2.0
+
+
+def test_object_pose_is_estimated_from_the_views_when_not_given(model_dir):
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 2))
+    camera = PinholeCamera.from_fov(96, 96, math.radians(50))
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 2.2), [-0.7, 1.1, 0.0])
+    X_OCs = CameraDistribution().sample(np.random.default_rng(2), 8, obj.look_at_target())
+    diagram, system = _scene(model_dir, obj, X_WO, X_OCs, camera, known_pose=False)
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    context = system.GetMyContextFromRoot(simulator.get_context())
+    X_WO_hat = system.get_X_WO_output_port().Eval(context)
+    error = X_WO.inverse() @ X_WO_hat
+    assert np.linalg.norm(error.translation()) < 0.02
+    assert abs(RollPitchYaw(error.rotation()).yaw_angle()) < math.radians(2.0)
+    result = system.get_fit_result_output_port().Eval(context)
+    assert result.extra["object_pose"]["estimated"] is True
+    # Keypoints come out in W through the estimate: the fit result (in O) moved by X_WO_hat.
+    kt = system.get_keypoint_trajectory_output_port().Eval(context)
+    p_O = result.trajectory["goal"][3]
+    np.testing.assert_allclose(kt.point("goal", kt.q_grid[3]), X_WO_hat.multiply(p_O), atol=1e-9)
