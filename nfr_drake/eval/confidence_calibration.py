@@ -166,7 +166,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  ood: int = 24,
                                  furniture: int = 12,
                                  write_models: bool = False, fit: FitConfig = FitConfig(),
-                                 threads: int | None = 1) -> None:
+                                 threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
     Args:
@@ -181,7 +181,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         furniture: furniture captures (seed 600), each fitted by the closet and the drawer model.
         write_models: also write the calibration to models/closet and models/drawer.
         fit: options of the fit.
-        threads: torch CPU threads.
+        threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
     out.mkdir(parents=True, exist_ok=True)
