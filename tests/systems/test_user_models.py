@@ -3,7 +3,7 @@ true keypoints or is refused with one line saying what to change."""
 
 import numpy as np
 import pytest
-from fixtures.user_models import OPENS, Geom, Joint, Link, write_models, write_sdf, write_urdf
+from fixtures.user_models import OPENS, Geom, Joint, Link, random_models, write_models, write_sdf, write_urdf
 from pydrake.math import RigidTransform
 
 from nfr_drake.cli import main
@@ -218,3 +218,28 @@ def test_a_handle_drawn_only_in_a_mesh_drake_cannot_measure_is_refused(tmp_path)
     path = write_urdf(tmp_path / "dae_handle.urdf", "dae_handle", links, joints)
     with pytest.raises(NfrDrakeError, match="the mesh handle.dae of body 'handle' cannot be measured"):
         SceneObject.from_model_file(path, "hinge", "handle", RigidTransform(), 0.0)
+
+
+def test_object_pose_turns_by_rpy_then_adds_the_yaw():
+    X = object_pose((1.0, 2.0, 0.0), 90.0, (90.0, 0.0, 0.0))
+    # Roll 90 (y up to z), then yaw 90 about W's z: the model's y axis ends up along W's z.
+    np.testing.assert_allclose(X.rotation().matrix() @ [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(X.rotation().matrix() @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
+    with pytest.raises(NfrDrakeError, match="finite"):
+        object_pose((0.0, 0.0, 0.0), 0.0, (float("nan"), 0.0, 0.0))
+
+
+def test_model_file_options_need_a_model_file(capsys, tmp_path):
+    for option in (["--closed-at", "upper"], ["--object-rpy-deg", "90", "0", "0"]):
+        assert main(["plan", "--category", "closet", *option, "--replay", str(tmp_path / "r.html")]) == 2
+        assert "apply to a model file (--object)" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_random_user_models_open(tmp_path, capsys):
+    """Two each of random doors, drawers and sliding doors at random poses (benchmarks/user_models.py
+    --random runs more)."""
+    for model in random_models(tmp_path, 6, seed=0):
+        status = main([*model.plan_args(), "--replay", str(tmp_path / f"{model.name}.html")])
+        out = capsys.readouterr()
+        assert status == 0 and "SUCCESS" in out.out, (model.name, out)
