@@ -57,6 +57,21 @@ class PipelineRow:
     failure: str
 
 
+@dataclass
+class PlaceRow(PipelineRow):
+    """One object's open-and-place run: `PipelineRow`'s columns (those of the opening; success is
+    the whole task's) and the place's: the grasp simulated, the item ("kind WxDxH cm"), whether it
+    was picked, its distance to the true goal (cm), inside the compartment, and the front still
+    open at the end."""
+
+    grasp: str
+    item: str
+    picked: bool
+    item_error_cm: float
+    inside: bool
+    still_open: bool
+
+
 def _row(scenario: Scenario) -> PipelineRow:
     outcome = run_scenario(scenario)
     revolute = scenario.category == "closet"
@@ -73,7 +88,7 @@ def _row(scenario: Scenario) -> PipelineRow:
         to_hinge = [(kt.point("hinge_bottom", kt.q_current) - h)[:2]
                     for kt, h in zip((outcome.predicted, outcome.truth), handle, strict=True)]
         hinge_side = bool(to_hinge[0] @ to_hinge[1] > 0.0)
-    return PipelineRow(
+    row = PipelineRow(
         category=scenario.category, index=scenario.index, q_true=outcome.q_true,
         q_estimate=outcome.q_estimate, keypoint_rmse_cm=outcome.keypoint_rmse_cm,
         handle_path_rmse_cm=outcome.handle_path_rmse_cm,
@@ -88,6 +103,12 @@ def _row(scenario: Scenario) -> PipelineRow:
         fit_seconds=outcome.perception_seconds,
         planning_seconds=task.planning_seconds if task is not None else 0.0,
         failure=failure.replace("\n", " "))
+    if scenario.task == "open":
+        return row
+    item = scenario.sample_item()
+    return PlaceRow(**asdict(row), grasp=scenario.grasp, item=str(item), picked=bool(sim and sim.picked),
+                    item_error_cm=float(100 * sim.item_error) if sim else float("nan"),
+                    inside=bool(sim and sim.inside), still_open=bool(sim and sim.still_open))
 
 
 def _probability(confidence: dict | None) -> float:
@@ -99,9 +120,9 @@ def _probability(confidence: dict | None) -> float:
 def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
     """Run `base` on objects index = 0 .. n-1 and append a `PipelineRow` per object to `csv_path`
     (objects of the category already there are skipped); returns the CSV's rows of the category
-    (string values, as `csv.DictReader` reads them)."""
+    (string values, as `csv.DictReader` reads them). An open-and-place task writes `PlaceRow`s."""
     done = set()
-    fields = list(PipelineRow.__dataclass_fields__)
+    fields = list((PipelineRow if base.task == "open" else PlaceRow).__dataclass_fields__)
     if csv_path.exists():
         with open(csv_path) as f:
             reader = csv.DictReader(f)
@@ -129,8 +150,11 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head"] = "head",
                           fit: FitConfig = FitConfig(), image_size: int = Scenario.image_size,
-                          min_confidence: float = -1.0, threads: int | None = None) -> None:
-    """Open (or close) n unseen objects with neural-field keypoints; print the success rate.
+                          min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
+                          grasp: Literal["constraint", "contact"] = "constraint",
+                          threads: int | None = None) -> None:
+    """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
+    item inside; print the success rate.
 
     Args:
         category: object category.
@@ -147,6 +171,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         min_confidence: do not plan on a fit whose P(handle within 2 cm) is below this (below 0:
             the model's calibrated threshold, `confidence.json`; 0: never refuse); such objects
             are counted as refused, apart from the failures.
+        task: "open", or "open-and-place" (then pick an item from a table beside the robot and
+            place it at the goal keypoint; the CSV gets the place's columns, `PlaceRow`).
+        grasp: open-and-place: "constraint" or "contact" (`Scenario.grasp`).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -154,13 +181,14 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size,
-                    min_confidence=min_confidence)
+                    min_confidence=min_confidence, task=task, grasp=grasp)
     rows = evaluate_pipeline(base, n, csv_path)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
     wins = sum(r["success"] == "True" for r in rows)
     refused = sum(r["refused"] == "True" for r in rows)
-    print(f"{category}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
+    what = "" if task == "open" else f" {task} ({grasp} grasp)"
+    print(f"{category}{what}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
           f"({100 * wins / max(len(rows), 1):.0f}%), {refused} refused for low fit confidence, "
           f"{len(rows) - wins - refused} failed")
 

@@ -48,10 +48,12 @@ from nfr_drake.world.robot import NUM_ARM_JOINTS, Q_HOME
 _Z = np.array([0.0, 0.0, 1.0])
 _IK_ITERATIONS = 80
 _KNOT_SLACK = 0.003  # knots clear obstacles by this much more than the trajectories between them, m
-PLACE_REACH = {"closet": 0.7, "drawer": 0.55}
-"""`PlannerConfig.place_reach` for an opening a place follows, by category, m: a closet's goal is
-reached by a level hand through its front, a drawer's from above, over the front (a forearm that
-comes down steeply: the base nearer)."""
+GRASP_OF = {"closet": "side", "drawer": "top"}
+"""The grasp of the item by the category it is placed in (module docstring)."""
+PLACE_REACH = {"closet": (0.6, 0.7, 0.85), "drawer": (0.5, 0.55, 0.7)}
+"""`PlannerConfig.place_reach` values for an opening a place follows, tried in turn (the nearer
+base first), by category, m: a closet's goal is reached by a level hand through its front, a
+drawer's from above, over the front (a forearm that comes down steeply: the base nearer)."""
 _EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
@@ -65,7 +67,7 @@ class PlaceConfig:
     """Pre-pick: the tool this far back along its approach from the pick pose, m."""
     lift_height: float = 0.08
     """How far the item is lifted off the table before it is carried, m."""
-    carry_clearance: float = 0.15
+    carry_clearance: float = 0.05
     """Side grasps: the item is carried from above the table to above the pre-place pose this far
     above the higher of the two, m (top grasps: at the higher of the two)."""
     entry_margin: float = 0.06
@@ -128,7 +130,7 @@ def place_problem(kt: KeypointTrajectory, q_target: float, item: Item, X_WI: Rig
     of a true model; None: from the keypoints (`compartment_obstacles`)."""
     entry, depth = _entry(kt, q_target, item, config or PlaceConfig())
     fixed, moving = obstacles if obstacles is not None else compartment_obstacles(kt, q_target)
-    return PlaceProblem("side" if kt.category == "closet" else "top", kt.point("goal", q_target), entry,
+    return PlaceProblem(GRASP_OF[kt.category], kt.point("goal", q_target), entry,
                         depth, list(fixed), list(moving), table, item, X_WI)
 
 
@@ -393,7 +395,7 @@ def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig
         X_WGplace = _tool_pose_at(scenes["free"], sols_b[-1])
         outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
         retreat = [_Stage(f"retreat {k}", "free", p, _tool_pose(RigidTransform(X_WGplace.rotation(), p), cfg,
-                                                                angle_deg=5.0))
+                                                                angle_deg=20.0))
                    for k, p in enumerate(outs, start=1)]
         sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
         if sols_c is None:

@@ -57,6 +57,10 @@ _PLACE_SIGHT_HEIGHT = 0.3  # the line from a base to a place goal starts this fa
 _PLACE_SIGHT_CLEARANCE = 0.1  # ... and clears the obstacles and an open door by this much, m
 _PLACE_SIGHT_FRACTION = 0.75  # ... along this fraction of its length
 _OBSTACLE_RANGE = 1.3  # obstacles farther than this from the shoulder are out of the arm's reach, m
+GRASP_DEPTH = {"constraint": 0.0, "contact": 0.015}
+"""`PlannerConfig.grasp_depth` by simulated grasp, m: fingers holding a bar by friction need it
+between their pads' middles (the tool point lies 0.9 cm from the fingertips), not at their edge,
+where the squeezed bar slips out."""
 
 
 class PlanningError(NfrDrakeError):
@@ -75,6 +79,10 @@ class PlannerConfig:
     """Largest mean speed of the handle while articulating, m/s."""
     pregrasp_distance: float = 0.10
     """How far back along the approach the pre-grasp holds the tool frame, m."""
+    grasp_depth: float = 0.0
+    """How far past the handle keypoint the tool origin goes along the approach, m: 0 holds the bar
+    at the fingertips' grip point (`TOOL_FRAME`), as a grasp by constraint needs; a grasp by
+    friction holds it deeper, mid-pad (`GRASP_DEPTH`)."""
     position_tolerance: float = 0.003
     """Half-width of the box the tool origin must lie in at each waypoint, m."""
     bar_tolerance_deg: float = 3.0
@@ -248,8 +256,8 @@ def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
 
 def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
     """Pre-grasp (the point `pregrasp_distance` ahead of the tool along its z on the handle), grasp,
-    then the handle waypoints."""
-    first, origin = waypoints[0], np.zeros(3)
+    then the handle waypoints (the point `grasp_depth` behind the tool origin on the handle)."""
+    first, origin = waypoints[0], np.array([0.0, 0.0, -cfg.grasp_depth])
     ahead = np.array([0.0, 0.0, cfg.pregrasp_distance])
     stages = [_Stage("pre-grasp", first.p_WH, ahead, first, cfg.grasp_cone_deg, flip),
               _Stage("grasp", first.p_WH, origin, first, cfg.grasp_cone_deg, flip)]

@@ -12,15 +12,26 @@ grasp is a ball constraint between the tool frame's origin and a grip point of t
 stretch (`SceneObject.grip_half_length`), so grip points are laid along it every `grip_spacing`;
 a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
 the tool origin is switched on through the context, only if it lies inside the open gripper
-(`capture_half_extents`, in the tool frame).
+(`capture_half_extents`, in the tool frame). `SimulationConfig.grasp = "contact"` instead closes
+the fingers on the handle with a set force and lets friction (point contact) hold it, the arm
+stiff throughout, as on a real robot.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
-from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
+from pydrake.geometry import (
+    AddContactMaterial,
+    CollisionFilterDeclaration,
+    GeometrySet,
+    Meshcat,
+    MeshcatVisualizer,
+    ProximityProperties,
+    RoleAssign,
+)
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
+    CoulombFriction,
     MultibodyPlant,
     MultibodyPlantConfig,
 )
@@ -49,6 +60,9 @@ from nfr_drake.world.robot import (
 _KP = np.array([1500.0, 1500.0, 1500.0, 1500.0, 400.0, 400.0, 200.0, 300.0, 300.0])
 _KD = np.array([120.0, 120.0, 100.0, 100.0, 25.0, 20.0, 10.0, 10.0, 10.0])
 _G = np.array([0.0, 0.0, -9.81])
+GRASPS = ("constraint", "contact")
+PAD_STIFFNESS = 1e5
+"""Point-contact stiffness of the finger pads and of what they squeeze in a contact grasp, N/m."""
 
 
 @dataclass
@@ -81,11 +95,32 @@ class SimulationConfig:
     grasped_stiffness: float = 0.1
     """Fraction of the arm's PD gains kept from the grasp on (1 = as stiff as during the approach).
     A stiff arm drags the held handle along the planned path, which is off the true one by the
-    keypoint error; a compliant one lets the object's joint guide the hand."""
+    keypoint error; a compliant one lets the object's joint guide the hand. Constraint grasp only."""
+    grasp: str = "constraint"
+    """"constraint": the hand holds the grip point with a ball constraint switched on as the
+    fingers close (hand-handle contact filtered out). "contact": the fingers squeeze the handle
+    (`squeeze_force`) and friction holds it (point contact, no constraint, no filter); the arm
+    keeps its full stiffness throughout (`grasped_stiffness` is not used)."""
+    squeeze_force: float = 40.0
+    """Contact grasp: each finger's PD pushes this hard on what it closes on, N (its target lies
+    `squeeze_force / Kp` past the closed pads; the Panda hand's continuous force is 70 N)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
             raise NfrDrakeError("simulation: grasped_stiffness must lie in (0, 1]")
+        if self.grasp not in GRASPS:
+            raise NfrDrakeError(f"simulation: grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
+        if self.squeeze_force <= 0.0:
+            raise NfrDrakeError("simulation: squeeze_force must be positive")
+
+    @property
+    def contact(self) -> bool:
+        return self.grasp == "contact"
+
+    def finger_target(self, closed: float) -> float:
+        """Each finger's commanded opening when closing on something `closed` m from the centre
+        (the constraint grasp), m: past the pads by `squeeze_force / Kp` for a contact grasp."""
+        return -self.squeeze_force / _KP[NUM_ARM_JOINTS] if self.contact else closed
 
 
 @dataclass
@@ -123,6 +158,7 @@ class SimulationResult:
     q_object: np.ndarray = field(repr=False)
     p_W_tool: np.ndarray = field(repr=False)
     p_W_handle: np.ndarray = field(repr=False)
+    grasp: str = "constraint"
 
     def summary(self) -> str:
         unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
@@ -130,7 +166,8 @@ class SimulationResult:
         return (f"{verdict}: articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
                 f"{self.joint_error * scale:.1f} {unit}), grasped {self.grasped} (offset "
                 f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
-                f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N")
+                f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N, "
+                f"{self.grasp} grasp")
 
 
 class CompliantCommand(LeafSystem):
@@ -212,14 +249,14 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     bar_B = obj.bar_B / np.linalg.norm(obj.bar_B)
     grips_B = grip_points(obj.p_BH, bar_B, obj.grip_half_length, config.grip_spacing)
     span_points = (1.0, -1.0) if config.grasp_half_span > 0.0 else (0.0,)
-    constraint_ids = [  # constraint_ids[k]: the constraints of grip point k
+    constraint_ids = [  # constraint_ids[k]: the constraints of grip point k (none: a contact grasp)
         [plant.AddBallConstraint(hand, X_HT @ np.array([sign * config.grasp_half_span, 0.0, 0.0]),
                                  handle_body, p_BG + sign * config.grasp_half_span * bar_B)
-         for sign in span_points]
+         for sign in span_points if not config.contact]
         for p_BG in grips_B]
     plant.Finalize()
 
-    # The grasp is the constraints: the gripper does not touch the object's moving bodies.
+    # A constraint grasp: the gripper does not touch the object's moving bodies.
     hand_bodies = [plant.GetBodyByName(name, robot) for name in HAND_BODIES]
     hand_geometries = GeometrySet([g for body in hand_bodies
                                    for g in plant.GetCollisionGeometriesForBody(body)])
@@ -227,8 +264,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     moving_bodies = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])]
     moving_geometries = GeometrySet([g for body in moving_bodies
                                      for g in plant.GetCollisionGeometriesForBody(body)])
-    scene_graph.collision_filter_manager().Apply(
-        CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
+    if not config.contact:
+        scene_graph.collision_filter_manager().Apply(
+            CollisionFilterDeclaration().ExcludeBetween(hand_geometries, moving_geometries))
     # The joint alone decides where the moving part goes: a real door or drawer clears the floor and
     # its neighbours, while a model's may rest on the floor (bottom edge at z = 0, or a mesh a
     # millimetre into it) or swing a few mm into a neighbouring front (an idealised hinge axis).
@@ -246,10 +284,12 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
     builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
     builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
-    desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, config)))
+    fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
+    desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, fingers)))
     t_activate = plan.t_grasp + 0.5 * config.dwell
+    stiffness = 1.0 if config.contact else config.grasped_stiffness
     command = builder.AddNamedSystem("compliance", CompliantCommand(
-        plant.num_positions(robot), NUM_ARM_JOINTS, t_activate, config.grasped_stiffness))
+        plant.num_positions(robot), NUM_ARM_JOINTS, t_activate, stiffness))
     builder.Connect(desired.get_output_port(), command.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
     builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
@@ -312,7 +352,21 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     success = grasped and joint_error <= tolerance and max_drift <= config.drift_tolerance
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
                             float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
-                            float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle)
+                            float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
+                            config.grasp)
+
+
+def stiffen_contact(plant: MultibodyPlant, scene_graph, bodies, stiffness: float = PAD_STIFFNESS) -> None:
+    """Give the collision geometries of `bodies` point-contact stiffness `stiffness` (N/m) and
+    friction 1 (before Finalize). Fingers squeezing a handle or an item at 40 N on Drake's default
+    stiffness sink about a centimetre into it, and a squeezed bar or can then pops out of the pads;
+    at 1e5 N/m they sink half a millimetre."""
+    for body in bodies:
+        for g in plant.GetCollisionGeometriesForBody(body):
+            props = ProximityProperties()
+            AddContactMaterial(point_stiffness=stiffness, friction=CoulombFriction(1.0, 1.0),
+                               properties=props)
+            scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
 
 
 def lock_shut(plant: MultibodyPlant, plant_context, joints) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.inference.fit import FitConfig
@@ -14,9 +15,13 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
                  q_target: float = 0.6, views: int = 10, image_size: int = Scenario.image_size,
                  fit: FitConfig = FitConfig(),
                  replay: Path = Path("out/demo/open_closet.html"),
-                 min_confidence: float = -1.0, threads: int | None = None) -> int:
+                 min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
+                 grasp: Literal["constraint", "contact"] = "constraint",
+                 threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
-    forward-simulated, the planner opens the door with those keypoints in simulation.
+    forward-simulated, the planner opens the door with those keypoints in simulation (and, with
+    `--task open-and-place`, then picks an item from a table beside the robot and places it at the
+    goal keypoint inside).
 
     Prints the estimated q, the keypoint error against ground truth, the fit's confidence, the
     planning time, a success line and the replay's path. Exit status 0 on success, 1 when the
@@ -35,6 +40,10 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
         replay: HTML replay to write.
         min_confidence: refuse to plan below this P(handle within 2 cm) (below 0: the model's
             calibrated threshold, `confidence.json`; 0: never refuse).
+        task: "open", or "open-and-place" (the paper's last step, Place).
+        grasp: open-and-place: how the simulated hand holds the handle and the item,
+            "constraint" (constraints switched on as the fingers close) or "contact" (the fingers
+            squeeze, friction holds).
         threads: torch CPU threads for the fit (default: the free cores,
             `nfr_drake.cpu.free_cores`).
     """
@@ -42,7 +51,7 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
     scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
                         q_target=q_target, views=views,
                         image_size=image_size, fit=fit, replay=str(replay),
-                        min_confidence=min_confidence)
+                        min_confidence=min_confidence, task=task, grasp=grasp)
     outcome = run_scenario(scenario)
     print(outcome.report())
     if outcome.refused:

@@ -15,7 +15,7 @@ object's own keypoints.
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,9 @@ from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
+from nfr_drake.planning.planner import GRASP_DEPTH
 from nfr_drake.systems.perception import AddNfrPerception
+from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import TaskOutcome, run_task
@@ -119,6 +121,20 @@ def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
     return float(100.0 * np.sqrt(np.mean(np.sum((a - b) ** 2, axis=-1))))
 
 
+def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
+         keypoints: KeypointTrajectory | None, reference: KeypointTrajectory | None,
+         replay: Path | None) -> TaskOutcome | PlaceTaskOutcome:
+    """Phase 2: the scenario's task planned with `keypoints` (None: the object's own)."""
+    simulation = replace(scenario.simulation, grasp=scenario.grasp)
+    planner = replace(scenario.planner, grasp_depth=GRASP_DEPTH[scenario.grasp])
+    if scenario.task == "open-and-place":
+        return run_place_task(obj, scenario.X_WO, scenario.q_start, scenario.q_target, scenario.sample_item(),
+                              keypoints=keypoints, reference=reference, replay=replay, planner_config=planner,
+                              simulation_config=PlaceSimulationConfig(opening=simulation))
+    return run_task(scene_object, scenario.q_target, keypoints=keypoints, replay=replay, reference=reference,
+                    planner_config=planner, simulation_config=simulation)
+
+
 def run_scenario(scenario: Scenario) -> PipelineOutcome:
     """Both phases (the first only when the scenario perceives); the replay (if asked for) draws
     the keypoint paths the planner used and, with perception, the true ones. NfrDrakeError first
@@ -129,9 +145,8 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
     obj = scenario.sample_object()
     scene_object = SceneObject.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
     replay = Path(scenario.replay) if scenario.replay else None
-    configs = {"planner_config": scenario.planner, "simulation_config": scenario.simulation}
     if not scenario.perceives:
-        task = run_task(scene_object, scenario.q_target, replay=replay, **configs)
+        task = _run(scenario, obj, scene_object, None, None, replay)
         return PipelineOutcome(q_estimate=scenario.q_start, q_true=scenario.q_start,
                                keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
                                predicted=task.keypoints, truth=task.keypoints, task=task,
@@ -142,8 +157,7 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid
     refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
-    task = None if refused else run_task(scene_object, scenario.q_target, keypoints=predicted,
-                                         replay=replay, reference=truth, **configs)
+    task = None if refused else _run(scenario, obj, scene_object, predicted, truth, replay)
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start,
         keypoint_rmse_cm=_rmse_cm(now(predicted), now(truth)),

@@ -6,7 +6,9 @@ arm (`table_beside`) with an item on it (`nfr_drake.world.items`).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
@@ -19,10 +21,18 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from nfr_drake.errors import ConfigError
 from nfr_drake.objects.articulated import ArticulatedObject
-from nfr_drake.planning.place import PlaceConfig, PlacePlan
-from nfr_drake.planning.planner import PlanningError
+from nfr_drake.planning.compartment import compartment_obstacles
+from nfr_drake.planning.place import (
+    GRASP_OF,
+    PLACE_REACH,
+    PlaceConfig,
+    PlacePlan,
+    place_problem,
+    place_reach_points,
+    plan_place,
+)
+from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.systems.articulation import (
     _KD,
     _KP,
@@ -30,10 +40,13 @@ from nfr_drake.systems.articulation import (
     SimulationConfig,
     _desired_state_trajectory,
     grip_points,
+    stiffen_contact,
 )
+from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.items import Item
-from nfr_drake.world.obstacles import distance_to_box
+from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.obstacles import distance_to_box, object_obstacles
 from nfr_drake.world.plan import ObstacleBox, PlanResult
 from nfr_drake.world.robot import (
     FINGER_OPEN,
@@ -85,17 +98,11 @@ def table_beside(X_WB: RigidTransform, obstacles: list[ObstacleBox], reach: floa
 @dataclass
 class PlaceSimulationConfig:
     """Options of `simulate_open_and_place`; `opening` are those of the opening's simulation
-    (`SimulationConfig`: time step, dwell, grasp capture, tolerances)."""
+    (`SimulationConfig`: time step, dwell, grasp capture, tolerances, and the grasp: "constraint",
+    the hand holding the handle with a ball constraint and the item with a weld, switched on when
+    the fingers close on them, or "contact", the fingers squeezing and friction holding)."""
 
-    grasp: str = "constraint"
-    """"constraint": the hand holds the handle with a ball constraint and the item with a weld,
-    switched on when the fingers close on them (hand-handle and hand-item contact filtered out;
-    the arm compliant while it pulls, `SimulationConfig.grasped_stiffness`). "contact": the
-    fingers squeeze with `squeeze_force` and friction holds (no constraints, no filters, the
-    arm at its full stiffness throughout)."""
     opening: SimulationConfig = field(default_factory=SimulationConfig)
-    squeeze_force: float = 40.0
-    """Contact grasp: force of each finger's PD on what it closes on, N (the Panda hand: 70 N)."""
     release: float = 0.4
     """Time the fingers take to open on the handle, then on the item, s."""
     pick_dwell: float = 0.6
@@ -106,13 +113,6 @@ class PlaceSimulationConfig:
     """Largest distance from the item's bottom centre to the goal keypoint, m."""
     rest_speed: float = 0.01
     """The item rests when its speed is below this, m/s."""
-
-    def __post_init__(self) -> None:
-        if self.grasp not in GRASPS:
-            raise ConfigError(f"grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
-
-
-GRASPS = ("constraint", "contact")
 
 
 @dataclass
@@ -182,10 +182,11 @@ class _Timeline:
 
 
 def _desired_states(open_plan: PlanResult, place: PlacePlan, cfg: PlaceSimulationConfig, finger_closed: float,
-                    finger_item: float) -> tuple[PiecewisePolynomial, _Timeline]:
+                    item_half_width: float, finger_item: float) -> tuple[PiecewisePolynomial, _Timeline]:
     """[q; v] of the robot (9 + 9) over the whole run: the opening as `simulate_articulation`
     plays it, the fingers opening, the segments with the fingers closing on the item after the
-    first and opening after the second, the settling time."""
+    first (to its sides in 70% of the dwell, then to `finger_item`: a contact grasp does not hit
+    it) and opening after the second, the settling time."""
     opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
     t_o = opening.end_time()
     to_pick, carry, retreat = place.segments
@@ -216,8 +217,10 @@ def _desired_states(open_plan: PlanResult, place: PlacePlan, cfg: PlaceSimulatio
         ramp = lambda a, b, t0, d: a + np.clip((t - t0) / d, 0.0, 1.0) * (b - a)  # noqa: E731
         if t < t2:
             return ramp(finger_closed, FINGER_OPEN, t_o, cfg.release)
+        if t < t2 + 0.7 * cfg.pick_dwell:
+            return ramp(FINGER_OPEN, item_half_width, t2, 0.7 * cfg.pick_dwell)
         if t < t4:
-            return ramp(FINGER_OPEN, finger_item, t2, cfg.pick_dwell)
+            return finger_item
         return ramp(finger_item, FINGER_OPEN, t4, cfg.release)
 
     q = np.array([arm(t) for t in times])
@@ -257,7 +260,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     `table` and place it with `place`, in one SAP simulation; records into `meshcat` if given."""
     cfg = config or PlaceSimulationConfig()
     sim = cfg.opening
-    contact = cfg.grasp == "contact"
+    contact = sim.contact
     scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
@@ -271,6 +274,9 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     plant.RegisterCollisionGeometry(world, table.X_WB, shape, "table", CoulombFriction(0.8, 0.8))
     plant.RegisterVisualGeometry(world, table.X_WB, shape, "table", np.array([0.55, 0.4, 0.3, 1.0]))
     item_body = item.add_to(plant)
+    if contact:
+        stiffen_contact(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]]
+                        + [item_body])
     robot_actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
     for actuator, kp, kd in zip([a for a in robot_actuators if a.model_instance() == robot], _KP, _KD,
                                 strict=True):
@@ -303,9 +309,8 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
     builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
     builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
-    squeeze = -cfg.squeeze_force / _KP[NUM_ARM_JOINTS]  # a finger target that far past the closed pads
-    desired, times = _desired_states(open_plan, place, cfg, squeeze if contact else sim.finger_closed,
-                                     squeeze if contact else item.width / 2)
+    desired, times = _desired_states(open_plan, place, cfg, sim.finger_target(sim.finger_closed),
+                                     item.width / 2, sim.finger_target(item.width / 2))
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
     command = builder.AddNamedSystem("compliance", _Stiffening(
         plant.num_positions(robot), NUM_ARM_JOINTS, times.t_activate, times.t_opened,
@@ -383,7 +388,91 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     still_open = abs(q_final - q_target) * span <= tolerance
     picked = lifted >= 0.5 * PlaceConfig().lift_height
     success = opened and picked and inside and resting and still_open and item_error <= cfg.place_tolerance
-    return PlaceSimulationResult(cfg.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
+    return PlaceSimulationResult(sim.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
                                  float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
                                  resting, float(q_final), still_open, opened, success, samples,
                                  np.array(q_object), np.array(p_item))
+
+
+@dataclass
+class PlaceTaskOutcome:
+    """Result of `run_place_task`: the opening plan and the place plan (None where planning
+    failed, `planning_error` then says why), their planning time (s), the simulation (None
+    without both plans), the replay's path."""
+
+    q_target: float
+    keypoints: KeypointTrajectory
+    plan: PlanResult | None
+    place: PlacePlan | None
+    planning_error: str
+    planning_seconds: float
+    simulation: PlaceSimulationResult | None
+    replay: Path | None
+
+    @property
+    def success(self) -> bool:
+        return self.simulation is not None and self.simulation.success
+
+
+def true_compartment(obj: ArticulatedObject, X_WO: RigidTransform, q: float
+                     ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
+    """The true model's boxes, one per part (`object_obstacles` unmerged: the compartment stays
+    hollow), at articulation q: those that stay put and those of front 0 (the moving one)."""
+    boxes = object_obstacles(obj, X_WO, q, moving=-1, merge=False)
+    moving = [b for b in boxes if b.name.startswith("front0_")]
+    return [b for b in boxes if not b.name.startswith("front0_")], moving
+
+
+def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float, item: Item,
+                   keypoints: KeypointTrajectory | None = None, reference: KeypointTrajectory | None = None,
+                   replay: Path | None = None, planner_config: PlannerConfig | None = None,
+                   place_config: PlaceConfig | None = None,
+                   simulation_config: PlaceSimulationConfig | None = None) -> PlaceTaskOutcome:
+    """Open front 0 of `obj` (a closet or a drawer at X_WO, at q_start) to q_target and place
+    `item` (standing on a table beside the robot) at the goal keypoint, planned with `keypoints`
+    (default: the object's own, with its true geometry as obstacles; given keypoints are planned
+    with keypoint-derived boxes only), then simulated on the true object. The base is sought
+    nearest the goal first (`PLACE_REACH`), until both plans succeed. `replay`: an HTML replay of
+    the run, with the keypoint paths used (and `reference`'s under "keypoints_true")."""
+    started = time.perf_counter()
+    place_config = place_config or PlaceConfig()
+    if keypoints is None:
+        kt = KeypointTrajectory.from_articulated_object(obj, X_WO, q_start)
+        obstacles = true_compartment(obj, X_WO, q_target)
+    else:
+        kt, obstacles = keypoints, compartment_obstacles(keypoints, q_target)
+    errors, simulation_config = [], simulation_config or PlaceSimulationConfig()
+    depth = GRASP_DEPTH[simulation_config.opening.grasp]
+    for reach in PLACE_REACH[kt.category]:
+        config = replace(planner_config or PlannerConfig(), place_reach=reach, grasp_depth=depth)
+        try:
+            plan = plan_articulation(kt, q_target, config=config,
+                                     must_reach=place_reach_points(kt, q_target, item, place_config))
+            table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
+                                       ITEM_REACH[GRASP_OF[kt.category]])
+            place = plan_place(plan, place_problem(kt, q_target, item, X_WI, table, obstacles, place_config),
+                               place_config)
+            break
+        except PlanningError as err:
+            errors.append(f"base within {reach:.2f} m of the goal: {err}")
+    else:
+        return PlaceTaskOutcome(q_target, kt, None, None, "; ".join(errors), float("nan"), None, None)
+    seconds = time.perf_counter() - started
+    meshcat = Meshcat() if replay is not None else None
+    if meshcat is not None:
+        draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
+        if reference is not None:
+            draw_keypoint_trajectory(meshcat, reference, "keypoints_true", (reference.q_current, q_target),
+                                     line_width=2.0)
+        for box in (*obstacles[0], *obstacles[1]):
+            draw_obstacle(meshcat, box)
+        goal = kt.point("goal", q_target)
+        centre = (goal + plan.X_WB.translation()) / 2 + [0.0, 0.0, 0.3]
+        away = plan.X_WB.translation() - goal
+        away[2] = 0.0
+        side = np.cross([0.0, 0.0, 1.0], away / np.linalg.norm(away))
+        frame_camera(meshcat, centre, centre + 0.6 * away + 1.2 * side + [0.0, 0.0, 0.9])
+    simulation = simulate_open_and_place(obj, X_WO, q_start, q_target, plan, place, item, table, meshcat,
+                                         simulation_config)
+    path = write_replay(meshcat, replay) if replay is not None else None
+    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path)

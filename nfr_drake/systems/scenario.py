@@ -8,6 +8,7 @@ import typing
 from dataclasses import asdict, dataclass, field, fields, make_dataclass
 from pathlib import Path
 
+import numpy as np
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.math import RigidTransform
 
@@ -21,11 +22,14 @@ from nfr_drake.objects import (
     sample_object,
 )
 from nfr_drake.planning.planner import PlannerConfig
-from nfr_drake.systems.articulation import SimulationConfig
+from nfr_drake.systems.articulation import GRASPS, SimulationConfig
 from nfr_drake.systems.scene_objects import object_pose
+from nfr_drake.world.items import Item, sample_item
 
+_ITEM_STREAM = 23  # the item's random stream beside the object's (the issue's number)
 OBJECT_DOMAINS = {"capture": SEED_DOMAIN_CAPTURE, "train": SEED_DOMAIN_TRAIN}
 KEYPOINT_SOURCES = ("head", "geometry", "ground_truth")
+TASKS = ("open", "open-and-place")
 
 
 @dataclass
@@ -79,6 +83,14 @@ class Scenario:
     """The planner acts only on a fit whose P(handle within 2 cm) (`inference.confidence`) is at
     least this: below 0, the threshold of the model's calibration (`confidence.json`; a model
     without one is never refused); 0, never refused; 1, always refused."""
+    task: str = "open"
+    """"open" (reach q_target) or "open-and-place" (then pick an item, `sample_item` from the
+    object's seed and index, from a table beside the robot and place it at the goal keypoint)."""
+    grasp: str = "constraint"
+    """How the simulated hand holds the handle (and the item): "constraint" (constraints switched
+    on when the fingers close, the arm compliant while it pulls) or "contact" (the fingers squeeze,
+    friction holds, the arm at full stiffness). It sets `simulation.grasp` and the planner's
+    `grasp_depth` (`GRASP_DEPTH`)."""
 
     def __post_init__(self):
         if self.category not in ("closet", "drawer"):
@@ -91,6 +103,10 @@ class Scenario:
         if self.keypoints not in KEYPOINT_SOURCES:
             raise ConfigError(f"keypoints must be one of {', '.join(KEYPOINT_SOURCES)}, "
                               f"got {self.keypoints!r}")
+        if self.task not in TASKS:
+            raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
+        if self.grasp not in GRASPS:
+            raise ConfigError(f"grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
         if self.min_confidence > 1.0:
             raise ConfigError("min_confidence must be at most 1 (below 0: the calibrated threshold)")
         if self.views < 1 or self.image_size < 8:
@@ -118,6 +134,10 @@ class Scenario:
         return sample_object(self.category,
                              object_rng(OBJECT_DOMAINS[self.objects], self.seed, self.index),
                              name=f"{self.category}_{self.seed}_{self.index}")
+
+    def sample_item(self) -> Item:
+        """The item an open-and-place task places: drawn from its own stream of the seed and index."""
+        return sample_item(np.random.default_rng([self.seed, self.index, _ITEM_STREAM]))
 
 
 def _thawed(cls: type) -> type:

@@ -45,6 +45,10 @@ class Item:
         if min(self.depth, self.height, self.mass, self.friction) <= 0.0:
             raise NfrDrakeError("item depth, height, mass and friction must be positive")
 
+    def __str__(self) -> str:
+        return (f"{self.kind} {100 * self.depth:.1f} x {100 * self.width:.1f} x {100 * self.height:.1f} cm, "
+                f"{1000 * self.mass:.0f} g")
+
     def shapes(self) -> list[tuple[str, Shape, RigidTransform]]:
         """(name, shape, X_IS) of the item's primitives, in frame I."""
         if self.kind == "box":

@@ -1,0 +1,57 @@
+"""Open-and-place simulated on the true object, and grasps by contact."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig
+from nfr_drake.systems.articulation import SimulationConfig
+from nfr_drake.systems.place_task import run_place_task
+from nfr_drake.systems.scenario import Scenario
+from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.task import run_task
+from nfr_drake.world.items import sample_item
+
+
+def test_open_and_place_a_drawer(tmp_path):
+    """A drawer opened and an item from the table placed in it, in one simulation: it rests inside,
+    within 3 cm of the goal, the drawer still open; the replay is written."""
+    obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
+    item = sample_item(np.random.default_rng(3))
+    outcome = run_place_task(obj, RigidTransform(), 0.0, 1.0, item, replay=tmp_path / "place.html")
+    assert outcome.planning_error == ""
+    sim = outcome.simulation
+    assert sim.opened and sim.picked and sim.inside and sim.resting and sim.still_open, sim.summary()
+    assert sim.item_error < 0.03
+    assert outcome.success and sim.summary().startswith("SUCCESS (constraint grasp)")
+    # The item left the table and ended where the plan let go of it.
+    assert sim.p_W_item[:, 2].max() > outcome.place.X_WI_pick.translation()[2] + 0.05
+    np.testing.assert_allclose(sim.p_W_item[-1][:2], outcome.place.X_WI_place.translation()[:2], atol=0.02)
+    assert outcome.replay.stat().st_size > 10_000
+
+
+def test_contact_grasp_holds_a_handle_under_the_pull():
+    """The fingers squeeze the door's bar and friction alone opens the door, the arm stiff: the
+    hand stays on the handle (drift under 2 cm) and the door reaches its target."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0)
+    outcome = run_task(scene_object, 0.6, planner_config=PlannerConfig(grasp_depth=GRASP_DEPTH["contact"]),
+                       simulation_config=SimulationConfig(grasp="contact"))
+    sim = outcome.simulation
+    assert sim.success, sim.summary()
+    assert sim.max_drift < 0.02 and sim.q_object[-1] > 0.55
+    assert sim.summary().endswith("contact grasp")
+
+
+def test_grasp_and_task_options_fail_in_one_line():
+    with pytest.raises(NfrDrakeError, match="grasp must be one of constraint, contact"):
+        SimulationConfig(grasp="glue")
+    with pytest.raises(ConfigError, match="task must be one of open, open-and-place"):
+        Scenario(task="fly")
+    with pytest.raises(ConfigError, match="grasp must be one of constraint, contact"):
+        Scenario(grasp="glue")
+    items = {Scenario(seed=200, index=i).sample_item() for i in range(3)}
+    assert len(items) == 3
+    assert Scenario(seed=200, index=1).sample_item() == Scenario(seed=200, index=1).sample_item()
