@@ -1,6 +1,7 @@
 """Success rate and planning time of `nfr-drake plan` with ground-truth keypoints on sampled objects.
 
     python benchmarks/planning_eval.py --count 50 --csv out/planning_eval.csv
+    python benchmarks/planning_eval.py --count 100 --grasp contact --csv out/planning_eval_contact.csv
     python benchmarks/planning_eval.py --categories furniture --count 100 --csv out/planning_furniture.csv
 
 Furniture: piece i opened at one random part (drawn from the piece's stream), the others shut.
@@ -30,14 +31,15 @@ def _cpu() -> str:
 
 def main(count: int = 50, seed: int = 7, csv: Path = Path("out/planning_eval.csv"),
          categories: tuple[str, ...] = ("closet", "drawer"), closet_target: float = 0.6,
-         drawer_target: float = 1.0) -> None:
-    """Evaluate (resuming from `csv`) and print the command, date, machine and a markdown table."""
+         drawer_target: float = 1.0, grasp: str = "constraint") -> None:
+    """Evaluate (resuming from `csv`) and print the command, date, machine and a markdown table.
+    `grasp`: the simulated grasp, "constraint" or "contact" (give each its own CSV)."""
     config = PlanningEvalConfig(count=count, seed=seed, categories=categories,
-                                closet_target=closet_target, drawer_target=drawer_target)
+                                closet_target=closet_target, drawer_target=drawer_target, grasp=grasp)
     rows = evaluate_planning(config, csv)
     print(f"command: python benchmarks/planning_eval.py --count {count} --seed {seed} --csv {csv} "
           f"--categories {' '.join(categories)} --closet-target {closet_target} "
-          f"--drawer-target {drawer_target}")
+          f"--drawer-target {drawer_target} --grasp {grasp}")
     print(f"date: {datetime.date.today()}, machine: {_cpu()}, {os.cpu_count()} cores, "
           f"python {sys.version.split()[0]}")
     print(f"load average at the end: {os.getloadavg()[0]:.1f}")

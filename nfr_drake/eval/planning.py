@@ -14,6 +14,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig
+from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.scene_objects import sampled_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 
@@ -33,14 +35,20 @@ class PlanningEvalConfig:
     categories: tuple[str, ...] = ("closet", "drawer")
     closet_target: float = OPEN_TARGET["closet"]
     drawer_target: float = OPEN_TARGET["drawer"]
+    grasp: str = "constraint"
+    """The simulated grasp, "constraint" or "contact" (`SimulationConfig.grasp`; the planner's
+    `grasp_depth` follows it); one CSV per grasp."""
 
 
-def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float]) -> dict:
+def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float],
+                 grasp: str = "constraint") -> dict:
     """Open one sampled object (a random part of it) from q = 0 to the target of its part's joint
-    (`targets` by SceneObject category, "closet" or "drawer"); one CSV row."""
+    (`targets` by SceneObject category, "closet" or "drawer") with the simulated `grasp`; one CSV
+    row."""
     obj, part, scene_object = sampled_part(category, seed, index, RigidTransform())
     q_target = targets[scene_object.category]
-    outcome = run_task(scene_object, q_target)
+    outcome = run_task(scene_object, q_target, planner_config=PlannerConfig(grasp_depth=GRASP_DEPTH[grasp]),
+                       simulation_config=SimulationConfig(grasp=grasp))
     sim = outcome.simulation
     return dict(category=category, seed=seed, index=index, kind=obj.params.get("kind", category),
                 part=part, part_type=obj.front(part).kind,
@@ -81,7 +89,7 @@ def evaluate_planning(config: PlanningEvalConfig, csv_path: Path) -> list[dict]:
                 if (category, config.seed, i) in done:
                     continue
                 targets = {"closet": config.closet_target, "drawer": config.drawer_target}
-                row = evaluate_one(category, config.seed, i, targets)
+                row = evaluate_one(category, config.seed, i, targets, config.grasp)
                 writer.writerow(row)
                 f.flush()
                 rows.append({k: str(v) for k, v in row.items()})
