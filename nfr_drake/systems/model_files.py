@@ -46,6 +46,8 @@ FLOAT_NOTICE = 0.05
 """A model whose lowest point is higher above the floor than this is noted (a wall cabinet?), m."""
 MAX_AXIS_TILT_DEG = 30.0
 """A hinge more than this from vertical, or a slide less than 90 minus this from it, is refused."""
+INWARD_COS = 0.2
+"""A handle whose first move points this much (cosine) towards the rest of the model is refused."""
 SHUT_EVIDENCE = 0.05
 """How much nearer the rest of the model the handle must be at the open limit than at the shut one
 the rule picks for the geometry to overrule it, m."""
@@ -167,6 +169,21 @@ def shut_by_geometry(handle_at: Callable[[float], np.ndarray], static_box: tuple
         f"joint {joint_name!r} is taken as shut at {opened:.3g}, where its handle is "
         f"{(distances[0] - distances[1]) * 100:.0f} cm nearer the rest of the model than at {shut:.3g} "
         "(the model is drawn open?); --closed-at says otherwise"]
+
+
+def check_opens_outward(handle_at: Callable[[float], np.ndarray], p_WS: np.ndarray, shut: float,
+                        opened: float, joint_name: str) -> None:
+    """Refuse a door or drawer whose handle first moves towards the centre p_WS (W, m) of the parts
+    that do not move, horizontally (more than `INWARD_COS` of its way): its axis or limits point
+    the wrong way. `handle_at(value)`: the handle in W, m, at a joint value."""
+    p0 = handle_at(shut)
+    step, out = (handle_at(shut + 0.1 * (opened - shut)) - p0) * [1, 1, 0], (p0 - p_WS) * [1, 1, 0]
+    if np.linalg.norm(step) > 1e-9 and np.linalg.norm(out) > 1e-9 and \
+            step @ out < -INWARD_COS * np.linalg.norm(step) * np.linalg.norm(out):
+        raise NfrDrakeError(
+            f"joint {joint_name!r} moves its handle into the model as it opens (from {shut:.3g} towards "
+            f"{opened:.3g}): its axis or its limits point the wrong way; negate the axis (or the limits "
+            "and their order) in the model")
 
 
 def body_box(plant: MultibodyPlant, inspector: SceneGraphInspector, body,

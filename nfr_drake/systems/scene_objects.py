@@ -28,6 +28,7 @@ from nfr_drake.systems.model_files import (
     add_model_file,
     body_box,
     check_handle_stands_out,
+    check_opens_outward,
     check_placement,
     handle_grip,
     handle_notes,
@@ -275,6 +276,9 @@ class SceneObject:
         notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
         check_handle_stands_out(plant, inspector, context, joint, body)
         front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body, axis_W)
+        if front_W is None and static_box is not None:
+            check_opens_outward(handle_at, (static_box[0] + static_box[1]) / 2, shut, opened, joint_name)
+            set_joint_value(plant, context, joint, shut)
         R_BW = X_WB.rotation().inverse()
         if grip_B is None:
             bar_W = _Z if front_W is not None else axis_W if revolute else np.cross(_Z, axis_W)

@@ -58,7 +58,8 @@ def test_a_joint_shut_at_its_upper_limit_starts_shut(models):
     np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3555, 0.25, 1.1], atol=1e-6)
     opened = obj.ground_truth.point("handle", 1.0)
     assert opened[0] > 0.5  # swung out
-    assert load(fridge, closed_at="lower").joint_range == (-1.9, 0.0)
+    with pytest.raises(NfrDrakeError, match="from -1.9 towards 0"):  # --closed-at is taken at its word:
+        load(fridge, closed_at="lower")                              # shut wide open, it would close
 
 
 def test_a_model_drawn_open_is_shut_where_its_handle_meets_the_rest(models):
@@ -68,8 +69,8 @@ def test_a_model_drawn_open_is_shut_where_its_handle_meets_the_rest(models):
     assert obj.joint_range == pytest.approx((-np.pi / 2, 0.0), abs=1e-5)
     assert any("taken as shut at -1.57" in note for note in obj.notes)
     np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3235, 0.24, 0.6], atol=1e-5)
-    forced = load(model, closed_at="upper")  # the user's word stands
-    assert forced.joint_range == pytest.approx((0.0, -np.pi / 2), abs=1e-5) and not forced.notes
+    with pytest.raises(NfrDrakeError, match="from 0 towards -1.57"):  # the user's word stands
+        load(model, closed_at="upper")
 
 
 def test_a_joint_with_no_clear_shut_limit_asks_for_closed_at(tmp_path):
@@ -243,3 +244,13 @@ def test_random_user_models_open(tmp_path, capsys):
         status = main([*model.plan_args(), "--replay", str(tmp_path / f"{model.name}.html")])
         out = capsys.readouterr()
         assert status == 0 and "SUCCESS" in out.out, (model.name, out)
+
+
+def test_a_door_that_would_open_into_its_cabinet_is_refused(models, tmp_path):
+    """The base cabinet with its hinge axis negated: from shut (0) to 1.75 rad it swings inwards."""
+    text = models["base_cabinet_door_on_floor"].path.read_text()
+    text = text.replace('<axis xyz="0 0 -1"/>', '<axis xyz="0 0 1"/>')
+    path = tmp_path / "inward.urdf"
+    path.write_text(text)
+    with pytest.raises(NfrDrakeError, match="moves its handle into the model as it opens"):
+        SceneObject.from_model_file(path, "hinge", "handle", RigidTransform(), 0.0)
