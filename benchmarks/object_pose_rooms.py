@@ -1,13 +1,17 @@
-"""Object pose error from masks in random rooms: unseen objects, held-out textures and lights.
+"""Object pose error from masks: unseen objects in random rooms (held-out textures and lights), or alone.
 
     python benchmarks/object_pose_rooms.py --category closet --rooms 12
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --setting alone
 
 Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `seed`; one articulation
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
 W by a random X_WO (yaw in [-pi, pi], x and y in [-2, 2] m) and `estimate_object_pose` runs on the
 views' masks: the target's labels (true masks), or, with `--segmenter DIR`, the segmenter's
-probabilities. Prints one line per room and the median position (cm) and yaw (degrees) errors,
-over all rooms and over those whose fronts are all shut.
+probabilities. With `--setting alone` the object of `nfr-drake captures` (seed `seed`, index i)
+stands alone before the training renders' background, photographed by `views` cameras of the
+paper's distribution (`CameraDistribution`) at a q drawn as the rooms' (shut with probability
+0.4, else uniform), its labels as masks. Prints one line per room and the median position (cm)
+and yaw (degrees) errors, over all rooms and over those whose fronts are all shut.
 """
 
 from __future__ import annotations
@@ -27,8 +31,25 @@ from nfr_drake.data.rooms import RoomDistribution
 from nfr_drake.perception.object_pose import ObjectPoseError, estimate_object_pose
 
 
+def _alone(category: str, seed: int, index: int, views: int, size: int):
+    """(masks, X_OC (V, 4, 4), camera, q) of an object alone, its labels as masks."""
+    from nfr_drake.data.camera_placement import CameraDistribution
+    from nfr_drake.data.render import ObjectRenderer
+    from nfr_drake.data.room_dataset import SHUT_PROBABILITY
+    from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
+
+    rng = object_rng(SEED_DOMAIN_CAPTURE, seed, index)
+    obj = sample_object(category, rng)
+    q = rng.uniform(0.0, 1.0, obj.num_fronts) * (rng.uniform(size=obj.num_fronts) >= SHUT_PROBABILITY)
+    camera = PinholeCamera.from_fov(size, size, math.radians(50.0))
+    X_OC = CameraDistribution().sample(rng, views, obj.look_at_target(), obj.swept_bounds(), camera)
+    renderer = ObjectRenderer(obj, camera)
+    masks = [(renderer.render(q, X).label > 0).astype(np.float32) for X in X_OC]
+    return masks, X_OC, camera, q
+
+
 def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 128, seed: int = 900,
-         segmenter: Path | None = None) -> None:
+         setting: str = "room", segmenter: Path | None = None) -> None:
     net = None
     if segmenter is not None:
         from nfr_drake.perception.segmentation.model import load_segmenter
@@ -38,20 +59,24 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
                            room=RoomDistribution(style="heldout"))
     rows = []
     for i in range(rooms):
-        arrays, meta, _, _ = render_room_arrays(spec, i)
-        camera = PinholeCamera.from_json(meta["camera"])
+        if setting == "alone":
+            masks, X_OC, camera, q = _alone(category, seed, i, views, size)
+        else:
+            arrays, meta, _, _ = render_room_arrays(spec, i)
+            camera, q = PinholeCamera.from_json(meta["camera"]), np.array(meta["q"][0])
+            X_OC = np.array(meta["X_OC"])[0]
+            if net is None:
+                masks = [(label > 0).astype(np.float32) for label in arrays["label"][0]]
+            else:
+                masks = [net.object_mask(rgb) for rgb in arrays["rgb"][0]]
         rng = np.random.default_rng([seed, i])
         yaw = rng.uniform(-math.pi, math.pi)
         X_WO = np.eye(4)
         X_WO[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
         X_WO[:2, 3] = rng.uniform(-2.0, 2.0, 2)
-        if net is None:
-            masks = [(label > 0).astype(np.float32) for label in arrays["label"][0]]
-        else:
-            masks = [net.object_mask(rgb) for rgb in arrays["rgb"][0]]
         started = time.perf_counter()
         try:
-            estimate = estimate_object_pose(masks, [X_WO @ X for X in np.array(meta["X_OC"])[0]],
+            estimate = estimate_object_pose(masks, [X_WO @ X for X in X_OC],
                                             [camera] * views, category=category)
         except ObjectPoseError as err:
             print(f"room {i}: {err}")
@@ -60,9 +85,9 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
         d = np.linalg.inv(X_WO) @ estimate.X_WO
         cm = 100.0 * float(np.linalg.norm(d[:2, 3]))
         deg = abs(math.degrees(math.atan2(d[1, 0], d[0, 0])))
-        shut = bool(np.all(np.array(meta["q"][0]) == 0.0))
+        shut = bool(np.all(q == 0.0))
         rows.append((cm, deg, shut))
-        print(f"room {i}: {'shut' if shut else 'open'} q {np.round(meta['q'][0], 2).tolist()}: "
+        print(f"room {i}: {'shut' if shut else 'open'} q {np.round(q, 2).tolist()}: "
               f"{cm:.2f} cm, {deg:.2f} deg; size {np.round(estimate.size, 3).tolist()} "
               f"({time.perf_counter() - started:.1f} s)")
     table = np.array(rows, dtype=float)
@@ -72,7 +97,7 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             within = np.mean((table[sel, 0] <= 2.0) & (table[sel, 1] <= 2.0))
             print(f"{category} {name} ({sel.sum()} rooms): median {cm:.2f} cm, {deg:.2f} deg; "
                   f"within 2 cm and 2 deg: {100 * within:.0f} %")
-    print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, masks: "
+    print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, {setting}, masks: "
           f"{'segmenter ' + str(segmenter) if segmenter else 'true labels'}")
 
 
