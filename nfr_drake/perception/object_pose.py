@@ -51,7 +51,8 @@ class HullConfig:
     mask_threshold: float = 0.5
     """A pixel is on the object when its mask value exceeds this."""
     min_views: int = 3
-    """Views whose image must hold a voxel for it to be kept."""
+    """Views whose image must hold a voxel for it to be kept: at least this many, and at least
+    half of all views (a region that only a few close, cut views hold is not the object)."""
     max_misses: int = 1
     """Views holding a voxel that may see it outside the mask (one bad mask, an occluder)."""
     top_band_m: tuple[float, float] = (0.015, 0.06)
@@ -160,7 +161,8 @@ def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
 def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
           cameras: list[PinholeCamera], config: HullConfig = HullConfig()) -> np.ndarray:
     """Which points p_W (n, 3) the hull keeps, (n,) bool: held by at least `min_views` images
-    and inside the mask in all of them but `max_misses`."""
+    and half of them, and inside the mask in all of them but `max_misses`."""
+    needed = max(config.min_views, (len(masks) + 1) // 2)
     held = np.zeros(len(p_W), np.int32)
     missed = np.zeros(len(p_W), np.int32)
     for mask, X_WC, camera in zip(masks, X_WCs, cameras, strict=True):
@@ -172,7 +174,7 @@ def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
         on[inside] = mask[row[inside].astype(int), col[inside].astype(int)] > config.mask_threshold
         held += inside
         missed += inside & ~on
-    return (held >= config.min_views) & (missed <= config.max_misses)
+    return (held >= needed) & (missed <= config.max_misses)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tuple[int, int, int]]:
@@ -282,14 +284,16 @@ def box_corners_W(box: np.ndarray) -> np.ndarray:
 def box_silhouette(box: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera, shape: tuple[int, int]
                    ) -> np.ndarray:
     """The floor box's silhouette (shape) float32 in [0, 1], anti-aliased, in an image of `shape`
-    (H, W) taken by `camera` (scaled) at X_WC; empty when a corner lies behind the camera."""
+    (H, W) taken by `camera` (scaled) at X_WC; the whole image when a corner lies behind the camera
+    (the box would hold or touch the camera, which stands outside the object)."""
     h, w = shape
     uv, front = project_points(box_corners_W(box), X_WC, camera)
+    if not front.all():
+        return np.ones(shape, np.float32)
     image = np.zeros(shape, np.uint8)
-    if front.all():
-        uv = (uv * [w / camera.width, h / camera.height] - 0.5) * 16
-        hull = cv2.convexHull(np.round(uv).astype(np.int32))
-        cv2.fillConvexPoly(image, hull, 255, lineType=cv2.LINE_AA, shift=4)
+    uv = (uv * [w / camera.width, h / camera.height] - 0.5) * 16
+    cv2.fillConvexPoly(image, cv2.convexHull(np.round(uv).astype(np.int32)), 255,
+                       lineType=cv2.LINE_AA, shift=4)
     return image.astype(np.float32) / 255.0
 
 
