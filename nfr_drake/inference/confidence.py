@@ -154,6 +154,12 @@ class ConfidenceModel:
         x = np.array([TRANSFORMS[t](float(features[name])) for name, t in self.terms])
         return (x - np.array(self.mean)) / np.array(self.std)
 
+    def weakest(self, features: dict) -> str:
+        """The feature whose term lowers this fit's probability most (its coefficient times its
+        standardised value, most negative): what a refusal names first."""
+        contributions = self.design(features) * np.array(self.coef)
+        return self.terms[int(np.argmin(contributions))][0]
+
     def probability(self, features: dict) -> float:
         """P(handle within 2 cm) of one fit's features."""
         return float(1.0 / (1.0 + math.exp(-(self.intercept + self.design(features) @ self.coef))))
@@ -206,10 +212,26 @@ def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1.0, iterations: int 
     return w[1:], float(w[0])
 
 
+ADVICE = {
+    "views": "too few views: photograph the object from more sides",
+    "edge_contact": "the object is cut by the image edge: step back so it is whole in every view",
+    "silhouette_iou_worst_view": ("the fitted shape covers the object poorly (silhouette IoU {:.2f} "
+                                  "in the worst view): check for occlusion, or use a model of this "
+                                  "kind of object"),
+    "sighting_missing": "the handle detector found no handle in 3 views: photograph the handle closer",
+    "sighting_gap_m": ("the handle detector's handle and the fitted one disagree: photograph the "
+                       "handle closer, or use a model of this kind of object"),
+    "code_distance": "the object is unlike the model's training objects: use a model of this kind",
+    None: "take more views, closer, or use a model of this kind of object",
+}
+"""What to do, by the weakest feature of a refused fit (`ConfidenceModel.weakest`)."""
+
+
 def refusal(confidence: dict | None, threshold: float | None = None) -> str | None:
     """Why a fit must not be acted on, in one line with what to do, or None when it may be:
     P(handle within 2 cm) of a result's `confidence` (`inference.infer.fit_confidence`) below
-    `threshold` (None: the calibration's own). A fit without a calibration is never refused."""
+    `threshold` (None: the calibration's own); the advice follows its `weakest` feature. A fit
+    without a calibration is never refused."""
     if confidence is None or confidence.get("p_handle_within_2cm") is None:
         return None
     p = confidence["p_handle_within_2cm"]
@@ -217,17 +239,8 @@ def refusal(confidence: dict | None, threshold: float | None = None) -> str | No
     if p >= threshold:
         return None
     f = confidence["features"]
-    if f["views"] < 3:
-        advice = f"only {int(f['views'])} view(s): photograph the object from more sides"
-    elif f["edge_contact"] > 0.05:
-        advice = "the object is cut by the image edge: step back so it is whole in every view"
-    elif f["silhouette_iou_worst_view"] < 0.75:
-        advice = (f"the fitted shape covers the object poorly (silhouette IoU "
-                  f"{f['silhouette_iou_worst_view']:.2f} in the worst view): check for occlusion "
-                  "or use a model of this kind of object")
-    elif f["sighting_missing"]:
-        advice = "the handle detector found no handle in 3 views: photograph the handle closer"
-    else:
-        advice = "take more views, closer, or use a model of this kind of object"
+    advice = ADVICE.get(confidence.get("weakest"), ADVICE[None])
+    if confidence.get("weakest") == "silhouette_iou_worst_view":
+        advice = advice.format(f["silhouette_iou_worst_view"])
     return (f"refused: P(handle within 2 cm) = {p:.2f} < {threshold:.2f} (image loss "
             f"{f['image_loss']:.4f}, worst view {f['image_loss_worst_view']:.4f}); {advice}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -43,6 +44,7 @@ from nfr_drake.perception.handle_triangulation import (
     locate_handle,
     project,
 )
+from nfr_drake.perception.object_pose import background_mask, estimate_object_pose
 
 
 class FittedModel:
@@ -100,11 +102,13 @@ rendered geometry where it shows them (`forward.geometric_keypoints`)."""
 
 
 def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
-          images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head"
-          ) -> tuple[FitResult, FitOutcome]:
+          images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head",
+          masks: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome]:
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
+    `masks` ((H, W) object probability per frame): only pixels on the object count in the image
+    loss (`observed_rays`).
     The result's `extra["warnings"]` lists what makes it doubtful (too few views); its
     `confidence` holds the fit's confidence features and, when the model folder has a calibration,
     P(handle within 2 cm) (`fit_confidence`).
@@ -115,7 +119,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
                         f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
-    rays = observed_rays(capture, images)
+    rays = observed_rays(capture, images, masks=masks)
     handle = None
     if fitted.handle_detector is not None and fit_config.uses_sightings:
         handle = locate_handle(fitted.handle_detector.detect(images), capture.frames)
@@ -148,10 +152,52 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     return result, outcome
 
 
+def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
+                   q_grid: np.ndarray, masks: list[np.ndarray], masked_loss: bool = True,
+                   keypoint_source: KeypointSource = "head"
+                   ) -> tuple[FitResult, FitOutcome, CaptureSet]:
+    """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
+    object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), the
+    fit runs in that O (its image loss `masked_loss` or over every pixel), and the result's
+    positions are moved into W (`extra["object_pose"]`: X_WO, the carcass size; a size outside
+    the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
+    with its poses in O (for reports). ObjectPoseError when the masks give no object."""
+    images = capture.load_images()
+    estimate = estimate_object_pose(masks, [f.X_OC for f in capture.frames],
+                                    [f.camera for f in capture.frames], category=fitted.category)
+    X_OW = np.linalg.inv(estimate.X_WO)
+    in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
+                      capture.gt, capture.extra)
+    result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source,
+                            masks if masked_loss else None)
+    R, t = estimate.X_WO[:3, :3], estimate.X_WO[:3, 3]
+    result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
+    result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
+    result.extra["object_pose"] = {"X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
+                                   "masked_loss": masked_loss}
+    problem = estimate.size_problem(fitted.category)
+    if problem:
+        result.extra["warnings"].append(problem)
+    return result, outcome, in_O
+
+
+def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.ndarray]:
+    """Object probability (H, W) per uint8 RGB image: the segmenter's in `segmenter` (a model
+    folder), or, with None, the pixels off the image border's median colour (an object alone
+    before a uniform background)."""
+    if segmenter is None:
+        return [background_mask(image) for image in images]
+    from nfr_drake.perception.segmentation.model import load_segmenter
+
+    net, _ = load_segmenter(segmenter)
+    return [net.object_mask(image) for image in images]
+
+
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
                    images: list[np.ndarray], handle: TriangulatedHandle | None) -> dict | None:
-    """The result's `confidence`: {p_handle_within_2cm (None without a calibration), threshold,
-    features, per_view} (docs/CONVENTIONS.md); None for a model without a handle keypoint."""
+    """The result's `confidence`: {p_handle_within_2cm, threshold and weakest (the feature that
+    lowers p most; all three None without a calibration), features, per_view}
+    (docs/CONVENTIONS.md); None for a model without a handle keypoint."""
     if "handle" not in fitted.keypoint_names:
         return None
     features, per_view = fit_features(
@@ -161,6 +207,7 @@ def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet
     calibration = fitted.confidence
     return {"p_handle_within_2cm": None if calibration is None else calibration.probability(features),
             "threshold": None if calibration is None else calibration.threshold,
+            "weakest": None if calibration is None else calibration.weakest(features),
             "features": features, "per_view": per_view}
 
 
@@ -278,6 +325,10 @@ def infer_command(
     fit: FitConfig = FitConfig(),
     trajectory_points: int = 21,
     keypoints: KeypointSource = "head",
+    estimate_pose: bool = False,
+    masks: Literal["segmenter", "background"] = "segmenter",
+    segmenter: Path = Path("models/segmenter"),
+    masked_loss: bool = True,
     threads: int | None = None,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (docs/CONVENTIONS.md).
@@ -295,6 +346,13 @@ def infer_command(
         trajectory_points: points of the forward-simulated q grid over [0, 1].
         keypoints: "head" (the keypoint head, as in the paper) or "geometry" (handle and hinge
             axis read from the fitted field's rendered segmentation, the head for the rest).
+        estimate_pose: the capture's poses are in a floor frame W (z up, the floor at z = 0: `poses`
+            with a board lying on the floor, a room capture): the object's pose is estimated from
+            its masks, the fit runs in that frame and the result's positions are in W.
+        masks: with --estimate-pose, the object's masks: "segmenter" (`--segmenter`, a photo of
+            a room) or "background" (an object alone before a uniform background).
+        segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
+        masked_loss: with --estimate-pose, only pixels on the object's mask count in the image loss.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -307,8 +365,19 @@ def infer_command(
     fitted.check_capture(cap, category)
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
-    result, outcome = infer(fitted, cap, fit, np.linspace(0.0, 1.0, trajectory_points),
-                            keypoint_source=keypoints)
+    q_grid = np.linspace(0.0, 1.0, trajectory_points)
+    if estimate_pose:
+        if masks == "segmenter" and not (segmenter / "config.json").is_file():
+            raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
+                                "for an object alone before a uniform background, use --masks background")
+        views = object_masks(cap.load_images(), segmenter if masks == "segmenter" else None)
+        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, masked_loss, keypoints)
+        pose = np.array(result.extra["object_pose"]["X_WO"])
+        print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "
+              f"{np.degrees(np.arctan2(pose[1, 0], pose[0, 0])):.1f} deg; size (depth x width x "
+              f"height) {' x '.join(f'{v:.2f}' for v in result.extra['object_pose']['size'])} m")
+    else:
+        result, outcome = infer(fitted, cap, fit, q_grid, keypoint_source=keypoints)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.write(out)
     print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "

@@ -90,15 +90,20 @@ def test_an_unreadable_calibration_is_a_one_line_error(tmp_path):
 
 
 def test_refusal_says_why_and_what_to_do():
-    features = dict.fromkeys(FEATURES, 0.0) | {"views": 10.0, "silhouette_iou_worst_view": 0.9,
-                                               "image_loss": 0.05, "image_loss_worst_view": 0.08}
-    confidence = {"p_handle_within_2cm": 0.2, "threshold": 0.4, "features": features}
+    features = dict.fromkeys(FEATURES, 0.0) | {"views": 10.0, "silhouette_iou_worst_view": 0.6,
+                                               "image_loss": 0.05, "image_loss_worst_view": 0.08,
+                                               "edge_contact": 0.3}
+    model = ConfidenceModel([("silhouette_iou_worst_view", "one_minus"), ("edge_contact", "identity")],
+                            [0.1, 0.05], [0.1, 0.1], [-1.0, -0.5], 0.0, 0.4, {})
+    confidence = {"p_handle_within_2cm": 0.2, "threshold": 0.4, "features": features,
+                  "weakest": model.weakest(features)}
     line = refusal(confidence)
     assert line.startswith("refused: P(handle within 2 cm) = 0.20 < 0.40") and "\n" not in line
-    assert "more views" in line
+    assert confidence["weakest"] == "silhouette_iou_worst_view" and "silhouette IoU 0.60" in line
     assert refusal(confidence, threshold=0.1) is None
-    assert "cut by the image edge" in refusal({**confidence, "features": features | {"edge_contact": 0.3}})
-    assert "more sides" in refusal({**confidence, "features": features | {"views": 2.0}})
+    cut = features | {"silhouette_iou_worst_view": 0.95}
+    assert "cut by the image edge" in refusal({**confidence, "weakest": model.weakest(cut)})
+    assert "more views" in refusal({**confidence, "weakest": None})
     assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
 
 
