@@ -4,7 +4,8 @@ Per dataset: the mean and median IoU of the thresholded mask (probability > 0.5)
 true one (label > 0), the pooled IoU (all pixels of all images), the same on the images whose
 true mask touches the image border (the object cut by the image edge) and on the others, and the
 false-positive area (predicted object pixels outside the true mask, relative to the true mask's
-area): what a twin beside the object or a similar neighbour adds to the mask.
+area): what a twin beside the object or a similar neighbour adds to the mask. For scale, the
+mean IoU of a fixed guess, the centre box (the middle half of the image in each direction).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def evaluate_dataset(net: Segmenter, root: Path) -> dict:
     """The measures of the module docstring on every image of the room dataset `root`."""
     spec = read_room_spec(root)
     data = RoomImages([root])
-    ious, cut, false_pos = [], [], []
+    ious, cut, false_pos, centre = [], [], [], []
     inter = union = 0
     for i in range(len(data)):
         rgb, label = data.image(i)
@@ -45,6 +46,7 @@ def evaluate_dataset(net: Segmenter, root: Path) -> dict:
             continue  # the object is hidden (behind the arm or clutter) in this view
         pred = net.object_mask(rgb) > THRESHOLD
         ious.append(mask_iou(pred, true))
+        centre.append(mask_iou(centre_box(true.shape), true))
         cut.append(touches_border(true))
         false_pos.append(np.count_nonzero(pred & ~true) / np.count_nonzero(true))
         inter += np.count_nonzero(pred & true)
@@ -59,7 +61,15 @@ def evaluate_dataset(net: Segmenter, root: Path) -> dict:
             "iou_pooled": inter / union if union else 1.0, "cut_images": int(cut_a.sum()),
             "iou_mean_cut": mean(ious_a[cut_a]), "iou_mean_whole": mean(ious_a[~cut_a]),
             "false_positive_area": mean(np.asarray(false_pos)),
-            "iou_below_0.5": int((ious_a < 0.5).sum())}
+            "iou_below_0.5": int((ious_a < 0.5).sum()), "iou_mean_centre_box": mean(np.asarray(centre))}
+
+
+def centre_box(shape: tuple[int, int]) -> np.ndarray:
+    """Boolean mask (H, W) of the middle half of the image in each direction."""
+    h, w = shape
+    box = np.zeros(shape, bool)
+    box[h // 4:h - h // 4, w // 4:w - w // 4] = True
+    return box
 
 
 def _overlay(rgb: np.ndarray, mask: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
