@@ -16,6 +16,8 @@ the errors against gt.json (`nfr_drake.eval.evaluate.score`: articulation, keypo
 observed state, handle error, handle trajectory RMSE). Prints one markdown row per variant:
 medians and 90th percentiles, and the ratio of the medians to the first variant's.
 
+`--step-costs`: CPU milliseconds of one Adam step of one code (forward, backward, update) on 64
+to 512 rays of the first capture.
 `--profile K`: where the CPU time of K fits of the first variant goes, under cProfile timed by
 `time.process_time` (cProfile adds its own overhead to every Python call, so shares, not
 seconds, are what to read).
@@ -189,6 +191,28 @@ def profile(fitted: FittedModel, dirs: list[Path], config: FitConfig) -> str:
     return "\n".join(lines)
 
 
+def step_costs(fitted: FittedModel, capture, counts=(64, 128, 256, 512), steps: int = 20) -> str:
+    """Markdown table: CPU ms of one Adam step (forward, backward, update) of one code on each
+    number of the capture's rays, median of `steps` steps."""
+    from nfr_drake.inference.fit import _adam, observed_rays
+
+    rays = observed_rays(capture)
+    for parameter in fitted.model.parameters():  # frozen, as in the fit
+        parameter.requires_grad_(False)
+    z0 = torch.cat([torch.tensor([0.0, 1.0]), fitted.z_obj_mean])[None]
+    lines = ["| rays per step | CPU ms per step |", "|---|---|"]
+    for count in counts:
+        times = []
+        for _ in range(steps):
+            z = z0.clone()
+            cpu = time.process_time()
+            _adam(fitted.model, z, rays, FitConfig(), torch.Generator().manual_seed(0), 1, count,
+                  stop_early=False)
+            times.append(time.process_time() - cpu)
+        lines.append(f"| {count} | {1000 * np.median(times):.1f} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, required=True)
@@ -202,6 +226,8 @@ def main() -> None:
     parser.add_argument("--profile", type=int, default=0,
                         help="profile this many fits of the first variant instead")
     parser.add_argument("--csv", type=Path, default=None, help="per-fit rows to write")
+    parser.add_argument("--step-costs", action="store_true",
+                        help="CPU time of one Adam step by rays per step instead")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
@@ -212,6 +238,9 @@ def main() -> None:
     print(f"{datetime.now():%Y-%m-%d %H:%M}, {platform.machine()}, {os.cpu_count()} CPUs, "
           f"{args.threads} torch thread(s), load average {os.getloadavg()[0]:.2f}, model "
           f"{args.model}, {args.captures} ({len(dirs)} captures)", flush=True)
+    if args.step_costs:
+        print(step_costs(fitted, warm))
+        return
     if args.profile:
         print(profile(fitted, dirs[:args.profile], next(iter(variants.values()))))
         return

@@ -10,8 +10,8 @@ The starts (`FitConfig.start`) are looked up by default: candidate codes at a gr
 articulations, with the mean training code and with the training codes whose keypoint head puts
 the handle where the handle detector saw it, are scored by one forward pass without gradient, and
 the best candidate of each band of q is explored (at a larger learning rate, so that z_obj leaves
-its start quickly). The exploration's loss falls tenfold within its first few tens of steps,
-while z_obj adapts; a start already near the object, at its band's best q, needs fewer steps. The
+its start quickly): the starts' losses say which basin of q is right only once z_obj has
+adapted, and a start at its band's best q, with codes near the sighting, adapts sooner. The
 refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
 from the noise of the steps' random rays, so the fit stops when it has converged. The "thorough"
 preset keeps the longer fit of before (starts spread evenly over q).
@@ -284,17 +284,21 @@ def image_detail(image: np.ndarray) -> np.ndarray:
 
 
 def observed_rays(capture: CaptureSet, images: list[np.ndarray] | None = None,
-                  dtype=torch.float32) -> ObservedRays:
-    """Every pixel of every frame of `capture` as a ray with its observed colour."""
+                  dtype=torch.float32, masks: list[np.ndarray] | None = None) -> ObservedRays:
+    """Every pixel of every frame of `capture` as a ray with its observed colour; with `masks`
+    ((H, W) object probability per frame, the frame's size) only the pixels on the object
+    (probability > 0.5): the masked image loss, for photos whose background is not the training
+    renders' (a room)."""
     images = capture.load_images() if images is None else images
     origins, directions, colours, frames, details = [], [], [], [], []
     for i, (frame, image) in enumerate(zip(capture.frames, images, strict=True)):
-        d = frame_ray_directions(frame)
+        keep = slice(None) if masks is None else np.asarray(masks[i]).reshape(-1) > 0.5
+        d = frame_ray_directions(frame)[keep]
         directions.append(d)
         origins.append(np.broadcast_to(frame.X_OC[:3, 3], d.shape))
-        colours.append(image.reshape(-1, 3) / 255.0)
+        colours.append(image.reshape(-1, 3)[keep] / 255.0)
         frames.append(np.full(len(d), i))
-        details.append(image_detail(image).reshape(-1))
+        details.append(image_detail(image).reshape(-1)[keep])
     cat = lambda xs: torch.from_numpy(np.concatenate(xs)).to(dtype)  # noqa: E731
     return ObservedRays(cat(origins), cat(directions), cat(colours),
                         torch.from_numpy(np.concatenate(frames)), cat(details))
