@@ -277,12 +277,16 @@ def _detector_view(image: np.ndarray, prob: np.ndarray, frame: CaptureFrame, siz
 def write_report(path: Path, fitted: FittedModel, capture: CaptureSet, result: FitResult,
                  outcome: FitOutcome, with_detector: bool = True) -> np.ndarray:
     """Write `observed_vs_rendered` of the fit, pixels doubled, as a PNG at `path`; the detector's
-    row when `with_detector` and the model ships one. Returns the written uint8 RGB image."""
+    row when `with_detector` and the model ships one. `capture` has its poses in O (a result in
+    W, `infer_in_world`, is moved back). Returns the written uint8 RGB image."""
+    handle = result.keypoints.get("handle")
+    if handle is not None and "object_pose" in result.extra:  # the result is in W, the capture in O
+        X_OW = np.linalg.inv(np.array(result.extra["object_pose"]["X_WO"]))
+        handle = X_OW[:3, :3] @ handle + X_OW[:3, 3]
     figure = observed_vs_rendered(
         fitted.model, outcome.z, outcome.q, capture,
         detector=fitted.handle_detector if with_detector else None,
-        sighted_p_O=result.extra["handle_sighting"].get("p_O"),
-        handle_p_O=result.keypoints.get("handle"))
+        sighted_p_O=result.extra["handle_sighting"].get("p_O"), handle_p_O=handle)
     figure = np.repeat(np.repeat(figure, 2, 0), 2, 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), cv2.cvtColor(figure, cv2.COLOR_RGB2BGR))

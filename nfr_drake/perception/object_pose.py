@@ -7,8 +7,9 @@ carcass footprint, +x out of the front, +z up; so X_WO is (x, y, yaw) with z = 0
 1. **Hull**: voxel centres on a floor-aligned grid are projected into every view; a voxel is kept
    when the views whose image holds it (at least `min_views`) all see it inside the object's mask,
    all but `max_misses` of them (a bad mask, an occluder). Views that do not hold a voxel (an image
-   edge cutting the object) say nothing about it. A coarse pass over the cameras' surroundings finds
-   the object (its largest connected part); a fine pass over that part's bounds measures it.
+   edge cutting the object) say nothing about it. A coarse pass over the cameras' surroundings
+   finds the object (the connected part most views see on the mask); a fine pass over that part's
+   bounds measures it.
 2. **Height**: the top of the hull (the highest slice with at least half the typical slice area).
 3. **Footprint**: the columns occupied just under the top (`top_band_m`): cameras look at the
    object from its front and from above, so the hull's back is bounded well only near its top, and
@@ -132,12 +133,16 @@ def category_size_ranges(category: str) -> tuple[tuple[float, float], ...]:
     return r.depth, r.width, r.height
 
 
-def background_mask(image: np.ndarray, background_rgb: tuple[float, float, float],
+def background_mask(image: np.ndarray, background_rgb: tuple[float, float, float] | None = None,
                     tolerance: float = 0.03) -> np.ndarray:
     """The object's mask (H, W) float32 0/1 in a photo of the object alone against a uniform
     background: pixels of a uint8 RGB image (H, W, 3) whose colour differs from `background_rgb`
-    (in [0, 1]) by more than `tolerance` in some channel."""
+    (in [0, 1]; None: the median colour of the image's border) by more than `tolerance` in some
+    channel."""
     rgb = np.asarray(image[..., :3], np.float32) / 255.0
+    if background_rgb is None:
+        border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]])
+        background_rgb = tuple(np.median(border, axis=0))
     return (np.abs(rgb - np.asarray(background_rgb, np.float32)).max(-1) > tolerance).astype(np.float32)
 
 
@@ -160,8 +165,9 @@ def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
 
 def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
           cameras: list[PinholeCamera], config: HullConfig = HullConfig()) -> np.ndarray:
-    """Which points p_W (n, 3) the hull keeps, (n,) bool: held by at least `min_views` images
-    and half of them, and inside the mask in all of them but `max_misses`."""
+    """How many views see each point p_W (n, 3) on the object's mask, (n,) int32, where the hull
+    keeps it (held by at least `min_views` images and half of them, inside the mask in all of
+    them but `max_misses`), else 0."""
     needed = max(config.min_views, (len(masks) + 1) // 2)
     held = np.zeros(len(p_W), np.int32)
     missed = np.zeros(len(p_W), np.int32)
@@ -174,7 +180,7 @@ def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
         on[inside] = mask[row[inside].astype(int), col[inside].astype(int)] > config.mask_threshold
         held += inside
         missed += inside & ~on
-    return (held >= needed) & (missed <= config.max_misses)
+    return np.where((held >= needed) & (missed <= config.max_misses), held - missed, 0)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tuple[int, int, int]]:
@@ -186,21 +192,26 @@ def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tupl
 
 def _hull(lo: np.ndarray, hi: np.ndarray, step: float, masks, X_WCs, cameras, config: HullConfig
           ) -> np.ndarray:
-    """The occupancy (nx, ny, nz) bool of the grid of `step` over [lo, hi], carved in slabs."""
+    """The occupied voxels of the grid of `step` over [lo, hi], carved in slabs: the object's
+    part (`_object_part`), (nx, ny, nz) bool."""
     points, shape = _grid(lo, hi, step)
-    keep = np.zeros(len(points), bool)
+    keep = np.zeros(len(points), np.int32)
     chunk = 1 << 20
     for start in range(0, len(points), chunk):
         keep[start:start + chunk] = carve(points[start:start + chunk], masks, X_WCs, cameras, config)
-    return keep.reshape(shape)
+    return _object_part(keep.reshape(shape))
 
 
-def _largest_part(occupied: np.ndarray) -> np.ndarray:
-    labels, count = ndimage.label(occupied)
+def _object_part(seen: np.ndarray) -> np.ndarray:
+    """The connected part of the kept voxels (seen > 0) that the most views see on the mask (the
+    largest among those): with cameras on one side, beams of a few views also meet beyond the
+    object, seen there by fewer views."""
+    labels, count = ndimage.label(seen > 0)
     if count == 0:
-        return occupied
-    sizes = np.bincount(labels.ravel())[1:]
-    return labels == (int(np.argmax(sizes)) + 1)
+        return seen > 0
+    best = ndimage.maximum(seen, labels, np.arange(1, count + 1))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    return labels == (int(np.lexsort((sizes, best))[-1]) + 1)
 
 
 def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
@@ -222,7 +233,7 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
     p_WC = np.stack([X[:3, 3] for X in X_WCs])
     lo = np.array([*(p_WC[:, :2].min(0) - config.search_margin_m), 0.0])
     hi = np.array([*(p_WC[:, :2].max(0) + config.search_margin_m), max(p_WC[:, 2].max(), 0.5)])
-    coarse = _largest_part(_hull(lo, hi, config.coarse_voxel_m, masks, X_WCs, cameras, config))
+    coarse = _hull(lo, hi, config.coarse_voxel_m, masks, X_WCs, cameras, config)
     if not coarse.any():
         raise ObjectPoseError("object pose: the masks agree on no object in front of the cameras "
                               "(empty masks, or camera poses not in a floor frame, z up)")
@@ -230,7 +241,7 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
     fine_lo = np.maximum(lo + (index.min(0) - 1) * config.coarse_voxel_m, [-np.inf, -np.inf, 0.0])
     fine_hi = lo + (index.max(0) + 2) * config.coarse_voxel_m
     step = config.voxel_m
-    fine = _largest_part(_hull(fine_lo, fine_hi, step, masks, X_WCs, cameras, config))
+    fine = _hull(fine_lo, fine_hi, step, masks, X_WCs, cameras, config)
     area = fine.sum((0, 1))
     typical = np.median(area[area > 0])
     top_slice = int(np.nonzero(area >= 0.5 * typical)[0].max())

@@ -83,3 +83,54 @@ def test_handle_path_on_interpolates_the_trajectory():
     result = FitResult("closet", 0.5, {}, np.array([0.0, 1.0]), {"handle": path}, 0.0, 0.0)
     np.testing.assert_allclose(infer_module.handle_path_on(np.array([0.0, 0.25, 1.0]), result),
                                [[0, 0, 0], [0.25, -0.5, 1.0], [1, -2, 4]])
+
+
+def test_estimate_pose_finds_the_object_on_the_floor_and_reports_in_w(model_folder, tmp_path, capsys):
+    import math
+
+    import numpy as np
+
+    root = tmp_path / "captures"
+    captures_command("closet", n=1, out=root, views=8, size=96, seed=11, q=0.0)
+    capture = next(p for p in root.iterdir() if (p / "transforms.json").is_file())
+    yaw = 2.0
+    X_WO = np.eye(4)
+    X_WO[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+    X_WO[:2, 3] = [0.8, -1.2]
+    doc = json.loads((capture / "transforms.json").read_text())
+    for frame in doc["frames"]:  # the camera poses in a floor frame W
+        frame["transform_matrix"] = (X_WO @ np.array(frame["transform_matrix"])).tolist()
+    (capture / "transforms.json").write_text(json.dumps(doc))
+    out = tmp_path / "r.json"
+    assert _infer(capture, model_folder, "--out", out, "--estimate-pose", "--masks", "background") == 0
+    assert "object pose: x 0.8" in capsys.readouterr().out
+    result = json.loads(out.read_text())
+    X_WO_hat = np.array(result["extra"]["object_pose"]["X_WO"])
+    error = np.linalg.inv(X_WO) @ X_WO_hat
+    assert np.linalg.norm(error[:2, 3]) < 0.02
+    assert abs(math.degrees(math.atan2(error[1, 0], error[0, 0]))) < 2.0
+    # Positions come out in W: the trajectory's points lie near the object's place in W.
+    handle = np.array(result["trajectory"]["keypoints"]["handle"])
+    assert np.linalg.norm(handle[:, :2] - X_WO[:2, 3], axis=1).max() < 2.0
+
+
+def test_estimate_pose_without_a_segmenter_is_one_line(one_view, model_folder, tmp_path, capsys):
+    status = _infer(one_view, model_folder, "--out", tmp_path / "r.json", "--estimate-pose",
+                    "--segmenter", tmp_path / "none")
+    err = capsys.readouterr().err
+    assert status == 2 and "no segmenter in" in err and err.count("\n") == 1
+
+
+def test_masked_rays_keep_the_pixels_on_the_object(one_view):
+    import numpy as np
+
+    from nfr_drake.data.capture import read_capture_set
+    from nfr_drake.inference.fit import observed_rays
+
+    capture = read_capture_set(one_view)
+    image = capture.load_images()[0]
+    mask = np.zeros(image.shape[:2], np.float32)
+    mask[4:9, 2:12] = 0.9
+    rays = observed_rays(capture, [image], masks=[mask])
+    assert rays.rgb.shape[0] == 50
+    np.testing.assert_allclose(rays.rgb[0].numpy(), image[4, 2] / 255.0, atol=1e-6)
