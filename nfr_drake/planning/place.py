@@ -9,7 +9,8 @@ samples, at rest at both ends:
    along a straight line (the way into the compartment: horizontal through a closet's front, down
    into a drawer) to the place pose: the item's bottom centre `drop_height` above the goal
    keypoint, upright;
-3. "retreat": back out along the same line, the item left behind.
+3. "retreat": back out along the same line (the hand may touch the item it let go of; the
+   approach within `approach_cone_deg` of the place's), the item left behind.
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
 hand fits under a shelf), a drawer's from the top (vertical approach: it is open from above). The
 obstacles: those that stay put, those of the moving part at q_target (the hand may touch them
@@ -233,6 +234,16 @@ def _tool_at(p_W: np.ndarray, tol: float):
     return make
 
 
+def _backing_out(p_W: np.ndarray, X_WG: RigidTransform, cfg: PlaceConfig):
+    """The tool origin at p_W (within 1 cm), its approach within `approach_cone_deg` of X_WG's."""
+    def make(sc: PlanningScene):
+        cone = AngleBetweenVectorsConstraint(sc.plant, sc.plant.world_frame(), X_WG.rotation().col(2),
+                                             sc.tool_frame, np.array([0.0, 0.0, 1.0]), 0.0,
+                                             np.radians(cfg.approach_cone_deg), sc.plant_context)
+        return [*_tool_at(p_W, 0.01)(sc), cone]
+    return make
+
+
 def _item_at(p_WI: np.ndarray, X_GI: RigidTransform, entry: np.ndarray, side: bool, cfg: PlaceConfig):
     """The held item's origin at p_WI, upright; a side grasp's approach within the cone of `entry`."""
     def make(sc: PlanningScene):
@@ -393,9 +404,12 @@ def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig
             failures.append(f"IK of {failed}")
             continue
         X_WGplace = _tool_pose_at(scenes["free"], sols_b[-1])
+        X_WIplace = X_WGplace @ X_GI
+        placed = ObstacleBox("placed item", 2 * pb.item.half_extents,
+                             X_WIplace @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
+        scenes["retreat"] = build_planning_scene(X_WB, everything, touching=[placed])
         outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
-        retreat = [_Stage(f"retreat {k}", "free", p, _tool_pose(RigidTransform(X_WGplace.rotation(), p), cfg,
-                                                                angle_deg=20.0))
+        retreat = [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg))
                    for k, p in enumerate(outs, start=1)]
         sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
         if sols_c is None:
