@@ -17,6 +17,7 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
                  replay: Path = Path("out/demo/open_closet.html"),
                  min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
                  grasp: Literal["constraint", "contact"] = "constraint",
+                 object_pose: Literal["given", "estimated"] = "given",
                  threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation (and, with
@@ -44,6 +45,8 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
         grasp: open-and-place: how the simulated hand holds the handle and the item,
             "constraint" (constraints switched on as the fingers close) or "contact" (the fingers
             squeeze, friction holds).
+        object_pose: "given" (the closet's true pose, the paper's setting) or "estimated" (from
+            the views, cameras placed around a coarse look at the scene; the error is printed).
         threads: torch CPU threads for the fit (default: the free cores,
             `nfr_drake.cpu.free_cores`).
     """
@@ -51,7 +54,8 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
     scenario = Scenario(category="closet", model=str(model), seed=seed, index=index,
                         q_target=q_target, views=views,
                         image_size=image_size, fit=fit, replay=str(replay),
-                        min_confidence=min_confidence, task=task, grasp=grasp)
+                        min_confidence=min_confidence, task=task, grasp=grasp,
+                        object_pose=object_pose)
     outcome = run_scenario(scenario)
     print(outcome.report())
     if outcome.refused:

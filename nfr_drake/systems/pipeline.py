@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -46,7 +46,8 @@ class PipelineOutcome:
     over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task
     (None when the fit was refused). Without perception (ground-truth keypoints, `perceived`
     False) the prediction is the truth. confidence: the fit result's `confidence` (or None);
-    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or ""."""
+    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or "";
+    pose_error: with an estimated object pose, its position (cm, xy) and yaw (degrees) errors."""
 
     q_estimate: float
     q_true: float
@@ -59,6 +60,7 @@ class PipelineOutcome:
     perceived: bool = True
     confidence: dict | None = None
     refused: str = ""
+    pose_error: tuple[float, float] | None = None
 
     def report(self) -> str:
         task = self.task
@@ -68,6 +70,9 @@ class PipelineOutcome:
                  f"{self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]; fit "
                  f"{self.perception_seconds:.1f} s{confidence}"] if self.perceived else []
+        if self.pose_error is not None:
+            lines.append(f"object pose estimated: {self.pose_error[0]:.2f} cm, "
+                         f"{self.pose_error[1]:.2f} deg from the true pose")
         if task is None:
             lines.append(self.refused)
         elif task.plan is None:
@@ -92,6 +97,15 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
 def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
                              ) -> tuple[KeypointTrajectory, float, dict | None]:
     """`perceive`, and the fit's confidence (the perception system's "confidence" port)."""
+    trajectory, seconds, confidence, _ = perceive_scene(scenario, obj)
+    return trajectory, seconds, confidence
+
+
+def perceive_scene(scenario: Scenario, obj: ArticulatedObject
+                   ) -> tuple[KeypointTrajectory, float, dict | None, RigidTransform]:
+    """`perceive_with_confidence`, and the object's pose the keypoints were placed with (the
+    "X_WO" port: the scenario's, or the estimate with `Scenario.object_pose` "estimated", the
+    cameras then around `Scenario.coarse_look`)."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
@@ -99,11 +113,13 @@ def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
     plant.Finalize()
     rng = np.random.default_rng([scenario.seed, scenario.index, 7])
     cameras = CameraDistribution(distance_m=tuple(scenario.distance_m))
-    X_WCs = [X_WO @ RigidTransform(X) for X in cameras.sample(rng, scenario.views,
+    X_WA = scenario.coarse_look()
+    X_WCs = [X_WA @ RigidTransform(X) for X in cameras.sample(rng, scenario.views,
                                                                obj.look_at_target())]
     camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
                                     math.radians(scenario.fov_y_deg))
-    perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, X_WO,
+    known = X_WO if scenario.object_pose == "given" else None
+    perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
                                   X_WCs, camera, scenario.fit, keypoint_source=scenario.keypoints)
     diagram = builder.Build()
     simulator = Simulator(diagram)
@@ -114,7 +130,8 @@ def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
     seconds = time.perf_counter() - started
     context = perception.GetMyContextFromRoot(simulator.get_context())
     return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
-            perception.get_confidence_output_port().Eval(context))
+            perception.get_confidence_output_port().Eval(context),
+            perception.get_X_WO_output_port().Eval(context))
 
 
 def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
@@ -151,7 +168,12 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
                                predicted=task.keypoints, truth=task.keypoints, task=task,
                                perceived=False)
-    predicted, seconds, confidence = perceive_with_confidence(scenario, obj)
+    predicted, seconds, confidence, X_WO_hat = perceive_scene(scenario, obj)
+    pose_error = None
+    if scenario.object_pose == "estimated":
+        error = scenario.X_WO.inverse() @ X_WO_hat
+        pose_error = (100.0 * float(np.linalg.norm(error.translation()[:2])),
+                      abs(math.degrees(RollPitchYaw(error.rotation()).yaw_angle())))
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
@@ -163,4 +185,4 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
         keypoint_rmse_cm=_rmse_cm(now(predicted), now(truth)),
         handle_path_rmse_cm=_rmse_cm(predicted.point("handle", grid), truth.point("handle", grid)),
         perception_seconds=seconds, predicted=predicted, truth=truth, task=task,
-        confidence=confidence, refused=refused or "")
+        confidence=confidence, refused=refused or "", pose_error=pose_error)

@@ -27,9 +27,11 @@ from nfr_drake.systems.scene_objects import object_pose
 from nfr_drake.world.items import Item, sample_item
 
 _ITEM_STREAM = 23  # the item's random stream beside the object's (the issue's number)
+_COARSE_LOOK_STREAM = 20  # the coarse look's random stream (the issue's number)
 OBJECT_DOMAINS = {"capture": SEED_DOMAIN_CAPTURE, "train": SEED_DOMAIN_TRAIN}
 KEYPOINT_SOURCES = ("head", "geometry", "ground_truth")
 TASKS = ("open", "open-and-place")
+OBJECT_POSE_SOURCES = ("given", "estimated")
 
 
 @dataclass
@@ -91,6 +93,15 @@ class Scenario:
     on when the fingers close, the arm compliant while it pulls) or "contact" (the fingers squeeze,
     friction holds, the arm at full stiffness). It sets `simulation.grasp` and the planner's
     `grasp_depth` (`GRASP_DEPTH`)."""
+    object_pose: str = "given"
+    """Where the perception system's X_WO comes from: "given" (the true pose, the paper's setting)
+    or "estimated" (from the views' masks, `perception.object_pose`); estimated, the cameras are
+    placed around a coarse look at the scene, the true pose off by `coarse_look_m` (xy) and
+    `coarse_look_deg` (yaw), drawn from the seed, instead of around the true object."""
+    coarse_look_m: float = 0.1
+    """Standard deviation of the coarse look's position error along x and y, m."""
+    coarse_look_deg: float = 10.0
+    """Standard deviation of the coarse look's yaw error, degrees."""
 
     def __post_init__(self):
         if self.category not in ("closet", "drawer"):
@@ -107,6 +118,11 @@ class Scenario:
             raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
         if self.grasp not in GRASPS:
             raise ConfigError(f"grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
+        if self.object_pose not in OBJECT_POSE_SOURCES:
+            raise ConfigError(f"object_pose must be one of {', '.join(OBJECT_POSE_SOURCES)}, "
+                              f"got {self.object_pose!r}")
+        if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
+            raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:
             raise ConfigError("min_confidence must be at most 1 (below 0: the calibrated threshold)")
         if self.views < 1 or self.image_size < 8:
@@ -129,6 +145,16 @@ class Scenario:
     @property
     def X_WO(self) -> RigidTransform:
         return object_pose(self.object_xyz, self.object_yaw_deg)
+
+    def coarse_look(self) -> RigidTransform:
+        """Where the perception cameras are placed around: X_WO, or with an estimated pose the
+        true one off by the coarse look's errors (drawn from the seed and index)."""
+        if self.object_pose == "given":
+            return self.X_WO
+        rng = np.random.default_rng([self.seed, self.index, _COARSE_LOOK_STREAM])
+        dx, dy = rng.normal(0.0, self.coarse_look_m, 2)
+        return object_pose([self.object_xyz[0] + dx, self.object_xyz[1] + dy, self.object_xyz[2]],
+                           self.object_yaw_deg + rng.normal(0.0, self.coarse_look_deg))
 
     def sample_object(self) -> ArticulatedObject:
         return sample_object(self.category,
