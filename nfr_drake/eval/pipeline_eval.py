@@ -148,7 +148,7 @@ def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
 def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
-                          keypoints: Literal["geometry", "head"] = "head",
+                          keypoints: Literal["geometry", "head", "ground_truth"] = "head",
                           fit: FitConfig = FitConfig(), image_size: int = Scenario.image_size,
                           min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
                           grasp: Literal["constraint", "contact"] = "constraint",
@@ -165,7 +165,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_start: articulation when photographed.
         q_target: articulation to reach (default: 0.6 for closets, as in the ground-truth
             planning evaluation, 1.0 for drawers).
-        keypoints: keypoint source ("geometry" or "head").
+        keypoints: keypoint source ("geometry" or "head"; "ground_truth": the object's own, no
+            cameras and no fit, for comparison).
         fit: options of the fit.
         image_size: square image size of the ten perception cameras, pixels.
         min_confidence: do not plan on a fit whose P(handle within 2 cm) is below this (below 0:
@@ -187,6 +188,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
     print(summary_row(rows))
     wins = sum(r["success"] == "True" for r in rows)
     refused = sum(r["refused"] == "True" for r in rows)
+    if task != "open":
+        print(place_summary(rows))
     what = "" if task == "open" else f" {task} ({grasp} grasp)"
     print(f"{category}{what}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
           f"({100 * wins / max(len(rows), 1):.0f}%), {refused} refused for low fit confidence, "
@@ -212,3 +215,13 @@ def summary_row(rows: list[dict]) -> str:
             f"{count('grasped')} | **{100 * count('success') / len(rows):.0f}%** | {failed} | "
             f"{p50:.1f} cm ({p10:.1f}-{p90:.1f}) | "
             f"{side} | {fit:.1f} |")
+
+
+def place_summary(rows: list[dict]) -> str:
+    """One line on the place of open-and-place CSV rows (`PlaceRow`): items picked, inside the
+    compartment, the median distance to the goal of those placed, fronts still open."""
+    count = lambda key: sum(r[key] == "True" for r in rows)  # noqa: E731
+    errors = [float(r["item_error_cm"]) for r in rows if r["inside"] == "True"]
+    median = f"{np.median(errors):.1f} cm" if errors else "n/a"
+    return (f"place: {count('picked')}/{len(rows)} items picked, {count('inside')} inside (median "
+            f"{median} from the goal), {count('still_open')} fronts still open")
