@@ -168,3 +168,13 @@ def test_march_init_step_moves_the_first_steps_forward(tiny_config):
     assert advance == pytest.approx(0.1 * config.march_steps, rel=0.3)
     with pytest.raises(Exception, match="march_init_step"):
         replace(tiny_config, march_max_step=0.3, march_init_step=0.3)
+
+
+def test_shipped_furniture_model_has_eight_slots_and_fits_the_size_limit():
+    folder = REPO / "models" / "furniture"
+    model, codes, config = load_model(folder)
+    assert model.config.num_slots == S and model.config.num_keypoints == 4 * S
+    assert config["keypoint_names"][4:6] == ["front1/handle", "front1/goal"]
+    assert sum(f.stat().st_size for f in folder.iterdir()) < 25e6
+    z = torch.cat([slots_q_to_z_art(torch.zeros(1, S), S), codes[:1]], -1)
+    assert model.slot_logits(z).shape == (1, S, 3) and torch.isfinite(model.keypoints(z)).all()
