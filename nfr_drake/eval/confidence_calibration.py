@@ -52,7 +52,8 @@ def pick_threshold(p: np.ndarray, success: np.ndarray, clean: np.ndarray) -> flo
 
 
 def featurize(lines: list[dict]) -> list[dict]:
-    """Per fit line: its split, variant, categories, handle error and features."""
+    """Per fit line: its split, kind (variant, capture set of the evaluation split, or the wrong
+    model's category), handle error and features."""
     models: dict[str, FittedModel] = {}
     rows = []
     for line in lines:
@@ -60,6 +61,7 @@ def featurize(lines: list[dict]) -> list[dict]:
         features, _ = case_features(line, fitted)
         wrong = line["category"] != line["model_category"]
         kind = (f"{line['model_category']} model on {line['category']}" if wrong
+                else Path(line["capture"]).parent.name if line["split"] == "evaluation"
                 else line["variant"])
         rows.append({"split": line["split"], "kind": kind, "model": line["model"],
                      "capture": line["capture"], "variant": line["variant"],
