@@ -239,8 +239,10 @@ def refusal(confidence: dict | None, threshold: float | None = None) -> str | No
     if p >= threshold:
         return None
     f = confidence["features"]
-    advice = ADVICE.get(confidence.get("weakest"), ADVICE[None])
-    if confidence.get("weakest") == "silhouette_iou_worst_view":
+    # Below 3 views the detector cannot triangulate a handle at all: more views come first.
+    weakest = "views" if f["views"] < 3 else confidence.get("weakest")
+    advice = ADVICE.get(weakest, ADVICE[None])
+    if weakest == "silhouette_iou_worst_view":
         advice = advice.format(f["silhouette_iou_worst_view"])
     return (f"refused: P(handle within 2 cm) = {p:.2f} < {threshold:.2f} (image loss "
             f"{f['image_loss']:.4f}, worst view {f['image_loss_worst_view']:.4f}); {advice}")

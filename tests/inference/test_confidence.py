@@ -104,6 +104,8 @@ def test_refusal_says_why_and_what_to_do():
     cut = features | {"silhouette_iou_worst_view": 0.95}
     assert "cut by the image edge" in refusal({**confidence, "weakest": model.weakest(cut)})
     assert "more views" in refusal({**confidence, "weakest": None})
+    two_views = {**confidence, "features": features | {"views": 2.0}, "weakest": "sighting_missing"}
+    assert "more sides" in refusal(two_views)  # no sighting is possible below 3 views
     assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
 
 
