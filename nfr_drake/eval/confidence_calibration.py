@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from nfr_drake.cpu import set_torch_threads
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.confidence_data import case_features, plan_cases, run_cases
-from nfr_drake.inference.confidence import ConfidenceModel, fit_logistic
+from nfr_drake.inference.confidence import CONFIDENCE_FILE, ConfidenceModel, fit_logistic
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel
 
@@ -167,7 +168,8 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  evaluation: int = 30, closed: int = 20, shut128: int = 12,
                                  ood: int = 24,
                                  furniture: int = 12,
-                                 write_models: bool = False, fit: FitConfig = FitConfig(),
+                                 write_models: bool = False, check: Path | None = None,
+                                 fit: FitConfig = FitConfig(),
                                  threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
@@ -182,12 +184,19 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         ood: out-of-distribution captures per category (seed 600).
         furniture: furniture captures (seed 600), each fitted by the closet and the drawer model.
         write_models: also write the calibration to models/closet and models/drawer.
+        check: a model folder whose confidence.json is checked instead (no calibration fits,
+            nothing written to the models): e.g. the shipped calibration under another fit
+            (`--fit.preset`).
         fit: options of the fit.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
+    checked = None if check is None else ConfidenceModel.read(check)
+    if check is not None and checked is None:
+        raise NfrDrakeError(f"--check {check}: no {CONFIDENCE_FILE} there")
     out.mkdir(parents=True, exist_ok=True)
-    cases = plan_cases(data, calibration, evaluation, closed, shut128, ood, furniture)
+    cases = plan_cases(data, 0 if checked else calibration, evaluation, closed, shut128, ood,
+                       furniture)
     keys = {c.key for c in cases}
     lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
     rows = featurize(lines)
@@ -202,9 +211,9 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
               "fits": len([r for r in rows if r["split"] == "calibration"]),
               "command": command, "date": datetime.date.today().isoformat(),
               "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
-    model = calibrate([r for r in rows if r["split"] == "calibration"], TERMS, source)
+    model = checked or calibrate([r for r in rows if r["split"] == "calibration"], TERMS, source)
     model.write(out)
-    if write_models:
+    if write_models and checked is None:
         for folder in ("models/closet", "models/drawer"):
             print(f"calibration -> {model.write(Path(folder))}")
     table = refusal_table(rows, model)
