@@ -13,15 +13,17 @@ stretch (`SceneObject.grip_half_length`), so grip points are laid along it every
 a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
 the tool origin is switched on through the context, only if it lies inside the open gripper
 (`capture_half_extents`, in the tool frame). `SimulationConfig.grasp = "contact"` instead closes
-the fingers on the handle with a set force and lets friction (point contact) hold it, the arm
-stiff throughout, as on a real robot.
+the fingers on the handle with a set force and lets friction hold it (compliant hydroelastic pads
+on a rigid hydroelastic handle), the arm stiff throughout, as on a real robot.
 """
 
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.geometry import (
+    AddCompliantHydroelasticProperties,
     AddContactMaterial,
+    AddRigidHydroelasticProperties,
     CollisionFilterDeclaration,
     GeometrySet,
     Meshcat,
@@ -61,8 +63,8 @@ _KP = np.array([1500.0, 1500.0, 1500.0, 1500.0, 400.0, 400.0, 200.0, 300.0, 300.
 _KD = np.array([120.0, 120.0, 100.0, 100.0, 25.0, 20.0, 10.0, 10.0, 10.0])
 _G = np.array([0.0, 0.0, -9.81])
 GRASPS = ("constraint", "contact")
-PAD_STIFFNESS = 1e5
-"""Point-contact stiffness of the finger pads and of what they squeeze in a contact grasp, N/m."""
+PAD_MODULUS = 1e6
+"""Hydroelastic modulus of the finger pads in a contact grasp, Pa (a rubber-like pad)."""
 
 
 @dataclass
@@ -99,8 +101,9 @@ class SimulationConfig:
     grasp: str = "constraint"
     """"constraint": the hand holds the grip point with a ball constraint switched on as the
     fingers close (hand-handle contact filtered out). "contact": the fingers squeeze the handle
-    (`squeeze_force`) and friction holds it (point contact, no constraint, no filter); the arm
-    keeps its full stiffness throughout (`grasped_stiffness` is not used)."""
+    (`squeeze_force`) and friction holds it (compliant hydroelastic pads, `hydroelastic_grip`; no
+    constraint, no filter); the arm keeps its full stiffness throughout (`grasped_stiffness` is
+    not used)."""
     squeeze_force: float = 40.0
     """Contact grasp: each finger's PD pushes this hard on what it closes on, N (its target lies
     `squeeze_force / Kp` past the closed pads; the Panda hand's continuous force is 70 N)."""
@@ -254,6 +257,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                                  handle_body, p_BG + sign * config.grasp_half_span * bar_B)
          for sign in span_points if not config.contact]
         for p_BG in grips_B]
+    if config.contact:
+        hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
+                          [plant.get_body(b) for b in plant.GetBodyIndices(model)])
     plant.Finalize()
 
     # A constraint grasp: the gripper does not touch the object's moving bodies.
@@ -356,16 +362,19 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             config.grasp)
 
 
-def stiffen_contact(plant: MultibodyPlant, scene_graph, bodies, stiffness: float = PAD_STIFFNESS) -> None:
-    """Give the collision geometries of `bodies` point-contact stiffness `stiffness` (N/m) and
-    friction 1 (before Finalize). Fingers squeezing a handle or an item at 40 N on Drake's default
-    stiffness sink about a centimetre into it, and a squeezed bar or can then pops out of the pads;
-    at 1e5 N/m they sink half a millimetre."""
-    for body in bodies:
-        for g in plant.GetCollisionGeometriesForBody(body):
+def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:
+    """Compliant hydroelastic finger pads on the collision geometries of the bodies `pads` (modulus
+    `PAD_MODULUS`, 4 mm resolution) and rigid hydroelastic ones on those of `held` (what they
+    squeeze: the handle's bodies, an item), friction 1; before Finalize. With point contact the
+    squeezed pads sank about a centimetre into an item and squeezed it out."""
+    for bodies, compliant in ((pads, True), (held, False)):
+        for g in [g for body in bodies for g in plant.GetCollisionGeometriesForBody(body)]:
             props = ProximityProperties()
-            AddContactMaterial(point_stiffness=stiffness, friction=CoulombFriction(1.0, 1.0),
-                               properties=props)
+            AddContactMaterial(dissipation=1.0, friction=CoulombFriction(1.0, 1.0), properties=props)
+            if compliant:
+                AddCompliantHydroelasticProperties(0.004, PAD_MODULUS, props)
+            else:
+                AddRigidHydroelasticProperties(0.004, props)
             scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
 
 

@@ -40,7 +40,7 @@ from nfr_drake.systems.articulation import (
     SimulationConfig,
     _desired_state_trajectory,
     grip_points,
-    stiffen_contact,
+    hydroelastic_grip,
 )
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
@@ -275,8 +275,9 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     plant.RegisterVisualGeometry(world, table.X_WB, shape, "table", np.array([0.55, 0.4, 0.3, 1.0]))
     item_body = item.add_to(plant)
     if contact:
-        stiffen_contact(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]]
-                        + [item_body])
+        grip_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)] + [item_body]
+        hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
+                          grip_bodies)
     robot_actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
     for actuator, kp, kd in zip([a for a in robot_actuators if a.model_instance() == robot], _KP, _KD,
                                 strict=True):
