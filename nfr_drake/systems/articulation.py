@@ -173,6 +173,29 @@ class SimulationResult:
                 f"{self.grasp} grasp")
 
 
+def set_arm_gains(plant: MultibodyPlant, robot) -> None:
+    """Give the robot's actuators (arm joints 1-7, then the fingers) the implicit PD gains _KP, _KD.
+    Before `plant.Finalize()`."""
+    actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
+    robot_actuators = [a for a in actuators if a.model_instance() == robot]
+    for actuator, kp, kd in zip(robot_actuators, _KP, _KD, strict=True):
+        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+
+
+def add_gravity_compensation(builder: DiagramBuilder, plant: MultibodyPlant, robot, X_WB) -> MultibodyPlant:
+    """Feed the robot's actuation with gravity compensation of a Panda alone at X_WB (feed-forward to
+    the implicit PD of its actuators). Returns the controller's plant: the InverseDynamics system
+    only refers to it, so the caller must hold it for as long as the diagram runs."""
+    controller_plant = MultibodyPlant(0.0)
+    add_panda(controller_plant, X_WB)
+    controller_plant.Finalize()
+    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
+        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+    builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
+    builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
+    return controller_plant
+
+
 class CompliantCommand(LeafSystem):
     """Scales the arm's implicit PD gains from time `t_soft` on, by rewriting its desired state.
 
@@ -242,10 +265,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     floor = add_floor(plant)
     add_pedestal(plant, plan.X_WB)
     model = obj.add_to(plant)
-    actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
-    robot_actuators = [a for a in actuators if a.model_instance() == robot]
-    for actuator, kp, kd in zip(robot_actuators, _KP, _KD, strict=True):
-        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    set_arm_gains(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
     handle_body = plant.GetBodyByName(obj.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
@@ -283,13 +303,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(clear_of, moving_geometries))
 
-    controller_plant = MultibodyPlant(0.0)
-    add_panda(controller_plant, plan.X_WB)
-    controller_plant.Finalize()
-    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
-        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
-    builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
-    builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
+    _controller_plant = add_gravity_compensation(builder, plant, robot, plan.X_WB)  # kept alive here
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
     desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, fingers)))
     t_activate = plan.t_grasp + 0.5 * config.dwell

@@ -13,10 +13,8 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import BasicVector, DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
@@ -34,13 +32,13 @@ from nfr_drake.planning.place import (
 )
 from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.systems.articulation import (
-    _KD,
-    _KP,
     CompliantCommand,
     SimulationConfig,
     _desired_state_trajectory,
+    add_gravity_compensation,
     grip_points,
     hydroelastic_grip,
+    set_arm_gains,
 )
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
@@ -278,10 +276,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         grip_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)] + [item_body]
         hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
                           grip_bodies)
-    robot_actuators = [plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())]
-    for actuator, kp, kd in zip([a for a in robot_actuators if a.model_instance() == robot], _KP, _KD,
-                                strict=True):
-        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    set_arm_gains(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
     handle_body = plant.GetBodyByName(scene_object.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
@@ -303,13 +298,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeBetween(hand_set, held))
 
-    controller_plant = MultibodyPlant(0.0)
-    add_panda(controller_plant, open_plan.X_WB)
-    controller_plant.Finalize()
-    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
-        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
-    builder.Connect(plant.get_state_output_port(robot), gravity.get_input_port_estimated_state())
-    builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(robot))
+    _controller_plant = add_gravity_compensation(builder, plant, robot, open_plan.X_WB)  # kept alive here
     desired, times = _desired_states(open_plan, place, cfg, sim.finger_target(sim.finger_closed),
                                      item.width / 2, sim.finger_target(item.width / 2))
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
