@@ -8,7 +8,7 @@ move with the camera (a direction (0, 0, 1) shines along its optical axis).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -48,6 +48,16 @@ class RoomLighting:
 
     def to_json(self) -> list[dict]:
         return [asdict(light) for light in self.lights]
+
+    def moved(self, X_PW: np.ndarray) -> RoomLighting:
+        """The same lights with the room's frame W at X_PW (4, 4) in another frame P: world
+        lights' directions and positions in P; camera lights unchanged."""
+        R, t = np.asarray(X_PW, float)[:3, :3], np.asarray(X_PW, float)[:3, 3]
+        return RoomLighting(tuple(
+            light if light.frame == "camera" else replace(
+                light, direction=tuple(float(c) for c in R @ light.direction),
+                position=tuple(float(c) for c in R @ light.position + t))
+            for light in self.lights))
 
 
 def _tint(rng: np.random.Generator, strength: float) -> tuple[float, float, float]:

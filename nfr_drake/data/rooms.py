@@ -116,21 +116,25 @@ class Room:
     robot: RobotPose | None
     lighting: RoomLighting
 
-    def add_to(self, plant) -> None:
-        """Add everything to `plant` (before Finalize); the `ObjectRenderer` scenery hook."""
+    def add_to(self, plant, X_PW: np.ndarray | None = None) -> None:
+        """Add everything to `plant` (before Finalize); the `ObjectRenderer` scenery hook. X_PW
+        (4, 4): the room's frame W (the target object's frame) in the plant's world, default
+        identity; the room's lights move with it by `RoomLighting.moved`."""
         from pydrake.math import RigidTransform
 
         from nfr_drake.objects.plant import add_articulated_object
         from nfr_drake.world.robot import ARM_JOINTS, FINGER_JOINTS, FINGER_OPEN, add_panda
 
+        X_PW = RigidTransform() if X_PW is None else RigidTransform(X_PW)
         for part in (*self.surfaces, *self.clutter):
-            _add_world_part(plant, part)
+            _add_world_part(plant, part, X_PW)
         for i, nb in enumerate(self.neighbours):
-            model = add_articulated_object(plant, nb.obj, RigidTransform(nb.X_WO), f"room_furniture_{i}")
+            model = add_articulated_object(plant, nb.obj, X_PW @ RigidTransform(nb.X_WO),
+                                           f"room_furniture_{i}")
             for front, value in zip(nb.obj.fronts, nb.obj.joint_values(nb.q), strict=True):
                 plant.GetJointByName(front.joint_name, model).set_default_positions([value])
         if self.robot is not None:
-            model = add_panda(plant, RigidTransform(self.robot.X_WB), "room_panda")
+            model = add_panda(plant, X_PW @ RigidTransform(self.robot.X_WB), "room_panda")
             for name, value in zip(ARM_JOINTS, self.robot.q, strict=True):
                 plant.GetJointByName(name, model).set_default_positions([value])
             for name in FINGER_JOINTS:
@@ -151,8 +155,9 @@ class Room:
         }
 
 
-def _add_world_part(plant, part: Part) -> None:
-    """Register `part` as visual geometry of the world body (pose in W)."""
+def _add_world_part(plant, part: Part, X_PW) -> None:
+    """Register `part` (pose in the room's frame W) as visual geometry of the plant's world body,
+    the room at X_PW (a RigidTransform)."""
     from pydrake.geometry import (
         Box,
         Cylinder,
@@ -166,7 +171,7 @@ def _add_world_part(plant, part: Part) -> None:
 
     shape = {"box": lambda s: Box(*s), "cylinder": lambda s: Cylinder(*s),
              "sphere": lambda s: Sphere(s[0])}[part.shape](part.size)
-    instance = GeometryInstance(RigidTransform(RollPitchYaw(part.rpy_LP), part.p_LP), shape,
+    instance = GeometryInstance(X_PW @ RigidTransform(RollPitchYaw(part.rpy_LP), part.p_LP), shape,
                                 part.geometry_name)
     for props in (IllustrationProperties(), PerceptionProperties()):
         props.AddProperty("phong", "diffuse", Rgba(*part.rgba))

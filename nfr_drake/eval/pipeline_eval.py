@@ -33,7 +33,8 @@ class PipelineRow:
     (closets; empty for drawers): whether the predicted hinge lies on the true hinge's side of the
     handle (the horizontal handle-to-hinge vectors point the same way). p_handle_within_2cm: the
     fit's confidence (nan without a calibration); refused: the fit was not planned on (`failure`
-    says why); planned, grasped and success are then False.
+    says why); planned, grasped and success are then False. pose_error_cm (xy) and
+    pose_error_deg (yaw): the estimated object pose's errors (nan when the pose was given).
     """
 
     category: str
@@ -55,6 +56,8 @@ class PipelineRow:
     fit_seconds: float
     planning_seconds: float
     failure: str
+    pose_error_cm: float
+    pose_error_deg: float
 
 
 @dataclass
@@ -82,9 +85,10 @@ def _row(scenario: Scenario) -> PipelineRow:
         failure = outcome.refused
     else:
         failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
-    handle = [kt.point("handle", kt.q_current) for kt in (outcome.predicted, outcome.truth)]
+    handle = [kt.point("handle", kt.q_current) if kt else np.full(3, np.inf)
+              for kt in (outcome.predicted, outcome.truth)]
     hinge_side = None
-    if revolute:
+    if revolute and outcome.predicted is not None:
         to_hinge = [(kt.point("hinge_bottom", kt.q_current) - h)[:2]
                     for kt, h in zip((outcome.predicted, outcome.truth), handle, strict=True)]
         hinge_side = bool(to_hinge[0] @ to_hinge[1] > 0.0)
@@ -102,7 +106,9 @@ def _row(scenario: Scenario) -> PipelineRow:
         max_drift_cm=float(100 * sim.max_drift) if sim else float("nan"),
         fit_seconds=outcome.perception_seconds,
         planning_seconds=task.planning_seconds if task is not None else 0.0,
-        failure=failure.replace("\n", " "))
+        failure=failure.replace("\n", " "),
+        pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
+        pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"))
     if scenario.task == "open":
         return row
     item = scenario.sample_item()
@@ -152,6 +158,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           fit: FitConfig = FitConfig(), image_size: int = Scenario.image_size,
                           min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
                           grasp: Literal["constraint", "contact"] = "constraint",
+                          object_pose: Literal["given", "estimated"] = "given",
+                          perceive: Literal["alone", "room"] = "alone",
+                          segmenter: Path = Path(Scenario.segmenter),
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate.
@@ -175,6 +184,11 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         task: "open", or "open-and-place" (then pick an item from a table beside the robot and
             place it at the goal keypoint; the CSV gets the place's columns, `PlaceRow`).
         grasp: open-and-place: "constraint" or "contact" (`Scenario.grasp`).
+        object_pose: "given" (the true pose, the paper's setting) or "estimated" from the views
+            (cameras around a coarse look; `Scenario.object_pose`); the CSV holds its errors.
+        perceive: what the cameras see: the object "alone" (the paper's setting) or in a "room"
+            (held-out textures and lights, the object's masks from `segmenter`; `Scenario.perceive`).
+        segmenter: the segmenter's model folder (with `--perceive room`).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -182,10 +196,12 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
                     q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size,
-                    min_confidence=min_confidence, task=task, grasp=grasp)
+                    min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
+                    perceive=perceive, segmenter=str(segmenter))
     rows = evaluate_pipeline(base, n, csv_path)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
+    print(perception_summary(rows))
     wins = sum(r["success"] == "True" for r in rows)
     refused = sum(r["refused"] == "True" for r in rows)
     if task != "open":
@@ -209,12 +225,27 @@ def summary_row(rows: list[dict]) -> str:
     p10, p50, p90 = np.percentile(handle, [10, 50, 90])
     sides = [r["hinge_side_correct"] for r in rows if r["hinge_side_correct"] != ""]
     side = f"{sum(s == 'True' for s in sides)} / {len(sides)}" if sides else "n/a"
-    fit = np.median([float(r["fit_seconds"]) for r in rows])
+    fit = np.nanmedian([float(r["fit_seconds"]) for r in rows])
     failed = len(rows) - count("refused") - count("success")
     return (f"| {rows[0]['category']} | {len(rows)} | {count('refused')} | {count('planned')} | "
             f"{count('grasped')} | **{100 * count('success') / len(rows):.0f}%** | {failed} | "
             f"{p50:.1f} cm ({p10:.1f}-{p90:.1f}) | "
             f"{side} | {fit:.1f} |")
+
+
+def perception_summary(rows: list[dict]) -> str:
+    """One line on the perception of CSV rows: the keypoint RMSE at the observed state and, when
+    the pose was estimated, its errors (medians) and how many lie within 2 cm and 2 degrees."""
+    rmse = np.array([float(r["keypoint_rmse_cm"]) for r in rows])
+    line = f"keypoint RMSE at the observed state: median {np.median(rmse):.2f} cm"
+    if np.isinf(rmse).any():
+        line += f" ({int(np.isinf(rmse).sum())} with no object pose, counted as inf)"
+    pose = np.array([(float(r["pose_error_cm"]), float(r["pose_error_deg"])) for r in rows])
+    if not np.isnan(pose).all():
+        within = int(np.sum((pose[:, 0] <= 2.0) & (pose[:, 1] <= 2.0)))
+        line += (f"; object pose: median {np.nanmedian(pose[:, 0]):.2f} cm, "
+                 f"{np.nanmedian(pose[:, 1]):.2f} deg, {within}/{len(rows)} within 2 cm and 2 deg")
+    return line
 
 
 def place_summary(rows: list[dict]) -> str:

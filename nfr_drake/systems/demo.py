@@ -18,6 +18,8 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
                  min_confidence: float = -1.0, task: Literal["open", "open-and-place"] = "open",
                  grasp: Literal["constraint", "contact"] = "constraint",
                  object_pose: Literal["given", "estimated"] = "given",
+                 perceive: Literal["alone", "room"] = "alone",
+                 segmenter: Path = Path(Scenario.segmenter),
                  threads: int | None = None) -> int:
     """Open an unseen closet: Drake cameras photograph it, the neural field is fitted and
     forward-simulated, the planner opens the door with those keypoints in simulation (and, with
@@ -47,6 +49,10 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
             squeeze, friction holds).
         object_pose: "given" (the closet's true pose, the paper's setting) or "estimated" (from
             the views, cameras placed around a coarse look at the scene; the error is printed).
+        perceive: what the cameras see: the closet "alone" before the training background (the
+            paper's setting) or in a "room" (floor, walls, other furniture, clutter, the arm, under
+            textures and lights the segmenter never saw; its masks pick the closet out).
+        segmenter: the segmenter's model folder (with `--perceive room`).
         threads: torch CPU threads for the fit (default: the free cores,
             `nfr_drake.cpu.free_cores`).
     """
@@ -55,7 +61,7 @@ def demo_command(model: Path = Path("models/closet"), seed: int = 100, index: in
                         q_target=q_target, views=views,
                         image_size=image_size, fit=fit, replay=str(replay),
                         min_confidence=min_confidence, task=task, grasp=grasp,
-                        object_pose=object_pose)
+                        object_pose=object_pose, perceive=perceive, segmenter=str(segmenter))
     outcome = run_scenario(scenario)
     print(outcome.report())
     if outcome.refused:

@@ -7,18 +7,22 @@ fit's confidence (P(handle within 2 cm) and what it rests on, `inference.confide
 object's pose X_WO.
 
 `AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
-cameras, one RgbdSensor per camera pose, and the system. The perception render engine sees the
-object alone (the robot, the floor and any other geometry lose their perception role), against the
-background colour and lighting of the training renders: a stand-in for segmenting the object out
-of a real photo. Frame O of the model is the object's frame. Its pose X_WO in the world is
-estimated from the views (W's floor at z = 0, z up): the object's masks against the uniform
-background give a visual hull and a floor box (`perception.object_pose`), and the fit runs in that
-O. The paper's setting passes a known X_WO instead.
+cameras, one RgbdSensor per camera pose, and the system. Perceiving "alone" (the paper's setting),
+the perception render engine sees the object alone (the robot, the floor and any other geometry
+lose their perception role), against the background colour and lighting of the training renders:
+a stand-in for segmenting the object out of a real photo. Perceiving the "room", it sees every
+geometry of the plant (floor, walls, other furniture, clutter, the robot) under the lights given,
+a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo and only
+the pixels on its mask count in the fit's image loss. Frame O of the model is the object's frame.
+Its pose X_WO in the world is estimated from the views (W's floor at z = 0, z up): the object's
+masks give a visual hull and a floor box (`perception.object_pose`), and the fit runs in that O.
+The paper's setting passes a known X_WO instead.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from pydrake.common.value import Value
@@ -41,14 +45,21 @@ from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
-from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, drake_camera_info
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel, KeypointSource, infer
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
+from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 PERCEPTION_RENDERER = "nfr_perception"
+SEGMENTER_DIR = Path("models/segmenter")
+"""The shipped segmenter (`nfr-drake train-segmenter`), which finds the object in photos of a room."""
+PerceptionScene = Literal["alone", "room"]
+"""What the perception cameras see: the object "alone" before the training background (the
+paper's setting), or the whole "room" (every geometry of the plant), the object found by a
+segmenter."""
 
 
 class NfrPerceptionSystem(LeafSystem):
@@ -76,9 +87,12 @@ class NfrPerceptionSystem(LeafSystem):
     features, per_view}; p None when the model folder has no calibration), or None.
     X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
 
-    X_WO None: the pose is estimated at each fit from the images' object masks (pixels off
-    `background_rgb`), the result's `extra["object_pose"]` says how (and `extra["warnings"]` names a
-    size outside the model's category). The fit runs in an initialisation event and whenever
+    Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities, and
+    only the pixels on them count in the fit's image loss; without, the pixels off
+    `background_rgb` (the object alone), every pixel counting in the loss.
+    X_WO None: the pose is estimated at each fit from the masks, the result's
+    `extra["object_pose"]` says how (and `extra["warnings"]` names a size outside the model's
+    category). The fit runs in an initialisation event and whenever
     `refit` is called; outputs read the stored result. `fit_count` counts fits.
     `keypoint_source` picks the keypoint head or the fitted geometry (see
     `nfr_drake.inference.infer.KeypointSource`).
@@ -88,7 +102,8 @@ class NfrPerceptionSystem(LeafSystem):
                  X_WCs: list[RigidTransform], X_WO: RigidTransform | None = None,
                  fit_config: FitConfig = FitConfig(), trajectory_points: int = 21,
                  keypoint_source: KeypointSource = "head", hull_config: HullConfig | None = None,
-                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB):
+                 background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
+                 segmenter: Segmenter | None = None):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -98,6 +113,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WCs = list(X_WCs)
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
+        self._segmenter = segmenter
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self.fit_count = 0
         self._image_ports = [
@@ -144,12 +160,17 @@ class NfrPerceptionSystem(LeafSystem):
         context.get_mutable_abstract_state(self._result_index).set_value(fitted)
         return fitted[0]
 
-    def _object_pose(self, images: list[np.ndarray]) -> tuple[RigidTransform, dict, list[str]]:
-        """X_WO (given, or estimated from the images' masks), what the result's extra says of it,
+    def _masks(self, images: list[np.ndarray]) -> list[np.ndarray]:
+        """The object's mask (H, W) in [0, 1] per image: the segmenter's, or off the background."""
+        if self._segmenter is not None:
+            return [self._segmenter.object_mask(image) for image in images]
+        return [background_mask(image, self._background_rgb) for image in images]
+
+    def _object_pose(self, masks: list[np.ndarray]) -> tuple[RigidTransform, dict, list[str]]:
+        """X_WO (given, or estimated from the object's masks), what the result's extra says of it,
         and warnings."""
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
-        masks = [background_mask(image, self._background_rgb) for image in images]
         estimate = estimate_object_pose(masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
                                         self._hull_config, self._model.category)
         problem = estimate.size_problem(self._model.category)
@@ -159,13 +180,14 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
-        X_WO, pose, warnings = self._object_pose(images)
+        masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
+        X_WO, pose, warnings = self._object_pose(masks)
         X_OW = X_WO.inverse()
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
         result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
-                          self._keypoint_source)
+                          self._keypoint_source, masks=masks if self._segmenter is not None else None)
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1
@@ -216,23 +238,31 @@ def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInsta
 def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph: SceneGraph,
                      model_dir: Path, object_model: ModelInstanceIndex, X_WO: RigidTransform | None,
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
-                     fit_config: FitConfig = FitConfig(), lighting: Lighting | None = None,
-                     keypoint_source: KeypointSource = "head") -> NfrPerceptionSystem:
+                     fit_config: FitConfig = FitConfig(), lighting: LightSet | None = None,
+                     keypoint_source: KeypointSource = "head", scene: PerceptionScene = "alone",
+                     segmenter: Path = SEGMENTER_DIR) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
-    `plant` must be finalised and hold every geometry of the scene; render engines then see the
-    object alone (`render_only`). X_WO: the object's known pose, or None to estimate it from the
-    views (`NfrPerceptionSystem`). Returns the system; its RgbdSensors are named `nfr_camera_{i}`.
+    `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
+    then see the object alone (`render_only`) under `lighting` (default the training renders'
+    `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
+    `RoomLighting.moved`), and the `segmenter` model folder finds the object. X_WO: the object's
+    known pose, or None to estimate it from the views (`NfrPerceptionSystem`). Returns the
+    system; its RgbdSensors are named `nfr_camera_{i}`.
     """
     params = RenderEngineVtkParams(default_clear_color=list(DEFAULT_BACKGROUND_RGB),
                                    lights=(lighting or Lighting()).drake_lights())
     scene_graph.AddRenderer(PERCEPTION_RENDERER, MakeRenderEngineVtk(params))
-    render_only(plant, scene_graph, object_model)
+    net = None
+    if scene == "room":
+        net = load_segmenter(segmenter)[0]
+    else:
+        render_only(plant, scene_graph, object_model)
     core = RenderCameraCore(PERCEPTION_RENDERER, drake_camera_info(camera),
                             ClippingRange(0.05, 20.0), RigidTransform())
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
-        keypoint_source=keypoint_source))
+        keypoint_source=keypoint_source, segmenter=net))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

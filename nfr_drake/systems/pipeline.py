@@ -26,11 +26,13 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.rooms import Room, RoomDistribution, sample_room
 from nfr_drake.inference.confidence import refusal
 from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
+from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.planning.planner import GRASP_DEPTH
 from nfr_drake.systems.perception import AddNfrPerception
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
@@ -39,6 +41,8 @@ from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import TaskOutcome, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
 
+_ROOM_STREAM = 203  # the perception room's stream (the cameras use 7, the coarse look 20, the item 23)
+
 
 @dataclass
 class PipelineOutcome:
@@ -46,7 +50,8 @@ class PipelineOutcome:
     over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task
     (None when the fit was refused). Without perception (ground-truth keypoints, `perceived`
     False) the prediction is the truth. confidence: the fit result's `confidence` (or None);
-    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or "";
+    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or on
+    nothing (the object's masks gave no pose: predicted None, the errors inf), or "";
     pose_error: with an estimated object pose, its position (cm, xy) and yaw (degrees) errors."""
 
     q_estimate: float
@@ -54,7 +59,7 @@ class PipelineOutcome:
     keypoint_rmse_cm: float
     handle_path_rmse_cm: float
     perception_seconds: float
-    predicted: KeypointTrajectory
+    predicted: KeypointTrajectory | None
     truth: KeypointTrajectory
     task: TaskOutcome | None
     perceived: bool = True
@@ -69,7 +74,7 @@ class PipelineOutcome:
         lines = [f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); keypoint error "
                  f"{self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]; fit "
-                 f"{self.perception_seconds:.1f} s{confidence}"] if self.perceived else []
+                 f"{self.perception_seconds:.1f} s{confidence}"] if self.perceived and self.predicted else []
         if self.pose_error is not None:
             lines.append(f"object pose estimated: {self.pose_error[0]:.2f} cm, "
                          f"{self.pose_error[1]:.2f} deg from the true pose")
@@ -105,22 +110,29 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject
                    ) -> tuple[KeypointTrajectory, float, dict | None, RigidTransform]:
     """`perceive_with_confidence`, and the object's pose the keypoints were placed with (the
     "X_WO" port: the scenario's, or the estimate with `Scenario.object_pose` "estimated", the
-    cameras then around `Scenario.coarse_look`)."""
+    cameras then around `Scenario.coarse_look`). With `Scenario.perceive` "room" the cameras see
+    the object in `perception_room`."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
     model = add_articulated_object(plant, obj, X_WO)
-    plant.Finalize()
     rng = np.random.default_rng([scenario.seed, scenario.index, 7])
     cameras = CameraDistribution(distance_m=tuple(scenario.distance_m))
     X_WA = scenario.coarse_look()
     X_WCs = [X_WA @ RigidTransform(X) for X in cameras.sample(rng, scenario.views,
                                                                obj.look_at_target())]
+    lighting = None
+    if scenario.perceive == "room":
+        room = perception_room(scenario, obj, X_WCs)
+        room.add_to(plant, X_WO.GetAsMatrix4())
+        lighting = room.lighting.moved(X_WO.GetAsMatrix4())
+    plant.Finalize()
     camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
                                     math.radians(scenario.fov_y_deg))
     known = X_WO if scenario.object_pose == "given" else None
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
-                                  X_WCs, camera, scenario.fit, keypoint_source=scenario.keypoints)
+                                  X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
+                                  scenario.perceive, Path(scenario.segmenter))
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
@@ -132,6 +144,16 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject
     return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
             perception.get_confidence_output_port().Eval(context),
             perception.get_X_WO_output_port().Eval(context))
+
+
+def perception_room(scenario: Scenario, obj: ArticulatedObject, X_WCs: list[RigidTransform]) -> Room:
+    """The room the perception cameras at X_WCs see `obj` in (frame W of the room = O): drawn from
+    the scenario's seed and index (`sample_room`, held-out textures and lights, the cameras'
+    framing unused: they are given), kept clear of the cameras."""
+    X_OW = scenario.X_WO.inverse()
+    p_OC = np.stack([(X_OW @ X_WC).translation() for X_WC in X_WCs])
+    rng = np.random.default_rng([scenario.seed, scenario.index, _ROOM_STREAM])
+    return sample_room(rng, obj, p_OC, RoomDistribution(style="heldout"))
 
 
 def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
@@ -168,13 +190,19 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
                                predicted=task.keypoints, truth=task.keypoints, task=task,
                                perceived=False)
-    predicted, seconds, confidence, X_WO_hat = perceive_scene(scenario, obj)
+    truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
+    try:
+        predicted, seconds, confidence, X_WO_hat = perceive_scene(scenario, obj)
+    except ObjectPoseError as err:
+        return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
+                               handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
+                               truth=truth, task=None, refused=f"nothing planned: {err}",
+                               pose_error=(math.inf, math.inf))
     pose_error = None
     if scenario.object_pose == "estimated":
         error = scenario.X_WO.inverse() @ X_WO_hat
         pose_error = (100.0 * float(np.linalg.norm(error.translation()[:2])),
                       abs(math.degrees(RollPitchYaw(error.rotation()).yaw_angle())))
-    truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid

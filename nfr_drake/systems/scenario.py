@@ -32,6 +32,7 @@ OBJECT_DOMAINS = {"capture": SEED_DOMAIN_CAPTURE, "train": SEED_DOMAIN_TRAIN}
 KEYPOINT_SOURCES = ("head", "geometry", "ground_truth")
 TASKS = ("open", "open-and-place")
 OBJECT_POSE_SOURCES = ("given", "estimated")
+PERCEPTION_SCENES = ("alone", "room")
 
 
 @dataclass
@@ -102,6 +103,14 @@ class Scenario:
     """Standard deviation of the coarse look's position error along x and y, m."""
     coarse_look_deg: float = 10.0
     """Standard deviation of the coarse look's yaw error, degrees."""
+    perceive: str = "alone"
+    """What the perception cameras see: "alone", the object before the training renders'
+    background and lights (the paper's setting), or "room", the object in a random room drawn
+    from the seed and index (floor, walls, other furniture, clutter, the arm; the held-out textures
+    and lights, which the segmenter never saw, `nfr_drake.data.rooms`), its masks found by
+    `segmenter` and only the pixels on them counting in the fit's image loss."""
+    segmenter: str = "models/segmenter"
+    """Segmenter model folder (read when perceiving a room)."""
 
     def __post_init__(self):
         if self.category not in ("closet", "drawer"):
@@ -121,6 +130,9 @@ class Scenario:
         if self.object_pose not in OBJECT_POSE_SOURCES:
             raise ConfigError(f"object_pose must be one of {', '.join(OBJECT_POSE_SOURCES)}, "
                               f"got {self.object_pose!r}")
+        if self.perceive not in PERCEPTION_SCENES:
+            raise ConfigError(f"perceive must be one of {', '.join(PERCEPTION_SCENES)}, "
+                              f"got {self.perceive!r}")
         if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
             raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:
