@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -19,7 +21,9 @@ from tqdm import tqdm
 from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
+    OBJECT_DATASET,
     PART_CATEGORIES,
+    DatasetFormat,
     DatasetSpec,
     completed_objects,
     dataset_lock,
@@ -145,39 +149,41 @@ def generate_dataset(spec: DatasetSpec, out: Path, workers: int = 2, shard: str 
     Returns the indices rendered by this call. Safe to interrupt and call again; a second run
     on `out` while this one writes it is refused (`dataset_lock`).
     """
+    return render_dataset(spec, OBJECT_DATASET, spec.objects, _render_and_write, out, workers, shard,
+                          progress, images_per_index=spec.articulations * spec.views)
+
+
+def render_dataset(spec, fmt: DatasetFormat, count: int, render_and_write: Callable[[tuple], int],
+                   out: Path, workers: int, shard: str, progress: bool, images_per_index: int
+                   ) -> list[int]:
+    """Render the indices in range(`count`) of `shard` that are not complete in `out`, a dataset
+    of format `fmt` and spec `spec`: `render_and_write((spec, str(out), index))` (a module-level
+    function: workers are spawned processes) writes one index and returns it. Holds the folder's
+    lock; returns the indices rendered by this call."""
     shard_i, shard_n = parse_shard(shard)
     out = Path(out)
     with dataset_lock(out):
-        return _render_missing(spec, out, workers, shard_i, shard_n, progress)
-
-
-def _render_missing(spec: DatasetSpec, out: Path, workers: int, shard_i: int, shard_n: int,
-                    progress: bool) -> list[int]:
-    """`generate_dataset` once it holds the folder's lock."""
-    open_dataset_dir(out, spec)
-    mine = [i for i in range(spec.objects) if i % shard_n == shard_i]
-    remove_partial(out, set(mine))
-    done = set(completed_objects(out))
-    pending = [i for i in mine if i not in done]
-    per_object = spec.articulations * spec.views
-    bar = tqdm(total=len(pending) * per_object, unit="img", disable=not progress,
-               desc=f"{spec.category}: {len(pending)} objects to render "
-                    f"({len(done & set(mine))} already on disk)")
-    jobs = [(spec, str(out), i) for i in pending]
-    rendered = []
-    if workers <= 1 or len(jobs) <= 1:
-        results = map(_render_and_write, jobs)
-        for index in results:
-            rendered.append(index)
-            bar.update(per_object)
-    else:
-        context = multiprocessing.get_context("spawn")
-        with context.Pool(min(workers, len(jobs))) as pool:
-            for index in pool.imap_unordered(_render_and_write, jobs):
+        open_dataset_dir(out, spec, fmt)
+        mine = [i for i in range(count) if i % shard_n == shard_i]
+        remove_partial(out, set(mine))
+        done = set(completed_objects(out))
+        jobs = [(spec, str(out), i) for i in mine if i not in done]
+        bar = tqdm(total=len(jobs) * images_per_index, unit="img", disable=not progress,
+                   desc=f"{spec.category}: {len(jobs)} to render "
+                        f"({len(done & set(mine))} already on disk)")
+        rendered = []
+        with ExitStack() as stack:
+            if workers > 1 and len(jobs) > 1:
+                pool = stack.enter_context(
+                    multiprocessing.get_context("spawn").Pool(min(workers, len(jobs))))
+                results = pool.imap_unordered(render_and_write, jobs)
+            else:
+                results = map(render_and_write, jobs)
+            for index in results:
                 rendered.append(index)
-                bar.update(per_object)
-    bar.close()
-    return rendered
+                bar.update(images_per_index)
+        bar.close()
+        return rendered
 
 
 def generate_command(

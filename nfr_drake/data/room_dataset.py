@@ -20,30 +20,27 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from tqdm import tqdm
 
+from nfr_drake.data.generate import render_dataset
 from nfr_drake.data.rooms import RoomDistribution
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
     OBJECTS_DIR,
+    DatasetFormat,
     completed_objects,
-    dataset_lock,
     object_dir_name,
-    remove_partial,
+    read_spec,
     write_object,
 )
 from nfr_drake.errors import DatasetError
 
 ROOM_FORMAT_NAME = "nfr-drake-room-dataset"
 ROOM_FORMAT_VERSION = 1
-SPEC_FILE = "dataset.json"
 SHUT_PROBABILITY = 0.4
 """Chance that a front of the target is shut (q = 0) in an articulation; else q is uniform."""
 
@@ -87,39 +84,14 @@ class RoomDatasetSpec:
         return cls(room=RoomDistribution(**room), **d)
 
 
+
+ROOM_DATASET = DatasetFormat(ROOM_FORMAT_NAME, ROOM_FORMAT_VERSION, RoomDatasetSpec,
+                             "nfr-drake generate-rooms")
+"""The room datasets of `nfr-drake generate-rooms`."""
+
 def read_room_spec(root: Path) -> RoomDatasetSpec:
     """The spec of the room dataset in `root`; DatasetError when missing or not a room dataset."""
-    path = Path(root) / SPEC_FILE
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: not found; is {root} a room dataset (`nfr-drake generate-rooms`)?"
-                           ) from None
-    except json.JSONDecodeError as err:
-        raise DatasetError(f"{path}: malformed JSON ({err})") from None
-    if doc.get("format") != ROOM_FORMAT_NAME or doc.get("version") != ROOM_FORMAT_VERSION:
-        raise DatasetError(f"{path}: not an {ROOM_FORMAT_NAME} v{ROOM_FORMAT_VERSION} file")
-    try:
-        return RoomDatasetSpec.from_json(doc["spec"])
-    except (KeyError, TypeError) as err:
-        raise DatasetError(f"{path}: bad spec ({err})") from None
-
-
-def _open_room_dir(root: Path, spec: RoomDatasetSpec) -> None:
-    """Create `root` for `spec` (dataset.json linked into place whole, once), or check that an
-    existing one was written with the same spec."""
-    (root / OBJECTS_DIR).mkdir(parents=True, exist_ok=True)
-    tmp = root / f".{SPEC_FILE}.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps({"format": ROOM_FORMAT_NAME, "version": ROOM_FORMAT_VERSION,
-                               "spec": spec.to_json()}, indent=2))
-    try:
-        os.link(tmp, root / SPEC_FILE)
-    except FileExistsError:
-        if read_room_spec(root) != spec:
-            raise DatasetError(f"{root / SPEC_FILE} was written with other options; use the same "
-                               "options to resume, or another --out") from None
-    finally:
-        tmp.unlink()
+    return read_spec(root, ROOM_DATASET)
 
 
 def render_room_arrays(spec: RoomDatasetSpec, index: int):
@@ -173,36 +145,8 @@ def generate_rooms(spec: RoomDatasetSpec, out: Path, workers: int = 1, shard: st
                    progress: bool = True) -> list[int]:
     """Render the rooms of `spec` that belong to `shard` and are not yet in `out`; returns the
     indices rendered by this call. Safe to interrupt and call again."""
-    from nfr_drake.data.generate import parse_shard
-
-    shard_i, shard_n = parse_shard(shard)
-    out = Path(out)
-    with dataset_lock(out):
-        _open_room_dir(out, spec)
-        return _render_pending(spec, out, [i for i in range(spec.rooms) if i % shard_n == shard_i],
-                               workers, progress)
-
-
-def _render_pending(spec: RoomDatasetSpec, out: Path, mine: list[int], workers: int, progress: bool
-                    ) -> list[int]:
-    """Render the rooms in `mine` that are not on disk, with `workers` processes."""
-    remove_partial(out, set(mine))
-    done = set(completed_objects(out))
-    jobs = [(spec, str(out), i) for i in mine if i not in done]
-    bar = tqdm(total=len(jobs), unit="room", disable=not progress,
-               desc=f"{spec.category} rooms ({len(done & set(mine))} already on disk)")
-    rendered = []
-    if workers <= 1 or len(jobs) <= 1:
-        for index in map(_render_and_write, jobs):
-            rendered.append(index)
-            bar.update(1)
-    else:
-        with multiprocessing.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-            for index in pool.imap_unordered(_render_and_write, jobs):
-                rendered.append(index)
-                bar.update(1)
-    bar.close()
-    return rendered
+    return render_dataset(spec, ROOM_DATASET, spec.rooms, _render_and_write, out, workers, shard,
+                          progress, images_per_index=spec.articulations * spec.views)
 
 
 def room_dirs(root: Path) -> list[Path]:

@@ -86,6 +86,22 @@ class DatasetSpec:
         return cls(cameras=CameraDistribution(**cams), **d)
 
 
+@dataclass(frozen=True)
+class DatasetFormat:
+    """A kind of dataset folder: the format name and version dataset.json states, the spec class
+    it holds (with `to_json` / `from_json`) and the command that writes such folders (named in
+    errors)."""
+
+    name: str
+    version: int
+    spec_type: type
+    command: str
+
+
+OBJECT_DATASET = DatasetFormat(FORMAT_NAME, FORMAT_VERSION, DatasetSpec, "nfr-drake generate")
+"""The object datasets of `nfr-drake generate`."""
+
+
 def object_dir_name(index: int) -> str:
     return f"obj_{index:06d}"
 
@@ -112,20 +128,21 @@ def dataset_lock(root: Path) -> Iterator[None]:
         os.close(fd)
 
 
-def open_dataset_dir(root: Path, spec: DatasetSpec) -> None:
-    """Create `root` for `spec`, or check that an existing one was written with the same spec.
+def open_dataset_dir(root: Path, spec, fmt: DatasetFormat = OBJECT_DATASET) -> None:
+    """Create `root` for `spec` (a dataset of format `fmt`), or check that an existing one was
+    written with the same spec.
 
     dataset.json is written under a temporary name and linked into place, which fails when the
     file exists: it is created once, whole, even by two runs at the same moment."""
     (root / OBJECTS_DIR).mkdir(parents=True, exist_ok=True)
     spec_path = root / SPEC_FILE
     tmp = spec_path.with_name(f".{SPEC_FILE}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps({"format": FORMAT_NAME, "version": FORMAT_VERSION,
+    tmp.write_text(json.dumps({"format": fmt.name, "version": fmt.version,
                                "spec": spec.to_json()}, indent=2))
     try:
         os.link(tmp, spec_path)
     except FileExistsError:
-        existing = read_spec(root)
+        existing = read_spec(root, fmt)
         if existing != spec:
             raise DatasetError(
                 f"{spec_path} was written with other options ({_spec_diff(existing, spec)}); "
@@ -139,19 +156,23 @@ def _spec_diff(a: DatasetSpec, b: DatasetSpec) -> str:
     return ", ".join(f"{k}: {da[k]} vs {db[k]}" for k in da if da[k] != db[k])
 
 
-def read_spec(root: Path) -> DatasetSpec:
-    """The spec of the dataset in `root`; DatasetError when it is missing or not one of ours."""
+def read_spec(root: Path, fmt: DatasetFormat = OBJECT_DATASET):
+    """The spec (a `fmt.spec_type`) of the dataset in `root`; DatasetError when it is missing or
+    not a dataset of format `fmt`."""
     path = Path(root) / SPEC_FILE
     try:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         raise DatasetError(f"{path}: not found; is {root} a dataset written by "
-                           "`nfr-drake generate`?") from None
+                           f"`{fmt.command}`?") from None
     except json.JSONDecodeError as err:
         raise DatasetError(f"{path}: malformed JSON ({err})") from None
-    if doc.get("format") != FORMAT_NAME or doc.get("version") != FORMAT_VERSION:
-        raise DatasetError(f"{path}: not an {FORMAT_NAME} v{FORMAT_VERSION} file")
-    return DatasetSpec.from_json(doc["spec"])
+    if doc.get("format") != fmt.name or doc.get("version") != fmt.version:
+        raise DatasetError(f"{path}: not an {fmt.name} v{fmt.version} file")
+    try:
+        return fmt.spec_type.from_json(doc["spec"])
+    except (KeyError, TypeError) as err:
+        raise DatasetError(f"{path}: bad spec ({err})") from None
 
 
 def completed_objects(root: Path) -> list[int]:
