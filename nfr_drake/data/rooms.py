@@ -36,9 +36,6 @@ from nfr_drake.objects.textures import TEXTURE_KINDS, texture_uri
 ROOM_TEXTURE_POOL = 200
 """Seeds per room texture kind: rooms draw their floor and walls from this many images per kind."""
 _CAMERA_CLEARANCE_M = 0.4  # walls, clutter and the arm's base keep this far from every camera
-_ARM_LOWER = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
-_ARM_UPPER = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
-"""The Panda's joint limits (sdf/panda/panda_arm_hand.sdf), rad."""
 
 
 @dataclass(frozen=True)
@@ -328,7 +325,9 @@ def _robot(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, cameras_W: 
     """The arm's base 15-90 cm in front of the swept bounds (lo, hi), facing the object within 60
     degrees, 0.8 m from every camera; joints near Franka's ready pose (sigma 0.6 rad, within
     limits). None when no such base is found in 20 tries."""
-    from nfr_drake.world.robot import Q_HOME
+    from nfr_drake.world.robot import Q_HOME, arm_joint_limits
+
+    lower, upper = arm_joint_limits()
 
     for _ in range(20):
         p = np.array([hi[0] + rng.uniform(0.15, 0.9), rng.uniform(lo[1] - 0.8, hi[1] + 0.8), 0.0])
@@ -339,7 +338,7 @@ def _robot(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, cameras_W: 
         X_WB = np.eye(4)
         X_WB[:3, :3] = [[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]
         X_WB[:3, 3] = p
-        q = np.clip(Q_HOME + rng.normal(0.0, 0.6, 7), _ARM_LOWER + 0.05, _ARM_UPPER - 0.05)
+        q = np.clip(Q_HOME + rng.normal(0.0, 0.6, 7), lower + 0.05, upper - 0.05)
         return RobotPose(X_WB, q)
     return None
 

@@ -7,6 +7,8 @@ closing axis, +x along the pads).
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
@@ -40,6 +42,20 @@ def add_panda(plant: MultibodyPlant, X_WB: RigidTransform | None = None,
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(BASE_FRAME, model),
                      X_WB if X_WB is not None else RigidTransform())
     return model
+
+
+@cache
+def arm_joint_limits() -> tuple[np.ndarray, np.ndarray]:
+    """The arm joints' position limits (lower, upper), rad, each (7,) in `ARM_JOINTS` order, as
+    the Panda's model states them (read-only arrays)."""
+    plant = MultibodyPlant(0.0)
+    model = add_panda(plant)
+    plant.Finalize()
+    joints = [plant.GetJointByName(name, model) for name in ARM_JOINTS]
+    lower = np.array([j.position_lower_limits()[0] for j in joints])
+    upper = np.array([j.position_upper_limits()[0] for j in joints])
+    lower.flags.writeable = upper.flags.writeable = False
+    return lower, upper
 
 
 def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 
-from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda
+from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda, arm_joint_limits
 
 # Franka's published modified-DH (Craig) parameters: (a_{i-1}, d_i, alpha_{i-1}) of joints 1-7 and the
 # flange (joint 8, fixed), and the hand: rotated -pi/4 about z, tool point 0.1034 m along z.
@@ -66,3 +66,13 @@ def test_datasheet_limits(panda):
     np.testing.assert_allclose(plant.GetVelocityUpperLimits()[:7], [2.175] * 4 + [2.61] * 3)
     efforts = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
     np.testing.assert_allclose(efforts[:7], [87] * 4 + [12] * 3)
+
+
+def test_arm_joint_limits_are_frankas_published_ones():
+    """Read from the model: Franka's datasheet limits (rad), and the ready pose inside them."""
+    lower, upper = arm_joint_limits()
+    np.testing.assert_allclose(lower, [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+    np.testing.assert_allclose(upper, [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+    assert np.all((lower < Q_HOME) & (Q_HOME < upper))
+    with pytest.raises(ValueError):
+        lower[0] = 0.0  # the cached arrays are shared: read-only
