@@ -36,6 +36,41 @@ def model_folder(tmp_path_factory):
     return folder
 
 
+FURNITURE_PARTS = ("door", "drawer", "door")
+"""What the tiny furniture model says of every code: slots 0-2 exist with these types, 3-7 do not."""
+
+
+@pytest.fixture(scope="module")
+def furniture_model_folder(tmp_path_factory):
+    """A furniture model folder: 8 slots, the tiny architecture, 3 training codes, random weights
+    but for the keypoint head's slot logits, which say `FURNITURE_PARTS` whatever the code."""
+    import torch
+
+    from nfr_drake.data.slot_dataset import slot_keypoint_names
+    from nfr_drake.nfr.checkpoint import write_model_folder
+    from nfr_drake.nfr.config import NFRModelConfig
+    from nfr_drake.nfr.model import NFRAutoDecoder
+
+    S = 8
+    small = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                           pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                           keypoint_hidden=16, num_slots=S, num_keypoints=4 * S,
+                           bound_center=(0.35, 0.0, 1.0), bound_radius=1.6, min_depth=0.5)
+    torch.manual_seed(0)
+    module = NFRAutoDecoder(small, num_objects=3)
+    last = module.model.keypoint_head.net[-1]
+    logits = torch.full((S, 3), -5.0)
+    for k, kind in enumerate(FURNITURE_PARTS):
+        logits[k] = torch.tensor([5.0, 5.0 if kind == "door" else -5.0, 5.0 if kind == "drawer" else -5.0])
+    with torch.no_grad():
+        last.weight[3 * 4 * S:] = 0.0
+        last.bias[3 * 4 * S:] = logits.flatten()
+    folder = tmp_path_factory.mktemp("model") / "furniture"
+    write_model_folder(folder, module, {"category": "furniture",
+                                        "keypoint_names": list(slot_keypoint_names(S))})
+    return folder
+
+
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """2 closets x 2 articulations x 4 views at 32 px, rendered by Drake (a few seconds)."""

@@ -5,9 +5,10 @@ logistic regression P(handle within 2 cm) on the calibration split alone (held-o
 training world, capture seed 500, some with few views, occlusion or the object cut by the edge),
 picks the threshold on that split (`pick_threshold`), and reports on the two splits it never saw:
 the evaluation captures (how many good fits are refused) and the out-of-distribution ones (how many
-fits more than 5 cm off are refused). Writes OUT/features.csv, OUT/confidence.json,
-OUT/report.md and OUT/calibration.png, and with `--write-models` the calibration into the model
-folders (`confidence.json`).
+fits more than 5 cm off are refused), and with `--rooms` on held-out rooms (`confidence_rooms`),
+their confidence from the segmenter's masks and, to compare, from the border colour. Writes
+OUT/features.csv, OUT/confidence.json, OUT/report.md and OUT/calibration.png, and with
+`--write-models` the calibration into the model folders (`confidence.json`).
 """
 
 from __future__ import annotations
@@ -23,8 +24,15 @@ import numpy as np
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.eval.confidence_data import case_features, plan_cases, run_cases
-from nfr_drake.inference.confidence import CONFIDENCE_FILE, ConfidenceModel, fit_logistic
+from nfr_drake.eval.confidence_data import ROOM_VARIANTS, case_features, plan_cases, run_cases
+from nfr_drake.eval.confidence_rooms import room_captures
+from nfr_drake.inference.confidence import (
+    CONFIDENCE_FILE,
+    FAR_M,
+    SUCCESS_M,
+    ConfidenceModel,
+    fit_logistic,
+)
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel
 
@@ -33,12 +41,6 @@ TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_
          ("sighting_gap_m", "log10_cm"), ("code_distance", "identity"), ("views", "inverse")]
 """The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`), each
 oriented so that more means a worse fit: its coefficient is held <= 0 (`calibrate`)."""
-
-SUCCESS_M = 0.02
-"""A fit succeeds when its handle is within this distance of the truth, m."""
-
-FAR_M = 0.05
-"""A fit is far off when its handle is more than this from the truth, m: those must be refused."""
 
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
@@ -52,21 +54,35 @@ def pick_threshold(p: np.ndarray, success: np.ndarray, clean: np.ndarray) -> flo
     return float(min(MAX_THRESHOLD, np.floor(100 * floor - 1e-9) / 100))
 
 
+BORDER_COLOUR = "rooms, border colour"
+"""The split of the room fits' rows whose observed silhouette is the border colour's (as for an
+object alone), to compare with the segmenter's ("rooms")."""
+
+
 def featurize(lines: list[dict]) -> list[dict]:
-    """Per fit line: its split, kind (variant, capture set of the evaluation split, or the wrong
-    model's category), handle error and features."""
+    """Per fit line with a fit: its split, kind (variant, capture set of the evaluation and room
+    splits, or the wrong model's category), handle error and features; a room fit gives a second
+    row, split `BORDER_COLOUR`."""
     models: dict[str, FittedModel] = {}
     rows = []
     for line in lines:
+        if line["handle_error_m"] is None:
+            continue
         fitted = models.setdefault(line["model"], FittedModel(Path(line["model"])))
-        features, _ = case_features(line, fitted)
         wrong = line["category"] != line["model_category"]
         kind = (f"{line['model_category']} model on {line['category']}" if wrong
                 else Path(line["capture"]).parent.name if line["split"] == "evaluation"
                 else line["variant"])
-        rows.append({"split": line["split"], "kind": kind, "model": line["model"],
-                     "capture": line["capture"], "variant": line["variant"],
-                     "handle_error_m": line["handle_error_m"], **features})
+        splits = [(line["split"], True)]
+        if line["variant"] in ROOM_VARIANTS:
+            pose = "estimated" if line["variant"] == "room_pose" else "given"
+            kind = f"{Path(line['capture']).parent.name}, {pose} pose"
+            splits.append((BORDER_COLOUR, False))
+        for split, room in splits:
+            features, _ = case_features(line, fitted, room)
+            rows.append({"split": split, "kind": kind, "model": line["model"],
+                         "capture": line["capture"], "variant": line["variant"],
+                         "handle_error_m": line["handle_error_m"], **features})
     return rows
 
 
@@ -167,7 +183,8 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  out: Path = Path("runs/confidence"), calibration: int = 40,
                                  evaluation: int = 30, closed: int = 20, shut128: int = 12,
                                  ood: int = 24,
-                                 furniture: int = 12,
+                                 furniture: int = 12, rooms: int = 0,
+                                 rooms_data: Path = Path("data/rooms"),
                                  write_models: bool = False, check: Path | None = None,
                                  fit: FitConfig = FitConfig(),
                                  threads: int | None = None) -> None:
@@ -183,6 +200,10 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         shut128: evaluation captures per category of C_shut128 (seed 200, shut, 128 px).
         ood: out-of-distribution captures per category (seed 600).
         furniture: furniture captures (seed 600), each fitted by the closet and the drawer model.
+        rooms: rooms per held-out room set and category (ROOM_SETS of closets and drawers in
+            `rooms_data`, written as capture sets to DATA/rooms), each fitted with the given pose
+            and with the pose estimated from the segmenter's masks; never calibrated on.
+        rooms_data: folder of the room datasets (`nfr-drake generate-rooms`, docs/ROOMS.md).
         write_models: also write the calibration to models/closet and models/drawer.
         check: a model folder whose confidence.json is checked instead (no calibration fits,
             nothing written to the models): e.g. the shipped calibration under another fit
@@ -195,11 +216,15 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     if check is not None and checked is None:
         raise NfrDrakeError(f"--check {check}: no {CONFIDENCE_FILE} there")
     out.mkdir(parents=True, exist_ok=True)
+    room_sets = {} if rooms == 0 else {
+        name: captures for c in ("closet", "drawer")
+        for name, captures in room_captures(rooms_data, data / "rooms", c, rooms).items()}
     cases = plan_cases(data, 0 if checked else calibration, evaluation, closed, shut128, ood,
-                       furniture)
+                       furniture, room_sets)
     keys = {c.key for c in cases}
     lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
     rows = featurize(lines)
+    failed = [line for line in lines if line["handle_error_m"] is None]
     with open(out / "features.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
@@ -220,6 +245,10 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))
     report = (f"threshold {model.threshold:.2f}; standardised coefficients: {terms}; intercept "
               f"{model.intercept:+.2f}\n\n{table}\n")
+    if failed:
+        report += (f"\nno fit ({len(failed)}): "
+                   + "; ".join(f"{Path(f['capture']).parent.name}/{Path(f['capture']).name} "
+                               f"{f['variant']}: {f['failure']}" for f in failed) + "\n")
     (out / "report.md").write_text(report)
     plot_calibration(rows, model, out / "calibration.png")
     print(report + f"-> {out}/report.md, {out}/calibration.png, {out}/confidence.json")

@@ -5,12 +5,15 @@ keeps what the fit found (z, q, the starts' losses and q, the triangulated handl
 error against gt.json. The confidence features are computed from the line (`case_features`), so a
 change of the features needs no new fit. The handle's truth is
 the capture's handle at its q; for a furniture capture (several fronts) the nearest front's handle.
+A room capture (`confidence_rooms`) is fitted with the segmenter's masks, with the given pose
+("room") or the pose estimated from the masks ("room_pose", the line keeps X_WO; the handle is
+compared in the room's frame).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +24,14 @@ from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.eval.capture_variants import apply_variant
 from nfr_drake.inference.confidence import fit_features
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.infer import FittedModel, infer, infer_in_world, object_masks
+from nfr_drake.perception.object_pose import ObjectPoseError
+
+SEGMENTER = Path("models/segmenter")
+"""The room segmenter whose masks the room fits and their confidence use."""
+
+ROOM_VARIANTS = ("room", "room_pose")
+"""Fits of a room capture: with the given pose, and with the pose estimated from the masks."""
 
 
 @dataclass(frozen=True)
@@ -50,25 +60,50 @@ def true_handles(gt: dict) -> np.ndarray:
 
 def load_case(case: Case | dict) -> tuple[CaptureSet, list[np.ndarray]]:
     """The capture set and images a case's fit sees (its capture set changed by its variant);
-    `case` may be a line."""
+    `case` may be a line; a room capture as it is."""
     case = Case(**{k: case[k] for k in Case.__dataclass_fields__}) if isinstance(case, dict) else case
     capture = read_capture_set(case.capture)
+    if case.variant in ROOM_VARIANTS:
+        return capture, capture.load_images()
     return apply_variant(case.variant, capture, capture.load_images(), case.seed)
 
 
-def case_features(line: dict, fitted: FittedModel) -> tuple[dict, list[dict]]:
+def case_features(line: dict, fitted: FittedModel, room: bool = True) -> tuple[dict, list[dict]]:
     """The confidence features of a line's fit (`inference.confidence.fit_features`), as `infer`
-    computes them."""
+    computes them: for a room capture in the fit's frame (the estimated O of "room_pose") with the
+    segmenter's masks as the observed silhouette, or with `room` False the image border's colour
+    (as for an object alone)."""
     capture, images = load_case(line)
-    return fit_features(fitted.model, torch.tensor(line["z"]), capture.frames, images,
+    frames, masks = capture.frames, None
+    if line["variant"] in ROOM_VARIANTS:
+        masks = object_masks(images, SEGMENTER) if room else None
+        if line.get("X_WO") is not None:
+            X_OW = np.linalg.inv(np.array(line["X_WO"]))
+            frames = [replace(f, X_OC=X_OW @ f.X_OC) for f in frames]
+    return fit_features(fitted.model, torch.tensor(line["z"]), frames, images,
                         np.array(line["start_losses"]), fitted.codes, fitted.code_scale,
-                        fitted.keypoint_names.index("handle"), line["sighting_p_O"])
+                        fitted.keypoint_names.index("handle"), line["sighting_p_O"], masks)
 
 
 def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
-    """Fit `case` and return its JSON line (see module docstring)."""
+    """Fit `case` and return its JSON line (see module docstring); a room whose masks give no
+    object pose returns a line without a fit (handle_error_m None, `failure` why)."""
     capture, images = load_case(case)
-    result, outcome = infer(fitted, capture, fit, np.linspace(0.0, 1.0, 2), images=images)
+    grid, X_WO = np.linspace(0.0, 1.0, 2), None
+    if case.variant in ROOM_VARIANTS:
+        masks = object_masks(images, SEGMENTER)
+        if case.variant == "room_pose":
+            try:
+                result, outcome, _ = infer_in_world(fitted, capture, fit, grid, masks)
+            except ObjectPoseError as err:
+                return {**asdict(case), "key": case.key, "category": capture.gt.get("category"),
+                        "model_category": fitted.category, "handle_error_m": None,
+                        "failure": str(err)}
+            X_WO = result.extra["object_pose"]["X_WO"]
+        else:
+            result, outcome = infer(fitted, capture, fit, grid, images, masks=masks)
+    else:
+        result, outcome = infer(fitted, capture, fit, grid, images=images)
     handle = result.keypoints["handle"]
     truth = true_handles(capture.gt)
     error = float(np.linalg.norm(truth - handle, axis=1).min())
@@ -82,7 +117,7 @@ def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
             "z": result.z.tolist(), "image_loss": result.image_loss,
             "start_losses": outcome.start_losses.tolist(), "start_q": outcome.start_q.tolist(),
             "sighting_p_O": seen.get("p_O"), "handle": handle.tolist(),
-            "handle_error_m": error, "keypoint_rmse_m": keypoint_rmse,
+            "handle_error_m": error, "keypoint_rmse_m": keypoint_rmse, "X_WO": X_WO,
             "seconds": result.seconds}
 
 
@@ -96,12 +131,14 @@ the other category's model to the clean capture."""
 
 
 def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, shut128: int, ood: int,
-               furniture: int) -> list[Case]:
+               furniture: int, rooms: dict[str, list[Path]] | None = None) -> list[Case]:
     """The cases of the confidence study from the capture sets under `data` (docs/EVALUATION.md,
     "Fit confidence"): per category `calibration` captures of C_calib (seed 500), `evaluation` of
     C_train_cams (seed 0), `closed` of C_closed (seed 3) and `shut128` of C_shut128 (seed 200,
     128 px, the pipeline's objects), all clean, and `ood` of C_oodsrc
-    (seed 600); and `furniture` captures of furniture_oodsrc, each fitted by both models. Models
+    (seed 600); `furniture` captures of furniture_oodsrc, each fitted by both models; and the
+    room captures `rooms` (set name <category>_<set> -> capture folders, `confidence_rooms`),
+    each fitted with the given and the estimated pose, index by index across the sets. Models
     are models/C."""
     cases = []
     for c in ("closet", "drawer"):
@@ -124,6 +161,13 @@ def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, shut1
             if i < furniture:
                 cases.append(Case(f"models/{c}", str(data / "furniture_oodsrc" / f"furniture_{i:03d}"),
                                   "clean", 600 + i, "ood"))
+    rooms = rooms or {}
+    for i in range(max((len(v) for v in rooms.values()), default=0)):
+        for name, captures in rooms.items():
+            if i < len(captures):
+                category = name.split("_")[0]
+                cases += [Case(f"models/{category}", str(captures[i]), variant, i, "rooms")
+                          for variant in ROOM_VARIANTS]
     return cases
 
 

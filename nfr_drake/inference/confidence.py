@@ -8,15 +8,15 @@ handle detector's triangulated handle, how clearly the best start won, and how f
 object code z_obj lies from the training codes. A `ConfidenceModel` (logistic regression on a few
 of them, read from the model folder's `confidence.json`) turns them into P(handle within 2 cm).
 
-The observed silhouette is pluggable (`ObservedMask`): the default assumes the training world's
-uniform background and thresholds each pixel's colour distance to the colour of the image border.
+The observed silhouette of an object alone before a uniform background (the training world) is
+the pixels off the colour of the image border (`uniform_background_mask`); in photos of a room it
+is the room segmenter's mask, not compared along the image sides it touches (`edge_band`).
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,8 +39,16 @@ VIEW_RAYS = 1024
 NEAREST_CODES = 5
 """z_obj's distance to the training codes is the mean distance to this many nearest ones."""
 
-ObservedMask = Callable[[np.ndarray], np.ndarray]
-"""Observed object mask: uint8 RGB image (H, W, 3) -> bool (H, W), True on the object."""
+SUCCESS_M = 0.02
+"""A fit succeeds when its handle is within this distance of the truth, m."""
+
+FAR_M = 0.05
+"""A fit is far off when its handle is more than this from the truth, m: those must be refused."""
+
+EDGE_BAND = 0.125
+"""In a room, the silhouettes are not compared within this share of the image's width (height)
+of an image side that the observed mask touches: the segmenter's mask of an object that the
+image edge cuts stops short of the corners or spills onto the wall beside it (docs/ROOMS.md)."""
 
 
 def uniform_background_mask(image: np.ndarray, threshold: float = 0.08) -> np.ndarray:
@@ -49,6 +57,19 @@ def uniform_background_mask(image: np.ndarray, threshold: float = 0.08) -> np.nd
     rgb = image.astype(np.float32) / 255.0
     border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]])
     return np.abs(rgb - np.median(border, axis=0)).max(-1) > threshold
+
+
+def edge_band(mask: np.ndarray, band: float = EDGE_BAND) -> np.ndarray:
+    """bool (H, W): the pixels within `band` of the image's size of each image side that the
+    observed mask (bool (H, W)) touches; there the object may go on beyond the image."""
+    h, w = mask.shape
+    rows, cols = max(1, round(band * h)), max(1, round(band * w))
+    near = np.zeros((h, w), bool)
+    near[:rows] |= mask[0].any()
+    near[h - rows:] |= mask[-1].any()
+    near[:, :cols] |= mask[:, 0].any()
+    near[:, w - cols:] |= mask[:, -1].any()
+    return near
 
 
 def code_scale(codes: torch.Tensor) -> float:
@@ -74,19 +95,23 @@ def _grid(height: int, width: int) -> np.ndarray:
 def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
                  images: list[np.ndarray], start_losses: np.ndarray, codes: torch.Tensor,
                  scale: float, handle_keypoint: int, sighting_p_O: np.ndarray | None,
-                 observed_mask: ObservedMask = uniform_background_mask) -> tuple[dict, list[dict]]:
+                 room_masks: list[np.ndarray] | None = None) -> tuple[dict, list[dict]]:
     """The features of a fit (dict name -> float) and per view {image_loss, silhouette_iou,
     edge_contact (share of the image border on the observed object)}.
 
     z (D,): the fitted code; frames and images (uint8 RGB (H, W, 3)): the views fitted;
     start_losses (S,): the starts' losses after exploration (`FitOutcome`); codes (N, k): the
     training z_obj, `scale` their spacing (`code_scale`); sighting_p_O (3,) in O, m: the detector's
-    triangulated handle, or None.
+    triangulated handle, or None. room_masks: for photos of a room, the object's probability
+    (H, W) per view (the segmenter's): the observed silhouette is where it exceeds 0.5, the
+    image loss counts the pixels on it and the silhouette IoU leaves out the `edge_band` of the
+    sides it touches; None: an object alone before a uniform background
+    (`uniform_background_mask`, every pixel compared).
     """
     per_view = []
     z = z.detach().float()
     with torch.no_grad():
-        for frame, image in zip(frames, images, strict=True):
+        for i, (frame, image) in enumerate(zip(frames, images, strict=True)):
             cam = frame.camera
             index = _grid(cam.height, cam.width)
             d = torch.from_numpy(frame_ray_directions(frame)[index]).float()
@@ -94,13 +119,22 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
             out = model.render(z[None], Rays(o[None], d[None]))
             observed = torch.from_numpy(image.reshape(-1, 3)[index] / 255.0).float()
             rendered_fg = (out.logits[0].argmax(-1) != int(SemanticClass.BACKGROUND)).numpy()
-            mask = observed_mask(image)
-            observed_fg = mask.reshape(-1)[index]
-            union = np.logical_or(rendered_fg, observed_fg).sum()
-            iou = float(np.logical_and(rendered_fg, observed_fg).sum() / union) if union else 1.0
+            if room_masks is None:
+                mask = uniform_background_mask(image)
+                observed_fg = mask.reshape(-1)[index]
+                compared = counted = np.ones(len(index), bool)
+            else:
+                mask = np.asarray(room_masks[i]) > 0.5
+                observed_fg = mask.reshape(-1)[index]
+                compared = ~edge_band(mask).reshape(-1)[index]
+                counted = observed_fg if observed_fg.any() else compared
+            union = np.logical_or(rendered_fg, observed_fg)[compared].sum()
+            iou = (float(np.logical_and(rendered_fg, observed_fg)[compared].sum() / union) if union
+                   else 1.0)
             border = np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]])
-            per_view.append({"image_loss": float(((out.rgb[0] - observed) ** 2).mean()),
-                             "silhouette_iou": iou, "edge_contact": float(border.mean())})
+            loss = ((out.rgb[0] - observed) ** 2).mean(-1)[torch.from_numpy(counted)]
+            per_view.append({"image_loss": float(loss.mean()), "silhouette_iou": iou,
+                             "edge_contact": float(border.mean())})
         handle = model.keypoints(z[None])[0, handle_keypoint].double().numpy()
         code_d = torch.cdist(z[None, 2:].double(), codes.double())[0]
         code_distance = float(code_d.topk(min(NEAREST_CODES, len(code_d)), largest=False)

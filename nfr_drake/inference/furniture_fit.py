@@ -129,16 +129,18 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
     return kp[:, slot].double().cpu().numpy()
 
 
+def part_json(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> dict:
+    """Slot `slot` of a fit as a part, {index, type, q, keypoints, trajectory}: keypoints name ->
+    [x, y, z] in O at the fitted q; trajectory q (N,) and name -> (N, 3), the slot swept over
+    q_grid (N,) with the others held."""
+    path = part_trajectory(model, fit.z, slot, q_grid)
+    return {"index": slot, "type": PART_TYPES[int(fit.types[slot])], "q": float(fit.q[slot]),
+            "keypoints": {n: fit.keypoints[slot, i].tolist() for i, n in enumerate(SLOT_KEYPOINTS)},
+            "trajectory": {"q": np.asarray(q_grid, float).tolist(),
+                           "keypoints": {n: path[:, i].tolist() for i, n in enumerate(SLOT_KEYPOINTS)}}}
+
+
 def parts_json(model: NFRModel, fit: FurnitureFit, q_grid: np.ndarray) -> list[dict]:
-    """`parts: [{index, type, q, keypoints, trajectory}]` of the slots the head says exist:
-    keypoints name -> [x, y, z] in O at the fitted q; trajectory q (N,) and name -> (N, 3)."""
-    parts = []
-    for k in np.flatnonzero(fit.exists):
-        path = part_trajectory(model, fit.z, int(k), q_grid)
-        parts.append({
-            "index": int(k), "type": PART_TYPES[int(fit.types[k])], "q": float(fit.q[k]),
-            "keypoints": {n: fit.keypoints[k, i].tolist() for i, n in enumerate(SLOT_KEYPOINTS)},
-            "trajectory": {"q": np.asarray(q_grid).tolist(),
-                           "keypoints": {n: path[:, i].tolist()
-                                         for i, n in enumerate(SLOT_KEYPOINTS)}}})
-    return parts
+    """`parts: [{index, type, q, keypoints, trajectory}]` (`part_json`) of the slots the head says
+    exist."""
+    return [part_json(model, fit, int(k), q_grid) for k in np.flatnonzero(fit.exists)]

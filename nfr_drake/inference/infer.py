@@ -103,12 +103,15 @@ rendered geometry where it shows them (`forward.geometric_keypoints`)."""
 
 def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
           images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head",
-          masks: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome]:
+          masks: list[np.ndarray] | None = None, masked_loss: bool = True, room: bool = True
+          ) -> tuple[FitResult, FitOutcome]:
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
-    `masks` ((H, W) object probability per frame): only pixels on the object count in the image
-    loss (`observed_rays`).
+    `masks` ((H, W) object probability per frame): with `masked_loss`, only pixels on the object
+    count in the image loss (`observed_rays`); with `room` (photos of a room, the segmenter's
+    masks) they are the fit confidence's observed silhouette (`confidence.fit_features`), else
+    that is the pixels off the image border's colour (an object alone).
     The result's `extra["warnings"]` lists what makes it doubtful (too few views); its
     `confidence` holds the fit's confidence features and, when the model folder has a calibration,
     P(handle within 2 cm) (`fit_confidence`).
@@ -119,7 +122,7 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
                         f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
-    rays = observed_rays(capture, images, masks=masks)
+    rays = observed_rays(capture, images, masks=masks if masked_loss else None)
     handle = None
     if fitted.handle_detector is not None and fit_config.uses_sightings:
         handle = locate_handle(fitted.handle_detector.detect(images), capture.frames)
@@ -127,7 +130,8 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
                          fitted.codes)
-    confidence = fit_confidence(fitted, outcome, capture, images, handle)
+    confidence = fit_confidence(fitted, outcome, capture, images, handle,
+                                masks if room else None)
     names = fitted.keypoint_names
     if keypoint_source == "geometry":
         views = [(f.camera, f.X_OC) for f in capture.frames]
@@ -154,11 +158,12 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
 
 def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
                    q_grid: np.ndarray, masks: list[np.ndarray], masked_loss: bool = True,
-                   keypoint_source: KeypointSource = "head"
+                   keypoint_source: KeypointSource = "head", room: bool = True
                    ) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), the
-    fit runs in that O (its image loss `masked_loss` or over every pixel), and the result's
+    fit runs in that O (its image loss `masked_loss` or over every pixel; `room`: the masks are a
+    room segmenter's, the confidence's silhouette, see `infer`), and the result's
     positions are moved into W (`extra["object_pose"]`: X_WO, the carcass size; a size outside
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
@@ -168,8 +173,8 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     X_OW = np.linalg.inv(estimate.X_WO)
     in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
                       capture.gt, capture.extra)
-    result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source,
-                            masks if masked_loss else None)
+    result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
+                            masked_loss, room)
     R, t = estimate.X_WO[:3, :3], estimate.X_WO[:3, 3]
     result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
     result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
@@ -194,16 +199,18 @@ def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.nd
 
 
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
-                   images: list[np.ndarray], handle: TriangulatedHandle | None) -> dict | None:
+                   images: list[np.ndarray], handle: TriangulatedHandle | None,
+                   room_masks: list[np.ndarray] | None = None) -> dict | None:
     """The result's `confidence`: {p_handle_within_2cm, threshold and weakest (the feature that
     lowers p most; all three None without a calibration), features, per_view}
-    (docs/CONVENTIONS.md); None for a model without a handle keypoint."""
+    (docs/CONVENTIONS.md); None for a model without a handle keypoint. `room_masks`: the object's
+    probability per view in photos of a room (`confidence.fit_features`)."""
     if "handle" not in fitted.keypoint_names:
         return None
     features, per_view = fit_features(
         fitted.model, outcome.z, capture.frames, images, outcome.start_losses, fitted.codes,
         fitted.code_scale, fitted.keypoint_names.index("handle"),
-        None if handle is None else handle.p_O)
+        None if handle is None else handle.p_O, room_masks)
     calibration = fitted.confidence
     return {"p_handle_within_2cm": None if calibration is None else calibration.probability(features),
             "threshold": None if calibration is None else calibration.threshold,
@@ -354,7 +361,8 @@ def infer_command(
             with a board lying on the floor, a room capture): the object's pose is estimated from
             its masks, the fit runs in that frame and the result's positions are in W.
         masks: with --estimate-pose, the object's masks: "segmenter" (`--segmenter`, a photo of
-            a room) or "background" (an object alone before a uniform background).
+            a room; they are also the fit confidence's observed silhouette) or "background" (an
+            object alone before a uniform background).
         segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
         masked_loss: with --estimate-pose, only pixels on the object's mask count in the image loss.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
@@ -375,7 +383,8 @@ def infer_command(
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
         views = object_masks(cap.load_images(), segmenter if masks == "segmenter" else None)
-        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, masked_loss, keypoints)
+        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, masked_loss, keypoints,
+                                              room=masks == "segmenter")
         pose = np.array(result.extra["object_pose"]["X_WO"])
         print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "
               f"{np.degrees(np.arctan2(pose[1, 0], pose[0, 0])):.1f} deg; size (depth x width x "

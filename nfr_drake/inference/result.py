@@ -3,17 +3,28 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from nfr_drake.errors import NfrDrakeError
 
+PART_KEYPOINTS = {"door": {"handle": "handle", "goal": "goal", "axis_0": "hinge_top",
+                           "axis_1": "hinge_bottom"},
+                  "drawer": {"handle": "handle", "goal": "goal"}}
+"""Per part type, a part's keypoints (named as the field's slots name them,
+`data.slot_dataset.SLOT_KEYPOINTS`) -> their names in the single-part fields, gt.json and the
+planner: a door's axis points are its hinge_top and hinge_bottom; a drawer's (its handle shut and
+fully open) have no counterpart."""
+
 
 @dataclass
 class FitResult:
     """What a fit found, positions in the frame of the capture's camera poses (frame O), metres.
+
+    A model with several parts (furniture) lists every part it finds in `parts`; its single-part
+    fields (q, keypoints, trajectory) are those of one of them, `part` (`with_part`).
 
     Attributes:
         category: the model's category.
@@ -27,6 +38,11 @@ class FitResult:
         confidence: how well the fit explains the photos and P(handle within 2 cm)
             (`inference.infer.fit_confidence`), or None.
         extra: anything else worth keeping (restarts, steps, model path).
+        parts: furniture: the parts the field finds, [{index, type, q, keypoints: name -> (3,),
+            trajectory: {q (N,), keypoints: name -> (N, 3)}}], keypoints named as the slots name
+            them (`PART_KEYPOINTS`), each part swept with the others held; None for one part.
+        part: furniture: which part the single-part fields are, {index, type ("door" or
+            "drawer"), found (whether it is among `parts`)}; None for one part.
     """
 
     category: str
@@ -39,6 +55,30 @@ class FitResult:
     z: np.ndarray | None = None
     confidence: dict | None = None
     extra: dict = field(default_factory=dict)
+    parts: list[dict] | None = None
+    part: dict | None = None
+
+    def with_part(self, part: dict) -> FitResult:
+        """This result with its single-part fields those of `part` (an entry of `parts`, or one
+        alike of a slot the field does not find), keypoints renamed by `PART_KEYPOINTS`."""
+        names = PART_KEYPOINTS[part["type"]]
+        path = part["trajectory"]
+        return replace(
+            self, q=float(part["q"]),
+            keypoints={to: np.asarray(part["keypoints"][n], float) for n, to in names.items()},
+            trajectory_q=np.asarray(path["q"], float),
+            trajectory={to: np.asarray(path["keypoints"][n], float) for n, to in names.items()},
+            part={"index": int(part["index"]), "type": part["type"],
+                  "found": any(p["index"] == part["index"] for p in self.parts or [])})
+
+    def part_of(self, index: int) -> FitResult:
+        """`with_part` of the part numbered `index` among `parts`; NfrDrakeError when the fit
+        found no such part."""
+        for part in self.parts or []:
+            if part["index"] == index:
+                return self.with_part(part)
+        found = ", ".join(f"{p['index']} ({p['type']})" for p in self.parts or []) or "none"
+        raise NfrDrakeError(f"the fit finds no part {index}; parts found: {found}")
 
     def to_json(self) -> dict:
         doc = {
@@ -58,6 +98,9 @@ class FitResult:
             doc["confidence"] = self.confidence
         if self.extra:
             doc["extra"] = self.extra
+        if self.parts is not None:
+            doc["parts"] = self.parts
+            doc["part"] = self.part
         return doc
 
     def write(self, path: str | Path) -> None:
@@ -76,6 +119,8 @@ class FitResult:
             z=np.asarray(doc["z"], float) if "z" in doc else None,
             confidence=doc.get("confidence"),
             extra=doc.get("extra", {}),
+            parts=doc.get("parts"),
+            part=doc.get("part"),
         )
 
     @classmethod

@@ -22,6 +22,8 @@ GRIP_AXIS_KEYPOINT = "grip_axis"
 furniture fronts): the bar axis the hand aligns with. Without it the planner takes the hinge axis
 (doors) or the horizontal across the pull (drawers), as the closet and drawer grips lie."""
 GRIP_AXIS_OFFSET = 0.05
+PART_CATEGORY = {"door": "closet", "drawer": "drawer"}
+"""The trajectory category of a part of a piece of furniture, by its type."""
 APPROACH_KEYPOINT = "approach_from"
 """An optional keypoint `GRIP_AXIS_OFFSET` out in front of the handle, moving with it (the ground truth
 of a loaded sliding door, whose handle moves across its front): the hand approaches the handle from
@@ -117,13 +119,16 @@ class KeypointTrajectory:
 
     @staticmethod
     def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:
-        """From a fit result dict (docs/CONVENTIONS.md: "category", "q", "trajectory" in frame O)."""
+        """From a fit result dict (docs/CONVENTIONS.md: "category", "q", "trajectory" in frame O);
+        a furniture result's single-part fields are those of its "part", a "closet" for a door and
+        a "drawer" for a drawer."""
         try:
             traj = result["trajectory"]
             names = tuple(traj["keypoints"])
             p_OK = np.stack([np.asarray(traj["keypoints"][n], dtype=float) for n in names], axis=1)
+            part = result.get("part")
+            category = result["category"] if part is None else PART_CATEGORY[part["type"]]
             return KeypointTrajectory.from_object_frame(
-                result["category"], np.asarray(traj["q"], dtype=float), names, p_OK, X_WO,
-                float(result["q"]))
+                category, np.asarray(traj["q"], dtype=float), names, p_OK, X_WO, float(result["q"]))
         except (KeyError, TypeError, ValueError) as err:
             raise NfrDrakeError(f"fit result has no usable keypoint trajectory: {err}") from None

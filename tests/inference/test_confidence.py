@@ -11,10 +11,12 @@ from nfr_drake.cli import main
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.captures import captures_command
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.eval.capture_variants import FEW_VIEWS, apply_variant
+from nfr_drake.eval.capture_variants import FEW_VIEWS, apply_variant, load_labels
 from nfr_drake.inference.confidence import (
     CONFIDENCE_FILE,
     ConfidenceModel,
+    edge_band,
+    fit_features,
     fit_logistic,
     refusal,
     uniform_background_mask,
@@ -133,3 +135,57 @@ def test_capture_variants(capture):
         apply_variant("background", cap, images, 3)[1][0].tolist()
     with pytest.raises(NfrDrakeError, match="unknown capture variant"):
         apply_variant("fog", cap, images, 0)
+
+
+def test_the_edge_band_covers_the_sides_the_mask_touches():
+    mask = np.zeros((16, 24), bool)
+    assert not edge_band(mask).any()
+    mask[5:9, 0:6] = True  # touches the left side only
+    band = edge_band(mask)
+    assert band[:, :3].all() and not band[:, 3:].any()
+    mask[0, 12] = True  # and the top
+    band = edge_band(mask)
+    assert band[:2].all() and band[:, :3].all() and not band[2:, 3:].any()
+
+
+def _room_features(capture, model_folder, images, masks):
+    import torch
+
+    from nfr_drake.inference.infer import FittedModel
+    from nfr_drake.nfr.latent import q_to_z_art
+
+    fitted = FittedModel(model_folder)
+    cap = read_capture_set(capture)
+    z = torch.cat([q_to_z_art(torch.tensor(0.3)), fitted.z_obj_mean])
+    return fit_features(fitted.model, z, cap.frames, images, np.array([1.0, 2.0]),
+                        fitted.codes, fitted.code_scale, 0, None, masks)
+
+
+def test_in_a_room_the_silhouette_is_the_mask_and_not_compared_along_the_sides_it_touches(
+        capture, model_folder):
+    cap = read_capture_set(capture)
+    images = cap.load_images()
+    masks = [(label > 0).astype(np.float32) for label in load_labels(cap)]
+    _, room_images = apply_variant("background", cap, images, 0)  # another background: a "room"
+    alone, alone_views = _room_features(capture, model_folder, images, None)
+    room, room_views = _room_features(capture, model_folder, room_images, masks)
+    # Only the background changed: the object's pixels, their image loss and the silhouettes
+    # are the same as before the uniform background.
+    same, _ = _room_features(capture, model_folder, images, masks)
+    for name in ("image_loss", "silhouette_iou", "silhouette_iou_worst_view", "edge_contact"):
+        assert room[name] == pytest.approx(same[name])
+    border, _ = _room_features(capture, model_folder, room_images, None)
+    assert border["edge_contact"] > alone["edge_contact"]  # the room is no background
+
+    spilled, blob = [m.copy() for m in masks], [m.copy() for m in masks]
+    for a, b in zip(spilled, blob, strict=True):
+        a[:, :3] = 1.0  # the mask spills along the left side, within its band
+        b[:, 0] = 1.0
+    left = [v["silhouette_iou"] for v in _room_features(capture, model_folder, room_images, spilled)[1]]
+    thin = [v["silhouette_iou"] for v in _room_features(capture, model_folder, room_images, blob)[1]]
+    assert left == pytest.approx(thin)
+    for a in spilled:
+        a[8:16, 8:16] = 1.0  # a spill away from the sides counts
+    inner = [v["silhouette_iou"] for v in _room_features(capture, model_folder, room_images, spilled)[1]]
+    assert inner != pytest.approx(left)
+    assert len(room_views) == len(alone_views) == 4

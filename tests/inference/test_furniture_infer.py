@@ -1,0 +1,88 @@
+"""`nfr-drake infer` with a furniture model: the furniture fit, `parts` and one part's single-part
+fields, and what the result gives the planner."""
+
+import json
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+
+from nfr_drake.data.capture import read_capture_set
+from nfr_drake.data.captures import captures_command
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
+from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
+from nfr_drake.inference.infer import FittedModel, infer_command, infer_parts
+from nfr_drake.inference.result import FitResult
+from nfr_drake.world.keypoints import KeypointTrajectory
+from tests.conftest import FURNITURE_PARTS
+
+QUICK = FurnitureFitConfig(starts=2, keep=1, steps=3, rays_per_step=32, lookup_rays=32)
+
+
+@pytest.fixture(scope="module")
+def capture_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("furniture_captures")
+    captures_command(category="furniture", n=1, out=out, views=3, size=24, seed=3)
+    return out / "furniture_000"
+
+
+def test_infer_writes_every_part_found_and_one_part_in_the_single_part_fields(
+        furniture_model_folder, capture_dir, tmp_path, capsys):
+    # Before the furniture fit joined `infer`, a furniture model failed inside the one-slot fit with
+    # a matrix shape error.
+    out = tmp_path / "result.json"
+    infer_command(capture_dir, model=furniture_model_folder, out=out, furniture_fit=QUICK,
+                  trajectory_points=5, part=1, threads=1)
+    doc = json.loads(out.read_text())
+    assert [(p["index"], p["type"]) for p in doc["parts"]] == list(enumerate(FURNITURE_PARTS))
+    assert all(list(p["keypoints"]) == list(SLOT_KEYPOINTS) for p in doc["parts"])
+    assert doc["category"] == "furniture"
+    assert doc["part"] == {"index": 1, "type": "drawer", "found": True}
+    drawer = doc["parts"][1]
+    assert doc["q"] == drawer["q"] and list(doc["keypoints"]) == ["handle", "goal"]
+    assert doc["keypoints"]["handle"] == drawer["keypoints"]["handle"]
+    assert np.asarray(doc["trajectory"]["keypoints"]["goal"]).shape == (5, 3)
+    assert "parts found: 0 door" in capsys.readouterr().out
+    result = FitResult.read(out)
+    assert result.part_of(0).part == {"index": 0, "type": "door", "found": True}
+    assert list(result.part_of(0).keypoints) == ["handle", "goal", "hinge_top", "hinge_bottom"]
+    np.testing.assert_allclose(result.part_of(0).keypoints["hinge_top"], doc["parts"][0]["keypoints"]["axis_0"])
+
+
+def test_a_furniture_result_gives_the_planner_its_part(furniture_model_folder, capture_dir):
+    fitted = FittedModel(furniture_model_folder)
+    grid = np.linspace(0, 1, 4)
+    result, fit = infer_parts(fitted, read_capture_set(capture_dir), QUICK, grid)
+    assert result.part["index"] == 0 and result.confidence is None
+    X_WO = RigidTransform([1.0, 0.0, 0.0])
+    door = KeypointTrajectory.from_fit_result(result.to_json(), X_WO)
+    drawer = KeypointTrajectory.from_fit_result(result.part_of(1).to_json(), X_WO)
+    assert door.category == "closet" and drawer.category == "drawer"
+    assert door.q_current == pytest.approx(fit.q[0], abs=1e-9)
+    # The drawer's handle path is slot 1 swept with the other slots held, moved into W.
+    np.testing.assert_allclose(drawer.point("handle", grid)[:, 0] - 1.0,
+                               np.asarray(result.parts[1]["trajectory"]["keypoints"]["handle"])[:, 0])
+    with pytest.raises(NfrDrakeError, match="finds no part 5"):
+        result.part_of(5)
+
+
+def test_a_part_the_field_does_not_find_is_given_with_a_warning(furniture_model_folder, capture_dir):
+    fitted = FittedModel(furniture_model_folder)
+    result, _ = infer_parts(fitted, read_capture_set(capture_dir), QUICK, np.linspace(0, 1, 3), part=6)
+    assert result.part == {"index": 6, "type": "door", "found": False}
+    assert any("finds no part 6" in w for w in result.extra["warnings"])
+    with pytest.raises(NfrDrakeError, match="out of range"):
+        infer_parts(fitted, read_capture_set(capture_dir), QUICK, np.linspace(0, 1, 3), part=8)
+
+
+def test_options_a_furniture_fit_does_not_have_are_refused(furniture_model_folder, model_folder,
+                                                           capture_dir, tmp_path):
+    with pytest.raises(NfrDrakeError, match="--report: not available for a model with several parts"):
+        infer_command(capture_dir, model=furniture_model_folder, out=tmp_path / "r.json",
+                      report=tmp_path / "r.png", furniture_fit=QUICK, threads=1)
+    closets = tmp_path / "closets"
+    captures_command(category="closet", n=1, out=closets, views=3, size=16)
+    with pytest.raises(NfrDrakeError, match="--part is for models with several parts"):
+        infer_command(closets / "closet_000", model=model_folder, out=tmp_path / "r.json", part=0,
+                      threads=1)
