@@ -32,6 +32,13 @@ from nfr_drake.inference.forward import (
     render_view,
     semantic_point_cloud,
 )
+from nfr_drake.inference.furniture_fit import (
+    FurnitureFit,
+    FurnitureFitConfig,
+    fit_furniture,
+    part_json,
+    parts_json,
+)
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
@@ -63,6 +70,11 @@ class FittedModel:
             self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
         self.confidence: ConfidenceModel | None = ConfidenceModel.read(self.folder)
         self._code_scale: float | None = None
+
+    @property
+    def num_slots(self) -> int:
+        """Articulation slots of the model: 1 for closets and drawers, one per part for furniture."""
+        return self.model.config.num_slots
 
     @property
     def code_scale(self) -> float:
@@ -184,6 +196,40 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     if problem:
         result.extra["warnings"].append(problem)
     return result, outcome, in_O
+
+
+def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitConfig,
+                q_grid: np.ndarray, images: list[np.ndarray] | None = None, part: int | None = None,
+                masks: list[np.ndarray] | None = None) -> tuple[FitResult, FurnitureFit]:
+    """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`);
+    the result lists the parts the field finds (`parts`, each swept over q_grid (N,) with the
+    others held) and its single-part fields are those of `part` (default: the first part found,
+    slot 0 when none is; a part the field does not find adds a warning). No confidence: it is
+    calibrated for closets and drawers only. `images` and `masks` as in `infer`. NfrDrakeError
+    for a part outside the model's slots."""
+    started = time.perf_counter()
+    if part is not None and not 0 <= part < fitted.num_slots:
+        raise NfrDrakeError(f"part {part} is out of range: {fitted.folder} has {fitted.num_slots} part "
+                            f"slots, 0 to {fitted.num_slots - 1}")
+    warnings = []
+    if len(capture.frames) < MIN_FIT_VIEWS:
+        warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
+                        f"are poorly constrained below {MIN_FIT_VIEWS} views")
+    images = capture.load_images() if images is None else images
+    fit = fit_furniture(fitted.model, observed_rays(capture, images, masks=masks), fitted.codes, config)
+    found = [int(k) for k in np.flatnonzero(fit.exists)]
+    chosen = part if part is not None else (found[0] if found else 0)
+    if chosen not in found:
+        warnings.append(f"the field finds no part {chosen} (parts found: {found or 'none'}); its "
+                        "keypoints are the slot's all the same")
+    result = FitResult(
+        category=fitted.category, q=0.0, keypoints={}, trajectory_q=np.asarray(q_grid, float),
+        trajectory={}, image_loss=fit.image_loss, seconds=0.0, z=fit.z.double().cpu().numpy(),
+        parts=parts_json(fitted.model, fit, q_grid),
+        extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings})
+    result = result.with_part(part_json(fitted.model, fit, chosen, q_grid))
+    result.seconds = time.perf_counter() - started
+    return result, fit
 
 
 def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.ndarray]:
@@ -325,6 +371,17 @@ def write_handle_plot(path: Path, capture: CaptureSet, result: FitResult) -> Non
                       f"{capture.root.name}: true q = {capture.gt['q']:.2f}, fitted q = {result.q:.2f}")
 
 
+def _write_result(result: FitResult, out: Path, headline: str) -> None:
+    """Write the result to `out`; print `headline`, its confidence and warnings."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result.write(out)
+    print(headline)
+    if result.confidence is not None:
+        print(confidence_line(result.confidence))
+    for warning in result.extra["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
+
+
 def infer_command(
     capture: Annotated[Path, tyro.conf.Positional],
     model: Path = Path("models/closet"),
@@ -340,6 +397,8 @@ def infer_command(
     masks: Literal["segmenter", "background"] = "segmenter",
     segmenter: Path = Path("models/segmenter"),
     masked_loss: bool = True,
+    part: int | None = None,
+    furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
     threads: int | None = None,
 ) -> None:
     """Fit MODEL to the capture set CAPTURE and write the fit result (docs/CONVENTIONS.md).
@@ -365,6 +424,10 @@ def infer_command(
             object alone before a uniform background).
         segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
         masked_loss: with --estimate-pose, only pixels on the object's mask count in the image loss.
+        part: a model with several parts (furniture): the part whose q, keypoints and trajectory
+            are the result's single-part fields (default: the first part found); every part found
+            is listed under `parts`.
+        furniture_fit: options of the fit of a model with several parts (furniture).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -378,6 +441,20 @@ def infer_command(
     if handle_plot is not None and cap.gt is None:
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
     q_grid = np.linspace(0.0, 1.0, trajectory_points)
+    if fitted.num_slots > 1:
+        asked = [name for name, on in (("--report", report), ("--point-cloud", point_cloud),
+                                       ("--handle-plot", handle_plot), ("--estimate-pose", estimate_pose),
+                                       ("--keypoints geometry", keypoints == "geometry")) if on]
+        if asked:
+            raise NfrDrakeError(f"{', '.join(asked)}: not available for a model with several parts "
+                                f"({fitted.folder}) yet")
+        result, _ = infer_parts(fitted, cap, furniture_fit, q_grid, part=part)
+        found = "; ".join(f"{p['index']} {p['type']} q = {p['q']:.3f}" for p in result.parts) or "none"
+        _write_result(result, out, f"parts found: {found}; part {result.part['index']} in the single-part "
+                      f"fields; image loss {result.image_loss:.5f}, {result.seconds:.1f} s -> {out}")
+        return
+    if part is not None:
+        raise NfrDrakeError(f"--part is for models with several parts (furniture); {model} has one")
     if estimate_pose:
         if masks == "segmenter" and not (segmenter / "config.json").is_file():
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
@@ -391,15 +468,9 @@ def infer_command(
               f"height) {' x '.join(f'{v:.2f}' for v in result.extra['object_pose']['size'])} m")
     else:
         result, outcome = infer(fitted, cap, fit, q_grid, keypoint_source=keypoints)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    result.write(out)
-    print(f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, {result.seconds:.1f} s "
-          f"({outcome.steps} steps, {fit.restarts} starts; close look at the handle: {outcome.focus})"
-          f" -> {out}")
-    if result.confidence is not None:
-        print(confidence_line(result.confidence))
-    for warning in result.extra["warnings"]:
-        print(f"warning: {warning}", file=sys.stderr)
+    _write_result(result, out, f"q = {result.q:.3f}, image loss {result.image_loss:.5f}, "
+                  f"{result.seconds:.1f} s ({outcome.steps} steps, {fit.restarts} starts; close look "
+                  f"at the handle: {outcome.focus}) -> {out}")
     if report is not None:
         write_report(report, fitted, cap, result, outcome, fit.handle_detector)
         print(f"report: {report}")
