@@ -3,7 +3,8 @@
 A method is anything that turns a capture set into a `Prediction`; the neural-field fit and the
 image-encoder baseline both are. Metrics follow the paper's evaluation (articulation error,
 keypoint RMSE at the observed state, handle trajectory over q in [0, 1]) plus render quality
-(PSNR, segmentation mIoU) for methods that render, and the time per capture.
+(PSNR, segmentation mIoU) for methods that render, and the time per capture. Objects with several
+parts (furniture) are scored part by part (`nfr_drake.eval.parts`) by the same driver.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import cv2
@@ -48,7 +49,7 @@ class Prediction:
 
 
 Method = Callable[[CaptureSet, np.ndarray], Prediction]
-"""(capture, q grid (N,)) -> Prediction."""
+"""(capture, q grid (N,)) -> Prediction (or another prediction its scorer reads, `evaluate`)."""
 
 
 @dataclass
@@ -105,33 +106,45 @@ def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: st
         image_loss=prediction.image_loss)
 
 
+def trajectory_grid(gt: dict) -> np.ndarray:
+    """The q grid (N,) of a gt.json's trajectories (a furniture piece's: its parts')."""
+    return np.asarray((gt["trajectory"] if "trajectory" in gt else gt["parts"][0]["trajectory"])["q"])
+
+
+def read_row(row_type: type, row: dict[str, str]):
+    """A CSV row (strings) as a `row_type` dataclass, each value of its field's type (str, int,
+    bool or float)."""
+    cast = {"str": str, "int": int, "bool": lambda v: v == "True"}
+    return row_type(**{f.name: cast.get(f.type, float)(row[f.name]) for f in fields(row_type)})
+
+
 def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
              limit: int | None = None,
              on_prediction: Callable[[str, CaptureSet, str, Prediction], None] | None = None,
-             ) -> list[CaptureMetrics]:
+             scorer: Callable[..., list] | None = None, row_type: type = CaptureMetrics) -> list:
     """Run every method on every capture of every set, appending rows to `csv_path`.
 
+    `scorer(capture, prediction, set_name, method)` gives a capture's rows, `row_type` dataclasses
+    with capture, set_name and method fields (default: one `score` row, `CaptureMetrics`).
     Rows already in the CSV (same capture, set and method) are kept and not recomputed, so an
     interrupted evaluation resumes. `on_prediction(set_name, capture, method, prediction)` is
     called for each new prediction (to keep trajectories for plots, say).
     """
-    done: dict[tuple[str, str, str], CaptureMetrics] = {}
-    fields = list(CaptureMetrics.__dataclass_fields__)
+    scorer = scorer or (lambda *args: [score(*args)])
+    columns = [f.name for f in fields(row_type)]
+    results = []
     if csv_path.exists():
         with open(csv_path) as f:
             reader = csv.DictReader(f)
-            if reader.fieldnames is not None and reader.fieldnames != fields:
+            if reader.fieldnames is not None and reader.fieldnames != columns:
                 raise NfrDrakeError(f"{csv_path}: written by another version (columns "
                                     f"{reader.fieldnames}); choose another --out")
-            for row in reader:
-                m = CaptureMetrics(**{k: (v if k in ("capture", "set_name", "method")
-                                          else float(v)) for k, v in row.items()})
-                done[(m.capture, m.set_name, m.method)] = m
+            results = [read_row(row_type, row) for row in reader]
+    done = {(m.capture, m.set_name, m.method) for m in results}
     new_file = not csv_path.exists()
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    results = list(done.values())
     with open(csv_path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
+        writer = csv.DictWriter(f, fieldnames=columns)
         if new_file:
             writer.writeheader()
         for set_name, root in sets.items():
@@ -141,15 +154,15 @@ def evaluate(methods: dict[str, Method], sets: dict[str, Path], csv_path: Path,
                 if not todo:
                     continue
                 capture = read_capture_set(d)
-                grid = np.asarray(capture.gt["trajectory"]["q"])
+                grid = trajectory_grid(capture.gt)
                 for method_name in todo:
                     prediction = methods[method_name](capture, grid)
                     if on_prediction is not None:
                         on_prediction(set_name, capture, method_name, prediction)
-                    metrics = score(capture, prediction, set_name, method_name)
-                    writer.writerow(asdict(metrics))
+                    rows = scorer(capture, prediction, set_name, method_name)
+                    writer.writerows(asdict(r) for r in rows)
                     f.flush()
-                    results.append(metrics)
+                    results += rows
     return results
 
 

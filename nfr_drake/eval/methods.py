@@ -9,17 +9,23 @@ import numpy as np
 
 from nfr_drake.data.capture import CaptureSet
 from nfr_drake.eval.evaluate import Method, Prediction
+from nfr_drake.eval.parts import PartsPrediction
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 
 
-def neural_field_methods(model_dir: Path, config: FitConfig) -> dict[str, Method]:
+def neural_field_methods(model_dir: Path, config: FitConfig,
+                         furniture_config: FurnitureFitConfig = FurnitureFitConfig()) -> dict[str, Method]:
     """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
     geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
-    observed views give PSNR and mIoU."""
+    observed views give PSNR and mIoU. A model with several parts (furniture) has the first only,
+    fitted with `furniture_config` (`furniture_method`)."""
     from nfr_drake.inference.forward import geometric_keypoints, render_view
     from nfr_drake.inference.infer import FittedModel, infer
 
     fitted = FittedModel(model_dir)
+    if fitted.num_slots > 1:
+        return {"neural field": furniture_method(fitted, furniture_config)}
     names = fitted.keypoint_names
     last: dict[str, tuple] = {}  # capture root -> (prediction with head keypoints, fitted z)
 
@@ -48,6 +54,21 @@ def neural_field_methods(model_dir: Path, config: FitConfig) -> dict[str, Method
                           labels=base.labels, image_loss=base.image_loss)
 
     return {"neural field": head, "neural field, geometric keypoints": geometry}
+
+
+def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
+    """The furniture fit of a model with several parts (`inference.infer.infer_parts`, a
+    `FittedModel`): a `PartsPrediction` with every slot swept over the q grid, the others held."""
+    from nfr_drake.inference.furniture_fit import part_trajectory
+    from nfr_drake.inference.infer import infer_parts
+
+    def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
+        fitted.check_capture(capture)
+        result, fit = infer_parts(fitted, capture, config, grid)
+        paths = np.stack([part_trajectory(fitted.model, fit.z, k, grid) for k in range(fitted.num_slots)])
+        return PartsPrediction(fit.q, fit.exists, fit.types, fit.keypoints, paths, result.seconds)
+
+    return method
 
 
 def baseline_method(baseline_dir: Path) -> Method:
