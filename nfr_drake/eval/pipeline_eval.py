@@ -4,7 +4,9 @@
 seed and appends one CSV row per object: perception errors, the fit's confidence, planning
 outcome, simulated outcome. A fit refused for its low confidence (`Scenario.min_confidence`) is
 not planned on: its row says `refused`, and the summary counts it apart from the failures. Rows
-already in the CSV are kept, so a killed evaluation continues where it stopped.
+already in the CSV are kept, so a killed evaluation continues where it stopped. A piece of
+furniture is opened at one part, drawn from the piece's own random stream (`Scenario.sample_piece`),
+its row saying which (`PartRow`).
 """
 
 from __future__ import annotations
@@ -61,6 +63,15 @@ class PipelineRow:
 
 
 @dataclass
+class PartRow(PipelineRow):
+    """One piece of furniture's run: `PipelineRow`'s columns (of the part opened, `unit` deg for a
+    door, cm for a drawer) and the part: its index in canonical order and its type."""
+
+    part: int
+    part_type: str
+
+
+@dataclass
 class PlaceRow(PipelineRow):
     """One object's open-and-place run: `PipelineRow`'s columns (those of the opening; success is
     the whole task's) and the place's: the grasp simulated, the item ("kind WxDxH cm"), whether it
@@ -77,7 +88,7 @@ class PlaceRow(PipelineRow):
 
 def _row(scenario: Scenario) -> PipelineRow:
     outcome = run_scenario(scenario)
-    revolute = scenario.category == "closet"
+    revolute = outcome.truth.category == "closet"
     scale = np.degrees(1.0) if revolute else 100.0
     task = outcome.task
     sim = task.simulation if task is not None else None
@@ -109,6 +120,8 @@ def _row(scenario: Scenario) -> PipelineRow:
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
         pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"))
+    if scenario.category == "furniture":
+        return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":
         return row
     item = scenario.sample_item()
@@ -123,12 +136,24 @@ def _probability(confidence: dict | None) -> float:
     return float("nan") if p is None else float(p)
 
 
-def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
-    """Run `base` on objects index = 0 .. n-1 and append a `PipelineRow` per object to `csv_path`
-    (objects of the category already there are skipped); returns the CSV's rows of the category
-    (string values, as `csv.DictReader` reads them). An open-and-place task writes `PlaceRow`s."""
+def object_scenario(base: Scenario, index: int, part_target: bool = False) -> Scenario:
+    """`base` at object `index` with its part drawn (`Scenario.sample_piece`) and, with
+    `part_target`, the q_target of the part's joint (`OPEN_TARGET`: a door's as a closet's, a
+    drawer's as a drawer's)."""
+    scenario = replace(base, index=index)
+    obj, part = scenario.sample_piece()
+    kind = "closet" if obj.front(part).joint_type == "revolute" else "drawer"
+    return replace(scenario, part=part, q_target=OPEN_TARGET[kind] if part_target else base.q_target)
+
+
+def evaluate_pipeline(base: Scenario, n: int, csv_path: Path, part_target: bool = False) -> list[dict]:
+    """Run `base` on objects index = 0 .. n-1 (`object_scenario`; `part_target`: each at its part's
+    target) and append a `PipelineRow` per object to `csv_path` (objects of the category already
+    there are skipped); returns the CSV's rows of the category (string values, as
+    `csv.DictReader` reads them). An open-and-place task writes `PlaceRow`s, furniture `PartRow`s."""
     done = set()
-    fields = list((PipelineRow if base.task == "open" else PlaceRow).__dataclass_fields__)
+    row_type = PlaceRow if base.task != "open" else PartRow if base.category == "furniture" else PipelineRow
+    fields = list(row_type.__dataclass_fields__)
     if csv_path.exists():
         with open(csv_path) as f:
             reader = csv.DictReader(f)
@@ -145,13 +170,13 @@ def evaluate_pipeline(base: Scenario, n: int, csv_path: Path) -> list[dict]:
         for i in tqdm(range(n), desc=f"{base.category} pipeline", unit="object"):
             if (base.category, i) in done:
                 continue
-            writer.writerow(asdict(_row(replace(base, index=i))))
+            writer.writerow(asdict(_row(object_scenario(base, i, part_target))))
             f.flush()
     with open(csv_path) as f:
         return [r for r in csv.DictReader(f) if r["category"] == base.category]
 
 
-def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, csv_path: Path,
+def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], model: Path, csv_path: Path,
                           n: int = 50, seed: int = 200, q_start: float = 0.0,
                           q_target: float | None = None,
                           keypoints: Literal["geometry", "head", "ground_truth"] = "head",
@@ -163,7 +188,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
                           segmenter: Path = Path(Scenario.segmenter),
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
-    item inside; print the success rate.
+    item inside; print the success rate. A piece of furniture is opened at one part drawn from its
+    own random stream, the others held shut; its fit has no confidence (not calibrated for
+    furniture), so none is refused.
 
     Args:
         category: object category.
@@ -172,8 +199,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         n: number of objects (indices 0 .. n-1 of the capture seed).
         seed: capture seed of the objects.
         q_start: articulation when photographed.
-        q_target: articulation to reach (default: 0.6 for closets, as in the ground-truth
-            planning evaluation, 1.0 for drawers).
+        q_target: articulation to reach (default: 0.6 for closets and furniture doors, as in the
+            ground-truth planning evaluation, 1.0 for drawers and furniture drawers).
         keypoints: keypoint source ("geometry" or "head"; "ground_truth": the object's own, no
             cameras and no fit, for comparison).
         fit: options of the fit.
@@ -192,13 +219,12 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
-    if q_target is None:
-        q_target = OPEN_TARGET[category]
     base = Scenario(category=category, model=str(model), seed=seed, q_start=q_start,
-                    q_target=q_target, keypoints=keypoints, fit=fit, image_size=image_size,
+                    q_target=1.0 if q_target is None else q_target, keypoints=keypoints, fit=fit,
+                    image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter))
-    rows = evaluate_pipeline(base, n, csv_path)
+    rows = evaluate_pipeline(base, n, csv_path, part_target=q_target is None)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
     print(perception_summary(rows))
@@ -206,6 +232,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer"], model: Path, cs
     refused = sum(r["refused"] == "True" for r in rows)
     if task != "open":
         print(place_summary(rows))
+    if category == "furniture":
+        print(part_summary(rows))
     what = "" if task == "open" else f" {task} ({grasp} grasp)"
     print(f"{category}{what}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
           f"({100 * wins / max(len(rows), 1):.0f}%), {refused} refused for low fit confidence, "
@@ -246,6 +274,15 @@ def perception_summary(rows: list[dict]) -> str:
         line += (f"; object pose: median {np.nanmedian(pose[:, 0]):.2f} cm, "
                  f"{np.nanmedian(pose[:, 1]):.2f} deg, {within}/{len(rows)} within 2 cm and 2 deg")
     return line
+
+
+def part_summary(rows: list[dict]) -> str:
+    """One line on furniture CSV rows (`PartRow`): successes per part type, and that no fit was
+    refused for want of a confidence calibration."""
+    types = sorted({r["part_type"] for r in rows})
+    wins = ", ".join(f"{t}s {sum(r['success'] == 'True' for r in rows if r['part_type'] == t)}/"
+                     f"{sum(r['part_type'] == t for r in rows)}" for t in types)
+    return f"by part: {wins}; no fit confidence for furniture (not calibrated): no fit refused"
 
 
 def place_summary(rows: list[dict]) -> str:

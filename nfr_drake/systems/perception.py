@@ -4,7 +4,7 @@
 triggered (at initialisation, or by `refit`), never per simulation step, and outputs the
 forward-simulated `KeypointTrajectory` in the world frame, the estimated articulation q, the
 fit's confidence (P(handle within 2 cm) and what it rests on, `inference.confidence`) and the
-object's pose X_WO.
+object's pose X_WO. With a model of furniture (several parts) it outputs the part asked for.
 
 `AddNfrPerception` wires it up in Drake's style: it adds a render engine for the perception
 cameras, one RgbdSensor per camera pose, and the system. Perceiving "alone" (the paper's setting),
@@ -40,14 +40,15 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, ModelInstanceIndex
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem, NumericParameterIndex
 from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import FittedModel, KeypointSource, infer
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
+from nfr_drake.inference.infer import FittedModel, KeypointSource, infer, infer_parts
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
@@ -96,6 +97,12 @@ class NfrPerceptionSystem(LeafSystem):
     `refit` is called; outputs read the stored result. `fit_count` counts fits.
     `keypoint_source` picks the keypoint head or the fitted geometry (see
     `nfr_drake.inference.infer.KeypointSource`).
+
+    A model with several parts (furniture) is fitted with `furniture_config` (`infer_parts`, the
+    keypoint head's keypoints) and has a numeric parameter `part` (one value; the constructor's
+    `part`, -1 for the first part the field finds): keypoint_trajectory, q_estimate and fit_result
+    give that part (its trajectory with the other parts held at their fitted q). Another value
+    (`set_part`) needs no new fit; a part the fit did not find then raises NfrDrakeError.
     """
 
     def __init__(self, model: FittedModel, cameras: list[PinholeCamera],
@@ -103,12 +110,17 @@ class NfrPerceptionSystem(LeafSystem):
                  fit_config: FitConfig = FitConfig(), trajectory_points: int = 21,
                  keypoint_source: KeypointSource = "head", hull_config: HullConfig | None = None,
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
-                 segmenter: Segmenter | None = None):
+                 segmenter: Segmenter | None = None, part: int | None = None,
+                 furniture_config: FurnitureFitConfig = FurnitureFitConfig()):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
             raise ValueError("need one camera per pose, and at least one")
-        self._model, self._fit_config = model, fit_config
+        if model.num_slots == 1 and part is not None:
+            raise ValueError(f"part: {model.folder} has one part; `part` selects one of a model with several")
+        if model.num_slots > 1 and keypoint_source != "head":
+            raise ValueError("a model with several parts gives the keypoint head's keypoints only")
+        self._model, self._fit_config, self._furniture_config = model, fit_config, furniture_config
         self._cameras = list(cameras)
         self._X_WCs = list(X_WCs)
         self._X_WO = X_WO
@@ -121,6 +133,10 @@ class NfrPerceptionSystem(LeafSystem):
             for i in range(len(cameras))]
         self._result_index = self.DeclareAbstractState(Value[object](None))
         ticket = {self.abstract_state_ticket(self._result_index)}
+        self._part_index = None
+        if model.num_slots > 1:
+            self._part_index = self.DeclareNumericParameter(BasicVector([-1.0 if part is None else part]))
+            ticket.add(self.numeric_parameter_ticket(NumericParameterIndex(self._part_index)))
         self._trajectory_port = self.DeclareAbstractOutputPort(
             "keypoint_trajectory", lambda: Value[object](None), self._CalcKeypointTrajectory,
             prerequisites_of_calc=ticket)
@@ -154,6 +170,19 @@ class NfrPerceptionSystem(LeafSystem):
     def get_X_WO_output_port(self):
         return self._X_WO_port
 
+    def set_part(self, context, part: int) -> None:
+        """Ask for part `part` of a model with several parts (this system's context)."""
+        if self._part_index is None:
+            raise ValueError(f"{self._model.folder} has one part")
+        context.get_mutable_numeric_parameter(self._part_index).SetAtIndex(0, part)
+
+    def _part(self, context) -> int | None:
+        """The part asked for, None for the first found (or a model with one part)."""
+        if self._part_index is None:
+            return None
+        part = int(context.get_numeric_parameter(self._part_index).GetAtIndex(0))
+        return None if part < 0 else part
+
     def refit(self, context) -> FitResult:
         """Fit again to the current camera images (this system's context); returns the result."""
         fitted = self._run_fit(context)
@@ -186,8 +215,13 @@ class NfrPerceptionSystem(LeafSystem):
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
-        result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
-                          self._keypoint_source, masks=masks if self._segmenter is not None else None)
+        loss_masks = masks if self._segmenter is not None else None
+        if self._model.num_slots > 1:
+            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
+                                    self._part(context), loss_masks)
+        else:
+            result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
+                              self._keypoint_source, masks=loss_masks)
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1
@@ -202,15 +236,23 @@ class NfrPerceptionSystem(LeafSystem):
             raise RuntimeError("NfrPerceptionSystem: no fit yet; initialise the simulator first")
         return fitted
 
-    def _CalcKeypointTrajectory(self, context, output) -> None:
+    def _selected(self, context) -> tuple[FitResult, RigidTransform]:
+        """`_stored`, its single-part fields those of the part asked for (furniture)."""
         result, X_WO = self._stored(context)
+        part = self._part(context)
+        if part is not None and part != result.part["index"]:
+            result = result.part_of(part)
+        return result, X_WO
+
+    def _CalcKeypointTrajectory(self, context, output) -> None:
+        result, X_WO = self._selected(context)
         output.set_value(KeypointTrajectory.from_fit_result(result.to_json(), X_WO))
 
     def _CalcQ(self, context, output) -> None:
-        output.SetAtIndex(0, self._stored(context)[0].q)
+        output.SetAtIndex(0, self._selected(context)[0].q)
 
     def _CalcFitResult(self, context, output) -> None:
-        output.set_value(self._stored(context)[0])
+        output.set_value(self._selected(context)[0])
 
     def _CalcConfidence(self, context, output) -> None:
         output.set_value(self._stored(context)[0].confidence)
@@ -240,14 +282,16 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      X_WCs: list[RigidTransform], camera: PinholeCamera,
                      fit_config: FitConfig = FitConfig(), lighting: LightSet | None = None,
                      keypoint_source: KeypointSource = "head", scene: PerceptionScene = "alone",
-                     segmenter: Path = SEGMENTER_DIR) -> NfrPerceptionSystem:
+                     segmenter: Path = SEGMENTER_DIR, part: int | None = None,
+                     furniture_config: FurnitureFitConfig = FurnitureFitConfig()) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
     then see the object alone (`render_only`) under `lighting` (default the training renders'
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
     `RoomLighting.moved`), and the `segmenter` model folder finds the object. X_WO: the object's
-    known pose, or None to estimate it from the views (`NfrPerceptionSystem`). Returns the
+    known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
+    parts (furniture): `part` and `furniture_config` as in `NfrPerceptionSystem`. Returns the
     system; its RgbdSensors are named `nfr_camera_{i}`.
     """
     params = RenderEngineVtkParams(default_clear_color=list(DEFAULT_BACKGROUND_RGB),
@@ -262,7 +306,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                             ClippingRange(0.05, 20.0), RigidTransform())
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
-        keypoint_source=keypoint_source, segmenter=net))
+        keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

@@ -25,7 +25,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.data.camera import PinholeCamera
-from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.rooms import Room, RoomDistribution, sample_room
 from nfr_drake.inference.confidence import refusal
 from nfr_drake.inference.infer import check_category
@@ -106,33 +106,36 @@ def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
     return trajectory, seconds, confidence
 
 
-def perceive_scene(scenario: Scenario, obj: ArticulatedObject
+def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None = None
                    ) -> tuple[KeypointTrajectory, float, dict | None, RigidTransform]:
     """`perceive_with_confidence`, and the object's pose the keypoints were placed with (the
     "X_WO" port: the scenario's, or the estimate with `Scenario.object_pose` "estimated", the
     cameras then around `Scenario.coarse_look`). With `Scenario.perceive` "room" the cameras see
-    the object in `perception_room`."""
+    the object in `perception_room`. A piece of furniture is framed as its captures are (its
+    bounds over every articulation in view, `CameraDistribution` "bounds") and the trajectory is
+    that of its part `part` (the perception system's `part`)."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
     model = add_articulated_object(plant, obj, X_WO)
     rng = np.random.default_rng([scenario.seed, scenario.index, 7])
-    cameras = CameraDistribution(distance_m=tuple(scenario.distance_m))
+    camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
+                                    math.radians(scenario.fov_y_deg))
+    cameras = CameraDistribution(distance_m=tuple(scenario.distance_m),
+                                 framing=resolve_framing("auto", obj.category))
     X_WA = scenario.coarse_look()
     X_WCs = [X_WA @ RigidTransform(X) for X in cameras.sample(rng, scenario.views,
-                                                               obj.look_at_target())]
+                                                               *cameras.target_of(obj), camera)]
     lighting = None
     if scenario.perceive == "room":
         room = perception_room(scenario, obj, X_WCs)
         room.add_to(plant, X_WO.GetAsMatrix4())
         lighting = room.lighting.moved(X_WO.GetAsMatrix4())
     plant.Finalize()
-    camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
-                                    math.radians(scenario.fov_y_deg))
     known = X_WO if scenario.object_pose == "given" else None
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
                                   X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
-                                  scenario.perceive, Path(scenario.segmenter))
+                                  scenario.perceive, Path(scenario.segmenter), part)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
@@ -176,13 +179,14 @@ def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
 
 def run_scenario(scenario: Scenario) -> PipelineOutcome:
     """Both phases (the first only when the scenario perceives); the replay (if asked for) draws
-    the keypoint paths the planner used and, with perception, the true ones. NfrDrakeError first
+    the keypoint paths the planner used and, with perception, the true ones. A piece of furniture
+    is opened at its part `Scenario.sample_piece` names, the others held shut. NfrDrakeError first
     when the model is not of the scenario's category."""
     if scenario.perceives:
         check_category(Path(scenario.model), read_model_config(Path(scenario.model)).get("category"),
                        scenario.category, "scenario", "object")
-    obj = scenario.sample_object()
-    scene_object = SceneObject.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
+    obj, part = scenario.sample_piece()
+    scene_object = SceneObject.from_articulated_object(obj, scenario.X_WO, scenario.q_start, part)
     replay = Path(scenario.replay) if scenario.replay else None
     if not scenario.perceives:
         task = _run(scenario, obj, scene_object, None, None, replay)
@@ -190,9 +194,10 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                keypoint_rmse_cm=0.0, handle_path_rmse_cm=0.0, perception_seconds=0.0,
                                predicted=task.keypoints, truth=task.keypoints, task=task,
                                perceived=False)
-    truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
+    truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start, part=part)
     try:
-        predicted, seconds, confidence, X_WO_hat = perceive_scene(scenario, obj)
+        predicted, seconds, confidence, X_WO_hat = perceive_scene(
+            scenario, obj, part if scenario.category == "furniture" else None)
     except ObjectPoseError as err:
         return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,

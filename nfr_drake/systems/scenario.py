@@ -23,7 +23,7 @@ from nfr_drake.objects import (
 )
 from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.systems.articulation import GRASPS, SimulationConfig
-from nfr_drake.systems.scene_objects import object_pose
+from nfr_drake.systems.scene_objects import object_pose, random_part
 from nfr_drake.world.items import Item, sample_item
 
 _ITEM_STREAM = 23  # the item's random stream beside the object's (the issue's number)
@@ -41,7 +41,8 @@ class Scenario:
     keypoints come from."""
 
     category: str = "closet"
-    """"closet" or "drawer"."""
+    """"closet", "drawer" or "furniture" (a piece with several doors and drawers, one of them
+    opened, `part`)."""
     objects: str = "capture"
     """Which objects: "capture" (unseen ones, `object_rng(SEED_DOMAIN_CAPTURE, seed, index)`, never
     a training object) or "train" (`object_rng(SEED_DOMAIN_TRAIN, seed, index)`)."""
@@ -111,10 +112,18 @@ class Scenario:
     `segmenter` and only the pixels on them counting in the fit's image loss."""
     segmenter: str = "models/segmenter"
     """Segmenter model folder (read when perceiving a room)."""
+    part: int = -1
+    """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
+    held shut; -1 draws one from the piece's own random stream after the piece, as the planning
+    evaluation does (`sample_piece`). A closet or a drawer has part 0 alone."""
 
     def __post_init__(self):
-        if self.category not in ("closet", "drawer"):
-            raise ConfigError(f"category must be closet or drawer, got {self.category!r}")
+        if self.category not in ("closet", "drawer", "furniture"):
+            raise ConfigError(f"category must be closet, drawer or furniture, got {self.category!r}")
+        if self.category != "furniture" and self.part not in (-1, 0):
+            raise ConfigError(f"part {self.part}: a {self.category} has one part, 0")
+        if self.category == "furniture" and self.task != "open":
+            raise ConfigError(f"task {self.task!r}: furniture is opened only (task open)")
         if self.objects not in OBJECT_DOMAINS:
             raise ConfigError(f"objects must be one of {sorted(OBJECT_DOMAINS)}, got {self.objects!r}")
         for name in ("q_start", "q_target"):
@@ -169,9 +178,15 @@ class Scenario:
                            self.object_yaw_deg + rng.normal(0.0, self.coarse_look_deg))
 
     def sample_object(self) -> ArticulatedObject:
-        return sample_object(self.category,
-                             object_rng(OBJECT_DOMAINS[self.objects], self.seed, self.index),
-                             name=f"{self.category}_{self.seed}_{self.index}")
+        return self.sample_piece()[0]
+
+    def sample_piece(self) -> tuple[ArticulatedObject, int]:
+        """The object (`sample_object`) and the part to open: `part`, or with -1 one drawn from the
+        object's stream after the object (`random_part`; 0 for a closet or a drawer). NfrDrakeError
+        (`SceneObject.from_articulated_object`) later when the piece has no such part."""
+        rng = object_rng(OBJECT_DOMAINS[self.objects], self.seed, self.index)
+        obj = sample_object(self.category, rng, name=f"{self.category}_{self.seed}_{self.index}")
+        return obj, (random_part(obj, rng) if self.part < 0 else self.part)
 
     def sample_item(self) -> Item:
         """The item an open-and-place task places: drawn from its own stream of the seed and index."""
