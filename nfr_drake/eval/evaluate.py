@@ -21,6 +21,7 @@ from tqdm import tqdm
 
 from nfr_drake.data.capture import CaptureSet, capture_dirs, read_capture_set
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.inference.confidence import FAR_M, SUCCESS_M
 from nfr_drake.inference.metrics import (
     articulation_error,
     keypoint_rmse_cm,
@@ -37,6 +38,8 @@ class Prediction:
     q: articulation in [0, 1]. keypoints: name -> (3,) at q. trajectory: name -> (N, 3) on the
     q grid it was asked for. renders / labels: per frame uint8 RGB (H, W, 3) / classes (H, W) at
     the observed state, or None for methods that do not render. seconds: wall time.
+    confidence: the fit's P(handle within 2 cm) (`inference.confidence`), NaN for a method
+    without one; refused: whether that is below the calibration's threshold (None: no confidence).
     """
 
     q: float
@@ -46,6 +49,8 @@ class Prediction:
     renders: list[np.ndarray] | None = None
     labels: list[np.ndarray] | None = None
     image_loss: float = math.nan
+    confidence: float = math.nan
+    refused: bool | None = None
 
 
 Method = Callable[[CaptureSet, np.ndarray], Prediction]
@@ -57,7 +62,9 @@ class CaptureMetrics:
     """Errors of one method on one capture set (NaN where a method has no such output).
 
     handle_error_cm: distance of the predicted handle from the true one at the observed state,
-    what a grasp must absorb.
+    what a grasp must absorb. confidence: the fit's P(handle within 2 cm); refused: 1 when it is
+    below the calibration's threshold (`demo` and `eval-pipeline` would not act on it), 0 when
+    not, NaN without a confidence.
     """
 
     capture: str
@@ -71,6 +78,8 @@ class CaptureMetrics:
     miou: float
     seconds: float
     image_loss: float
+    confidence: float
+    refused: float
 
 
 def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: str) -> CaptureMetrics:
@@ -103,7 +112,8 @@ def score(capture: CaptureSet, prediction: Prediction, set_name: str, method: st
         handle_error_cm=keypoint_rmse_cm(kp_pred[[handle]], kp_true[[handle]]),
         handle_trajectory_rmse_cm=trajectory_rmse_cm(traj_pred, traj_true),
         psnr_db=psnr_db, miou=miou, seconds=prediction.seconds,
-        image_loss=prediction.image_loss)
+        image_loss=prediction.image_loss, confidence=prediction.confidence,
+        refused=math.nan if prediction.refused is None else float(prediction.refused))
 
 
 def trajectory_grid(gt: dict) -> np.ndarray:
@@ -173,11 +183,31 @@ COLUMNS = (("articulation_error", "articulation error ({unit})"),
             ("psnr_db", "PSNR (dB)"), ("miou", "mIoU"), ("seconds", "time (s)"))
 
 
+REFUSAL_COLUMNS = ("refused", "good fits refused", "fits > 5 cm off kept")
+"""The summary's refusal columns (`refusal_cells`)."""
+
+
+def refusal_cells(rows: list[CaptureMetrics]) -> list[str]:
+    """The `REFUSAL_COLUMNS` of one set and method: fits refused, good fits (handle within 2 cm,
+    `inference.confidence.SUCCESS_M`) refused and fits more than 5 cm off (`FAR_M`) kept, each
+    "k of n"; "n/a" for a method without a confidence."""
+    refused = np.array([r.refused for r in rows], float)
+    if np.all(np.isnan(refused)):
+        return ["n/a"] * len(REFUSAL_COLUMNS)
+    error_m = np.array([r.handle_error_cm for r in rows], float) / 100.0
+    good, far, said = error_m <= SUCCESS_M, error_m > FAR_M, ~np.isnan(refused)
+    refused = refused == 1.0
+    return [f"{refused.sum()} of {said.sum()}", f"{(refused & good).sum()} of {(good & said).sum()}",
+            f"{(~refused & far & said).sum()} of {(far & said).sum()}"]
+
+
 def summary_table(results: Iterable[CaptureMetrics], unit: str) -> str:
-    """Markdown table of medians (and 90th percentiles of the errors) per set and method."""
+    """Markdown table of medians (and 90th percentiles of the errors) per set and method, and
+    the fits refused by the fit confidence (`refusal_cells`)."""
     results = list(results)
-    header = "| set | method | n | " + " | ".join(t.format(unit=unit) for _, t in COLUMNS) + " |"
-    lines = [header, "|" + "---|" * (3 + len(COLUMNS))]
+    header = ("| set | method | n | " + " | ".join(t.format(unit=unit) for _, t in COLUMNS) + " | "
+              + " | ".join(REFUSAL_COLUMNS) + " |")
+    lines = [header, "|" + "---|" * (3 + len(COLUMNS) + len(REFUSAL_COLUMNS))]
     keys = sorted({(r.set_name, r.method) for r in results})
     for set_name, method in keys:
         rows = [r for r in results if r.set_name == set_name and r.method == method]
@@ -190,5 +220,6 @@ def summary_table(results: Iterable[CaptureMetrics], unit: str) -> str:
                 cells.append(f"{np.nanmedian(values):.3g}")
             else:
                 cells.append(f"{np.nanmedian(values):.2f} (p90 {np.nanpercentile(values, 90):.2f})")
+        cells += refusal_cells(rows)
         lines.append(f"| {set_name} | {method} | {len(rows)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -17,9 +18,11 @@ from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 def neural_field_methods(model_dir: Path, config: FitConfig,
                          furniture_config: FurnitureFitConfig = FurnitureFitConfig()) -> dict[str, Method]:
     """Fit + forward simulation, keypoints from the head ("neural field") and from the fitted
-    geometry ("neural field, geometric keypoints"); both share one fit per capture. Renders of the
+    geometry ("neural field, geometric keypoints"); both share one fit per capture, and its
+    confidence (P(handle within 2 cm), refused below the calibration's threshold). Renders of the
     observed views give PSNR and mIoU. A model with several parts (furniture) has the first only,
     fitted with `furniture_config` (`furniture_method`)."""
+    from nfr_drake.inference.confidence import refusal
     from nfr_drake.inference.forward import geometric_keypoints, render_view
     from nfr_drake.inference.infer import FittedModel, infer
 
@@ -34,9 +37,12 @@ def neural_field_methods(model_dir: Path, config: FitConfig,
         result, outcome = infer(fitted, capture, config, grid)
         views = [render_view(fitted.model, outcome.z, outcome.q, f.camera, f.X_OC)
                  for f in capture.frames]
+        p = (result.confidence or {}).get("p_handle_within_2cm")
         prediction = Prediction(result.q, result.keypoints, result.trajectory, result.seconds,
                                 renders=[v.rgb for v in views], labels=[v.labels for v in views],
-                                image_loss=result.image_loss)
+                                image_loss=result.image_loss,
+                                confidence=math.nan if p is None else p,
+                                refused=None if p is None else refusal(result.confidence) is not None)
         last.clear()
         last[str(capture.root)] = (prediction, outcome)
         return prediction
@@ -51,7 +57,8 @@ def neural_field_methods(model_dir: Path, config: FitConfig,
         return Prediction(base.q, {n: now[i] for i, n in enumerate(names)},
                           {n: path[:, i] for i, n in enumerate(names)},
                           base.seconds + time.perf_counter() - started, renders=base.renders,
-                          labels=base.labels, image_loss=base.image_loss)
+                          labels=base.labels, image_loss=base.image_loss,
+                          confidence=base.confidence, refused=base.refused)
 
     return {"neural field": head, "neural field, geometric keypoints": geometry}
 

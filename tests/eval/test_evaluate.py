@@ -74,3 +74,29 @@ def test_run_writes_the_tables_and_plots_and_returns_the_summary(captures, tmp_p
     assert len((out / "results.csv").read_text().splitlines()) == 5
     run_evaluation(methods, [captures], out, example_plots=1)  # resumes: no row twice
     assert len((out / "results.csv").read_text().splitlines()) == 5
+
+
+def test_the_summary_counts_refusals_next_to_the_errors(captures, tmp_path):
+    def confident(shift, p, refused):
+        oracle = _oracle(shift)
+
+        def method(capture, grid):
+            prediction = oracle(capture, grid)
+            prediction.confidence, prediction.refused = p, refused
+            return prediction
+        return method
+
+    methods = {"good refused": confident((0.0, 0.0, 0.0), 0.1, True),
+               "far kept": confident((0.06, 0.0, 0.0), 0.9, False),
+               "no confidence": _oracle()}
+    results = evaluate(methods, {"closets": captures}, tmp_path / "r.csv")
+    again = evaluate(methods, {"closets": captures}, tmp_path / "r.csv")  # read back from the CSV
+    for rows in (results, again):
+        by_method = {r.method: r for r in rows}
+        assert by_method["good refused"].refused == 1.0 and by_method["far kept"].confidence == 0.9
+        assert math.isnan(by_method["no confidence"].refused)
+    table = summary_table(again, "deg")
+    assert table.splitlines()[0].endswith("| refused | good fits refused | fits > 5 cm off kept |")
+    assert "| 2 of 2 | 2 of 2 | 0 of 0 |" in table.split("good refused |")[1].splitlines()[0]
+    assert "| 0 of 2 | 0 of 0 | 2 of 2 |" in table.split("far kept |")[1].splitlines()[0]
+    assert table.split("no confidence |")[1].splitlines()[0].endswith("| n/a | n/a | n/a |")
