@@ -115,7 +115,7 @@ def captures_command(
     views: int = 10,
     size: int = 128,
     fov_y_deg: float = 50.0,
-    distance_m: tuple[float, float] = (1.4, 1.9),
+    distance_m: tuple[float, float] | None = None,
     azimuth_deg: tuple[float, float] = (-60.0, 60.0),
     elevation_deg: tuple[float, float] = (5.0, 40.0),
     seed: int = 0,
@@ -134,7 +134,9 @@ def captures_command(
         views: images per capture set.
         size: square image size, pixels.
         fov_y_deg: vertical field of view, degrees.
-        distance_m: camera distance range to the object centre, metres (framing "distance").
+        distance_m: camera distance range to the object centre, metres (framing "distance";
+            default 1.4 1.9). Refused with framing "bounds", where each view's distance follows
+            from the piece's bounds, the field of view and `margin`.
         azimuth_deg: camera azimuth range around the front, degrees.
         elevation_deg: camera elevation range, degrees.
         seed: capture seed (objects are disjoint from training data for every seed).
@@ -148,8 +150,13 @@ def captures_command(
     if q is not None and not 0.0 <= q <= 1.0:
         raise ConfigError(f"--q must lie in [0, 1], got {q}")
     shard_i, shard_n = parse_shard(shard)
-    cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m,
-                                 framing=resolve_framing(framing, category), margin=margin)
+    framing = resolve_framing(framing, category)
+    if distance_m is not None and framing == "bounds":
+        raise ConfigError("--distance-m: unused with framing bounds (furniture's by default), where each "
+                          "camera stands as far as the piece's bounds and --margin ask; give --margin, or "
+                          "--framing distance")
+    cameras = CameraDistribution(azimuth_deg, elevation_deg, distance_m or CameraDistribution.distance_m,
+                                 framing=framing, margin=margin)
     camera = PinholeCamera.from_fov(size, size, math.radians(fov_y_deg))
     out.mkdir(parents=True, exist_ok=True)
     mine = [i for i in range(n) if i % shard_n == shard_i]
