@@ -1,5 +1,8 @@
 """Fit a furniture model to furniture capture sets and compare every part with gt.json.
 
+A quick check with the fitted q per part; `nfr-drake eval --category furniture` is the evaluation
+(per-part CSV, tables, plots, unseen-camera sets: docs/FURNITURE.md).
+
 Per capture: whether the part count is right (the slots the head says exist against the true
 fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
 keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
@@ -23,11 +26,8 @@ from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.inference.fit import observed_rays
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture, part_trajectory
 from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
+from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
-
-GT_NAMES = {"door": ("handle", "goal", "hinge_top", "hinge_bottom"), "drawer": ("handle", "goal")}
-"""gt.json keypoints of each front type, in `SLOT_KEYPOINTS` order (a door's axis points are its
-hinge points; a drawer's are not in gt.json's keypoints)."""
 
 
 def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig) -> dict:
@@ -35,9 +35,9 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig) -> dic
     fit = fit_furniture(model, observed_rays(read_capture_set(capture_dir)), codes, config)
     parts = []
     for part in gt["parts"]:
-        k, names = part["index"], GT_NAMES[part["type"]]
-        pred = fit.keypoints[k, :len(names)]
-        true = np.array([part["keypoints"][n] for n in names])
+        k, names = part["index"], PART_KEYPOINTS[part["type"]]
+        pred = fit.keypoints[k, [SLOT_KEYPOINTS.index(n) for n in names]]
+        true = np.array([part["keypoints"][names[n]] for n in names])
         traj_q = np.asarray(part["trajectory"]["q"])
         path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
         parts.append({
