@@ -72,6 +72,13 @@ def edge_band(mask: np.ndarray, band: float = EDGE_BAND) -> np.ndarray:
     return near
 
 
+def silhouette_iou(rendered: np.ndarray, observed: np.ndarray, compared: np.ndarray) -> float:
+    """IoU of two bool silhouettes (P,) over the pixels `compared` (P,) bool; 1 when both are
+    empty there."""
+    union = np.logical_or(rendered, observed)[compared].sum()
+    return float(np.logical_and(rendered, observed)[compared].sum() / union) if union else 1.0
+
+
 def code_scale(codes: torch.Tensor) -> float:
     """The training codes' own spacing: the median over codes (N, k) of the mean distance to
     their `NEAREST_CODES` nearest other codes (fewer when N is small; 1 for a single code), the
@@ -128,9 +135,7 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
                 observed_fg = mask.reshape(-1)[index]
                 compared = ~edge_band(mask).reshape(-1)[index]
                 counted = observed_fg if observed_fg.any() else compared
-            union = np.logical_or(rendered_fg, observed_fg)[compared].sum()
-            iou = (float(np.logical_and(rendered_fg, observed_fg)[compared].sum() / union) if union
-                   else 1.0)
+            iou = silhouette_iou(rendered_fg, observed_fg, compared)
             border = np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]])
             loss = ((out.rgb[0] - observed) ** 2).mean(-1)[torch.from_numpy(counted)]
             per_view.append({"image_loss": float(loss.mean()), "silhouette_iou": iou,
