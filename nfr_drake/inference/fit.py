@@ -6,15 +6,24 @@ codes are fitted together for `explore_steps`, and the one with the lowest image
 evaluation set of rays is then refined alone until its loss has not improved by `min_improvement`
 for `patience` steps, or `max_steps` steps in all have run.
 
-The fast preset looks its starts up (`FitConfig.start`): candidate codes at a grid of
+The default (fast) fit looks its starts up (`FitConfig.start`): candidate codes at a grid of
 articulations, with the mean training code and with the training codes whose keypoint head puts
 the handle where the handle detector saw it, are scored by one forward pass without gradient, and
 the best candidate of each band of q is explored (at a larger learning rate, so that z_obj leaves
 its start quickly): the starts' losses say which basin of q is right only once z_obj has
 adapted, and a start at its band's best q, with codes near the sighting, adapts sooner. The
 refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
-from the noise of the steps' random rays, so the fit stops when it has converged. The default,
-thorough, fit spreads its starts evenly over q and runs longer stages.
+from the noise of the steps' random rays, so the fit stops when it has converged. The thorough
+preset spreads its starts evenly over q and runs longer stages.
+
+A drawer's pull and depth trade along a shallow valley of the image loss (a deeper drawer pulled
+out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
+the loss rises steeply on either side of the refined q, yet without the scan the fast fit ended
+1.4 cm from the true pull (median of 20 drawers; docs/BENCHMARKS.md). The valley scan
+(`FitConfig.valley_codes`), between the refinement and the close look, holds a few articulations
+around the refined one, starts each z_obj along the direction in which the keypoint head keeps
+the focus part in place, fits the z_obj of all of them together and goes on from the minimum of
+their losses' profile over q.
 
 A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
 steps, a `detail_fraction` share of the rays (half by default) is drawn among those passing within
@@ -63,13 +72,14 @@ class FitConfig:
     `tune-head` and the scenario YAML (`fit:`). On the command line each option is `--fit.NAME`;
     the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
 
-    preset: Literal["thorough", "fast"] = "thorough"
-    """"thorough", the defaults below, or "fast" (`FAST`): starts looked up, explored 30 steps at
-    lr 0.03 with 64 rays each, at most 120 steps of 128 rays with early stopping on fixed rays,
-    a close look of 20 steps; about a quarter of the CPU time, as accurate on closets, a drawer's
-    pull about three times less accurate (docs/BENCHMARKS.md). Fields left at their default take
-    the preset's value."""
-    start: Literal["lookup", "spread"] = "spread"
+    preset: Literal["fast", "thorough"] = "fast"
+    """"fast", the defaults below: starts looked up, explored 30 steps at lr 0.03 with 64 rays
+    each, at most 120 steps of 128 rays with early stopping on fixed rays, a valley scan of 5
+    codes for 15 steps, a close look of 20 steps. Or "thorough" (`THOROUGH`, the default before
+    the valley scan): 4 starts spread over q explored 120 steps, up to 400 steps of 256 rays, a
+    close look of 150 steps; about three times the CPU time for the same accuracy
+    (docs/BENCHMARKS.md). Fields left at their default take the preset's value."""
+    start: Literal["lookup", "spread"] = "lookup"
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
     part the keypoint head puts nearest it at that articulation, are scored by one forward pass on
@@ -83,28 +93,28 @@ class FitConfig:
     restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
     """Codes explored in parallel (see `start`); the lowest image loss wins. At most `lookup_q`
     with start "lookup"."""
-    explore_steps: int = 120
+    explore_steps: int = 30
     """Adam steps of the exploration phase (all starts), at most `max_steps`."""
-    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 400
+    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 120
     """Adam steps at most, exploration included."""
-    explore_rays: int = 128
+    explore_rays: int = 64
     """Random pixels (over all views) per exploration step and start, shared by the starts."""
-    rays_per_step: int = 256
+    rays_per_step: int = 128
     """Random pixels per refinement step."""
     lr: float = 1e-2
     """Adam learning rate of z in the refinement."""
-    explore_lr: float = 1e-2
-    """Adam learning rate of the exploration (all starts, and the sighted start); the fast preset's
-    is larger than `lr`, so that z_obj leaves its start within a few tens of steps and the starts'
-    losses can be compared sooner."""
+    explore_lr: float = 3e-2
+    """Adam learning rate of the exploration (all starts, and the sighted start); larger than
+    `lr`, so that z_obj leaves its start within a few tens of steps and the starts' losses can be
+    compared sooner."""
     latent_weight: float = 1e-3
     """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
     seen them)."""
-    patience: int = 60
+    patience: int = 30
     """Refinement steps without an improvement of `min_improvement` that end the fit."""
     min_improvement: float = 0.01
     """Relative improvement of the refinement's loss that counts as progress."""
-    stop_every: int = 0
+    stop_every: int = 10
     """Early stopping measures the refined code's image loss on `lookup_rays` fixed rays (drawn
     like the steps'), without gradient, every `stop_every` refinement steps; 0: it watches the
     steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`)."""
@@ -116,7 +126,20 @@ class FitConfig:
     decide q and the hinge side weigh more in the loss."""
     seed: int = 0
     """Seed of ray sampling."""
-    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 150
+    valley_codes: int = 5
+    """Codes of the valley scan after the refinement (0: none; needs the focus part): the
+    refined code's q and z_obj trade along a shallow valley of the image loss (a deeper drawer
+    pulled out less puts its handle at the same point), along which Adam walks slowly. The scan
+    holds `valley_codes` articulations evenly over `valley_span` around the refined q, each with
+    z_obj moved along the keypoint head's valley (the focus part kept in place, to first
+    order), fits their z_obj with q held for `valley_steps` shared steps, and continues from
+    the best of them on fixed rays or, when its loss there is lower, the code at the minimum of
+    a parabola through their losses (z_obj interpolated between its neighbours)."""
+    valley_span: float = 0.2
+    """Width of the valley scan's grid of q (shifted to lie in [0, 1])."""
+    valley_steps: int = 15
+    """Adam steps of the valley scan's codes (all together, `rays_per_step` rays each)."""
+    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 20
     """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
     """Rays passing within this distance of the part take part in the close look, m."""
@@ -140,22 +163,22 @@ class FitConfig:
     candidates, or (start "spread") a second start at the exploration's winner's q that the two
     explore for half of `explore_steps` (within `max_steps`)."""
 
-    FAST: ClassVar[dict] = dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
-                                rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
-                                focus_steps=20)
-    """The "fast" preset's values."""
+    THOROUGH: ClassVar[dict] = dict(start="spread", explore_steps=120, max_steps=400,
+                                    explore_rays=128, rays_per_step=256, explore_lr=1e-2,
+                                    patience=60, stop_every=0, valley_codes=0, focus_steps=150)
+    """The "thorough" preset's values."""
 
     @classmethod
-    def fast(cls, **overrides) -> FitConfig:
-        """The "fast" preset, with `overrides` on top."""
-        return cls(preset="fast", **overrides)
+    def thorough(cls, **overrides) -> FitConfig:
+        """The "thorough" preset, with `overrides` on top."""
+        return cls(preset="thorough", **overrides)
 
     def __post_init__(self):
         if self.preset not in ("fast", "thorough"):
             raise ConfigError(f"FitConfig.preset must be 'fast' or 'thorough', not {self.preset!r}")
-        if self.preset == "fast":  # the preset's value for every field left at its default
+        if self.preset == "thorough":  # the preset's value for every field left at its default
             defaults = {f.name: f.default for f in fields(self)}
-            for name, value in self.FAST.items():
+            for name, value in self.THOROUGH.items():
                 if getattr(self, name) == defaults[name]:
                     object.__setattr__(self, name, value)
         if self.start not in ("lookup", "spread"):
@@ -180,6 +203,10 @@ class FitConfig:
         if self.sighting_weight < 0 or self.sighting_scale_m <= 0 or self.sighting_codes < 0:
             raise ConfigError("FitConfig: sighting_weight and sighting_codes must be >= 0, "
                               "sighting_scale_m > 0")
+        if self.valley_codes < 0 or self.valley_codes == 1 or self.valley_steps < 0 \
+                or not 0 < self.valley_span <= 1:
+            raise ConfigError("FitConfig: valley_codes must be 0 or >= 2, valley_steps >= 0, "
+                              "valley_span in (0, 1]")
         if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
@@ -371,7 +398,7 @@ def _sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | No
 def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
           generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool,
           sighting: PartSighting | None = None,
-          held_loss: Callable[[torch.Tensor], float] | None = None) -> int:
+          held_loss: Callable[[torch.Tensor], float] | None = None, hold_q: bool = False) -> int:
     """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
     each; returns the steps run.
 
@@ -383,6 +410,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     With `stop_early`, stops when the loss has not improved by `min_improvement` (relative) for
     `patience` steps: the summed per-step image loss, smoothed, or with `held_loss` (codes (S, D)
     -> their summed image loss on fixed rays) that loss, measured every `stop_every` steps.
+    With `hold_q` only z_obj moves (Adam leaves a coordinate without gradient in place).
     """
     z.requires_grad_(True)
     optimiser = torch.optim.Adam([z], lr=config.lr)
@@ -398,6 +426,8 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
                 + _sighting_loss(model, z, sighting, config).sum())
         optimiser.zero_grad()
         loss.backward()
+        if hold_q:
+            z.grad[:, :2] = 0.0
         optimiser.step()
         with torch.no_grad():  # keep z_art on the upper half circle, where q lies (docstring)
             z[:, 1].abs_()
@@ -452,6 +482,45 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     if gap > config.focus_agreement_m:
         return z, f"discarded: keypoint head and rendered part {100 * gap:.1f} cm apart", config.focus_steps
     return z_look[0], "kept", config.focus_steps
+
+
+def _valley_direction(model: NFRModel, z: torch.Tensor, keypoint: int) -> torch.Tensor:
+    """d z_obj / d q (k,) along which the keypoint head's part `keypoint` stays in place, to
+    first order, at code z (D,): -J_obj^+ dp/dq, the smallest change of z_obj that undoes q's
+    move of the part."""
+    def part(q: torch.Tensor, z_obj: torch.Tensor) -> torch.Tensor:
+        return model.keypoints(torch.cat([q_to_z_art(q), z_obj])[None])[0, keypoint]
+
+    q = z_art_to_q(z[:2]).detach()
+    dp_dq, J_obj = torch.autograd.functional.jacobian(part, (q, z[2:].detach()))
+    return -torch.linalg.pinv(J_obj) @ dp_dq
+
+
+def _valley_scan(model: NFRModel, rays: ObservedRays, config: FitConfig,
+                 generator: torch.Generator, z: torch.Tensor, keypoint: int,
+                 sighting: PartSighting | None,
+                 held_losses: Callable[[torch.Tensor], torch.Tensor]) -> tuple[torch.Tensor, int]:
+    """The valley scan (`FitConfig.valley_codes`) from the refined code z (D,): the code to go on
+    from (D,) and the steps run. `held_losses`: codes (S, D) -> their losses (S,) on fixed rays."""
+    q0 = z_art_to_q(z[:2])
+    grid = torch.linspace(-config.valley_span / 2, config.valley_span / 2, config.valley_codes,
+                          dtype=z.dtype) + q0
+    grid = grid - (grid[-1] - 1).clamp_min(0) + (-grid[0]).clamp_min(0)  # inside [0, 1]
+    z_obj = z[2:] + (grid - q0)[:, None] * _valley_direction(model, z, keypoint)
+    codes = torch.cat([q_to_z_art(grid), z_obj], -1)
+    _adam(model, codes, rays, config, generator, config.valley_steps, config.rays_per_step,
+          stop_early=False, sighting=sighting, hold_q=True)
+    codes = codes.detach()
+    losses = held_losses(codes).double()
+    a, b, _ = np.polyfit(grid.double().numpy(), losses.numpy(), 2)
+    best = int(torch.argmin(losses))
+    q = float(np.clip(-b / (2 * a), float(grid[0]), float(grid[-1]))) if a > 0 else float(grid[best])
+    right = int(torch.searchsorted(grid, torch.tensor(q, dtype=grid.dtype)).clamp(1, len(grid) - 1))
+    t = (q - grid[right - 1]) / (grid[right] - grid[right - 1])
+    candidate = torch.cat([q_to_z_art(torch.tensor(q, dtype=z.dtype)),
+                           torch.lerp(codes[right - 1, 2:], codes[right, 2:], t)])
+    pair = held_losses(torch.stack([codes[best], candidate]))
+    return (candidate if pair[1] < pair[0] else codes[best]), config.valley_steps
 
 
 def _sighted_start(model: NFRModel, rays: ObservedRays, config: FitConfig,
@@ -567,6 +636,15 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
                    config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss)
     z_best = z_best.detach()[0]
+    if focus is not None and config.valley_codes:
+        valley_index = rays.sample(config.eval_rays // 4, config.detail_fraction, generator)
+
+        def valley_losses(c: torch.Tensor) -> torch.Tensor:
+            return eval_losses(c, valley_index) + _sighting_loss(model, c, sighting, config).cpu()
+
+        z_best, valley_steps = _valley_scan(model, rays, config, generator, z_best,
+                                            focus.keypoint, sighting, valley_losses)
+        steps += valley_steps
     look = "off"
     if focus is not None and config.focus_steps > 0:
         z_best, look, look_steps = _close_look(model, rays, config, focus, generator, z_best,

@@ -1,5 +1,5 @@
 """The fast fit's mechanics on a small untrained model: the looked-up starts, the codes nearest a
-sighting, early stopping on fixed rays, and the presets."""
+sighting, early stopping on fixed rays, the valley scan, and the presets."""
 
 from dataclasses import replace
 
@@ -16,6 +16,8 @@ from nfr_drake.inference.fit import (
     _adam,
     _lookup_starts,
     _nearest_codes,
+    _valley_direction,
+    _valley_scan,
     fit_latent,
     observed_rays,
 )
@@ -121,17 +123,17 @@ def test_the_fit_stops_early_on_a_flat_loss(model_folder, capture):
 
 
 def test_presets():
-    fast = FitConfig.fast()
-    assert fast.preset == "fast" and FitConfig().preset == "thorough"  # the default
-    for name, value in FitConfig.FAST.items():
-        assert getattr(fast, name) == value != getattr(FitConfig(), name)
-    assert FitConfig.fast(max_steps=300).max_steps == 300  # a field set on top is kept
-    assert FitConfig.fast(max_steps=300).focus_steps == FitConfig.FAST["focus_steps"]
+    thorough = FitConfig.thorough()
+    assert thorough.preset == "thorough" and FitConfig().preset == "fast"  # the default
+    for name, value in FitConfig.THOROUGH.items():
+        assert getattr(thorough, name) == value != getattr(FitConfig(), name)
+    assert FitConfig.thorough(max_steps=300).max_steps == 300  # a field set on top is kept
+    assert FitConfig.thorough(max_steps=300).focus_steps == FitConfig.THOROUGH["focus_steps"]
 
     def command(fit: FitConfig = FitConfig()) -> FitConfig:
         return fit
 
-    assert tyro.cli(command, args=["--fit.preset", "fast"]) == fast
+    assert tyro.cli(command, args=["--fit.preset", "thorough"]) == thorough
     assert tyro.cli(command, args=[]) == FitConfig()
     with pytest.raises(ConfigError, match="preset"):
         FitConfig(preset="slow")
@@ -142,7 +144,56 @@ def test_presets():
     with pytest.raises(ConfigError, match="stop_every"):
         FitConfig(stop_every=-1)
     with pytest.raises(ConfigError, match="lookup_q"):
-        FitConfig.fast(restarts=5, lookup_q=4)  # a band of q without a candidate
-    assert FitConfig(restarts=5, lookup_q=4).restarts == 5  # spread starts need no lookup
+        FitConfig(restarts=5, lookup_q=4)  # a band of q without a candidate
+    assert FitConfig.thorough(restarts=5, lookup_q=4).restarts == 5  # spread starts need no lookup
     with pytest.raises(ConfigError, match="explore_lr"):
         FitConfig(explore_lr=0.0)
+
+
+def test_the_valley_direction_keeps_the_part_in_place(model_folder):
+    """Moving q by dq and z_obj by the direction times dq moves the head's part far less than
+    moving q alone (first order: the change left is of order dq^2)."""
+    fitted = FittedModel(model_folder)
+    z = torch.cat([q_to_z_art(torch.tensor(0.4)), fitted.codes[1]]).double()
+    model = fitted.model.double()
+    direction = _valley_direction(model, z, keypoint=0)
+    assert direction.shape == (z.shape[0] - 2,)
+
+    def part(q, z_obj):
+        with torch.no_grad():
+            return model.keypoints(torch.cat([q_to_z_art(torch.tensor(q, dtype=z.dtype)),
+                                              z_obj])[None])[0, 0]
+
+    dq = 1e-3
+    q_alone = (part(0.4 + dq, z[2:]) - part(0.4, z[2:])).norm()
+    along = (part(0.4 + dq, z[2:] + dq * direction) - part(0.4, z[2:])).norm()
+    assert q_alone > 0 and along < 0.01 * q_alone
+
+
+def test_the_valley_scan_holds_q_and_goes_on_from_the_minimum_of_its_losses(model_folder, capture):
+    """Losses on fixed rays that are a parabola in q with its minimum between two of the grid's
+    articulations: the scan goes on from that minimum; its codes' q do not move in its steps."""
+    fitted = FittedModel(model_folder)
+    rays = observed_rays(capture)
+    config = replace(SMALL, valley_codes=5, valley_span=0.2, valley_steps=3)
+    z = torch.cat([q_to_z_art(torch.tensor(0.5)), fitted.z_obj_mean])
+    seen = []
+
+    def parabola(codes):
+        seen.append(z_art_to_q(codes[:, :2]))
+        return (z_art_to_q(codes[:, :2]) - 0.53) ** 2
+
+    out, steps = _valley_scan(fitted.model, rays, config, torch.Generator().manual_seed(0), z, 0,
+                              None, parabola)
+    assert steps == 3
+    torch.testing.assert_close(seen[0], torch.tensor([0.4, 0.45, 0.5, 0.55, 0.6]), atol=1e-5,
+                               rtol=0)  # the grid, q held through the steps
+    assert abs(float(z_art_to_q(out[:2])) - 0.53) < 1e-4
+    near_top = replace(config, valley_span=0.4)  # grid shifted to [0.6, 1.0] from q = 0.9
+    z_top = torch.cat([q_to_z_art(torch.tensor(0.9)), fitted.z_obj_mean])
+    seen.clear()
+    _valley_scan(fitted.model, rays, near_top, torch.Generator().manual_seed(0), z_top, 0, None,
+                 parabola)
+    torch.testing.assert_close(seen[0], torch.tensor([0.6, 0.7, 0.8, 0.9, 1.0]), atol=1e-5, rtol=0)
+    with pytest.raises(ConfigError, match="valley_codes"):
+        FitConfig(valley_codes=1)
