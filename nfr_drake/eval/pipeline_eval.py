@@ -203,7 +203,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             ground-truth planning evaluation, 1.0 for drawers and furniture drawers).
         keypoints: keypoint source ("geometry" or "head"; "ground_truth": the object's own, no
             cameras and no fit, for comparison).
-        fit: options of the fit.
+        fit: options of the fit (closets and drawers; furniture: `FurnitureFitConfig`'s defaults).
         image_size: square image size of the ten perception cameras, pixels.
         min_confidence: do not plan on a fit whose P(handle within 2 cm) is below this (below 0:
             the model's calibrated threshold, `confidence.json`; 0: never refuse); such objects

@@ -76,7 +76,8 @@ class Scenario:
     distance_m: list[float] = field(default_factory=lambda: [1.4, 1.9])
     """Distance range of the perception cameras to the object centre, m."""
     fit: FitConfig = field(default_factory=FitConfig)
-    """Options of the neural field's fit."""
+    """Options of the neural field's fit (closets and drawers; furniture is fitted with the defaults
+    of `FurnitureFitConfig`)."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     """Options of the planner."""
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
