@@ -2,19 +2,24 @@
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
        [--n 20] [--threads 1] [--variants thorough fast] [--variant NAME:FIELD=VALUE,...]
-       [--profile K] [--step-costs] [--csv FILE]
+       [--profile K] [--step-costs] [--csv FILE] [--halves]
+       python benchmarks/fit_time.py --captures DIR [--n 20] --from-csv FILE [--halves]
 Create the captures with `nfr-drake captures --category closet --n 20 --out DIR --size 64`.
 
 Side by side (default): every capture is fitted (`nfr_drake.inference.infer.infer`: the fit and the
 forward simulation of gt.json's q grid) once per variant, the variants interleaved on each capture
 (their order alternating from one capture to the next) so that the machine's load hits them
-alike. A variant is a fit preset (`FitConfig(preset=...)`: "thorough", the default, or "fast")
-or one named with `--variant NAME:FIELD=VALUE,...` (FitConfig fields on top of the default,
-`preset=fast` included). Per fit: CPU seconds of the process (`time.process_time`, the
-measure that another job's load hardly changes with one torch thread), wall seconds, steps, and
-the errors against gt.json (`nfr_drake.eval.evaluate.score`: articulation, keypoint RMSE at the
-observed state, handle error, handle trajectory RMSE). Prints one markdown row per variant:
-medians and 90th percentiles, and the ratio of the medians to the first variant's.
+alike. A variant is a fit preset (`FitConfig(preset=...)`: "fast", the default, or "thorough",
+the default before the valley scan) or one named with `--variant NAME:FIELD=VALUE,...`
+(FitConfig fields on top of the default, `preset=thorough` included). Per fit: CPU seconds of
+the process (`time.process_time`, the measure that another job's load hardly changes with one
+torch thread), wall seconds, steps, and the errors against gt.json
+(`nfr_drake.eval.evaluate.score`: articulation, keypoint RMSE at the observed state, handle
+error, handle trajectory RMSE). Prints one markdown row per variant: medians and 90th
+percentiles, and the ratio of the medians to the first variant's; with `--halves`, the same
+for the first and the second half of the captures too (a choice tuned on the first half is
+checked on the second). `--from-csv FILE` prints the tables of a CSV written by `--csv` without
+fitting.
 
 `--step-costs`: CPU milliseconds of one Adam step of one code (forward, backward, update) on 64
 to 512 rays of the first capture.
@@ -124,6 +129,27 @@ def summary(rows: dict[str, list[dict]], unit: str) -> str:
     return "\n".join(lines)
 
 
+def tables(rows: dict[str, list[dict]], unit: str, halves: bool) -> str:
+    """`summary` of all rows, and with `halves` of the first and second half of each variant's
+    rows (captures in order) too."""
+    text = summary(rows, unit)
+    if halves:
+        n = min(len(rs) for rs in rows.values())
+        for first, last in ((0, n // 2), (n // 2, n)):
+            text += (f"\n\ncaptures {first}-{last - 1}:\n"
+                     + summary({name: rs[first:last] for name, rs in rows.items()}, unit))
+    return text
+
+
+def read_rows(csv_path: Path) -> dict[str, list[dict]]:
+    """The rows per variant of a CSV written by `side_by_side`, in its order."""
+    rows: dict[str, list[dict]] = {}
+    with open(csv_path, newline="") as f:
+        for row in csv.DictReader(f):
+            rows.setdefault(row["variant"], []).append({k: float(row[k]) for k, _ in METRICS})
+    return rows
+
+
 def profile_parts() -> list[tuple[str, list]]:
     """(label, functions) of the parts a profile reports; a str names a builtin method."""
     from torch.nn import LSTMCell
@@ -215,12 +241,13 @@ def step_costs(fitted: FittedModel, capture, counts=(64, 128, 256, 512), steps: 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", type=Path, required=True)
+    parser.add_argument("--model", type=Path, help="the model folder to fit (not with --from-csv)")
     parser.add_argument("--captures", type=Path, required=True)
     parser.add_argument("--n", type=int, default=20)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--variants", nargs="*", default=["thorough", "fast"],
-                        help="presets to compare, in this order (the first is the reference)")
+                        help="presets to compare, in this order (the first is the reference: "
+                             "by default the old default, thorough, against the new, fast)")
     parser.add_argument("--variant", action="append", default=[],
                         help="NAME:FIELD=VALUE,... another variant (FitConfig fields)")
     parser.add_argument("--profile", type=int, default=0,
@@ -228,12 +255,22 @@ def main() -> None:
     parser.add_argument("--csv", type=Path, default=None, help="per-fit rows to write")
     parser.add_argument("--step-costs", action="store_true",
                         help="CPU time of one Adam step by rays per step instead")
+    parser.add_argument("--halves", action="store_true",
+                        help="the tables of the first and the second half of the captures too")
+    parser.add_argument("--from-csv", type=Path, default=None,
+                        help="print the tables of the rows of a --csv file instead of fitting")
     args = parser.parse_args()
+    dirs = capture_dirs(args.captures)[:args.n]
+    warm = read_capture_set(dirs[0])  # the first fit of a process pays for lazy set-up
+    unit = "deg" if warm.gt["object"]["joint_type"] == "revolute" else "cm"
+    if args.from_csv is not None:
+        print(tables(read_rows(args.from_csv), unit, args.halves))
+        return
+    if args.model is None:
+        parser.error("--model is needed to fit")
     torch.set_num_threads(args.threads)
     fitted = FittedModel(args.model)
     variants = dict(variant_config(s) for s in args.variants + args.variant)
-    dirs = capture_dirs(args.captures)[:args.n]
-    warm = read_capture_set(dirs[0])  # the first fit of a process pays for lazy set-up
     infer(fitted, warm, next(iter(variants.values())), np.linspace(0.0, 1.0, 3))
     print(f"{datetime.now():%Y-%m-%d %H:%M}, {platform.machine()}, {os.cpu_count()} CPUs, "
           f"{args.threads} torch thread(s), load average {os.getloadavg()[0]:.2f}, model "
@@ -246,8 +283,7 @@ def main() -> None:
         return
     rows = side_by_side(fitted, dirs, variants, args.csv)
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}\n")
-    unit = "deg" if warm.gt["object"]["joint_type"] == "revolute" else "cm"
-    print(summary(rows, unit))
+    print(tables(rows, unit, args.halves))
 
 
 if __name__ == "__main__":
