@@ -14,7 +14,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig
+from nfr_drake.planning.planner import PlannerConfig, grasp_planner
 from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.scene_objects import sampled_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
@@ -36,8 +36,8 @@ class PlanningEvalConfig:
     closet_target: float = OPEN_TARGET["closet"]
     drawer_target: float = OPEN_TARGET["drawer"]
     grasp: str = "constraint"
-    """The simulated grasp, "constraint" or "contact" (`SimulationConfig.grasp`; the planner's
-    `grasp_depth` follows it); one CSV per grasp."""
+    """The simulated grasp, "constraint" or "contact" (`SimulationConfig.grasp`; the planner
+    follows it, `grasp_planner`); one CSV per grasp."""
 
 
 def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float],
@@ -47,7 +47,7 @@ def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float]
     row."""
     obj, part, scene_object = sampled_part(category, seed, index, RigidTransform())
     q_target = targets[scene_object.category]
-    outcome = run_task(scene_object, q_target, planner_config=PlannerConfig(grasp_depth=GRASP_DEPTH[grasp]),
+    outcome = run_task(scene_object, q_target, planner_config=grasp_planner(PlannerConfig(), grasp),
                        simulation_config=SimulationConfig(grasp=grasp))
     sim = outcome.simulation
     return dict(category=category, seed=seed, index=index, kind=obj.params.get("kind", category),

@@ -18,11 +18,13 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.math import BsplineBasis, RigidTransform, RollPitchYaw
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import BsplineBasis, RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.inverse_kinematics import (
     AngleBetweenVectorsConstraint,
     InverseKinematics,
     MinimumDistanceLowerBoundConstraint,
+    OrientationConstraint,
     PositionConstraint,
 )
 from pydrake.planning import KinematicTrajectoryOptimization
@@ -85,6 +87,22 @@ class PlannerConfig:
     friction holds it deeper, mid-pad (`GRASP_DEPTH`)."""
     position_tolerance: float = 0.003
     """Half-width of the box the tool origin must lie in at each waypoint, m."""
+    path_tolerance: float = 0.004
+    """Between consecutive handle waypoints the handle's point of the tool (`grasp_depth` behind
+    its origin) stays within this of the straight line joining them, m, at `path_samples` evenly
+    spaced times: an arm that holds the handle stiffly must follow its path, not only its
+    waypoints (without it the hand swung up to 15 cm off a door's arc between two waypoints)."""
+    path_samples: int = 3
+    approach_tolerance: float = 0.01
+    """From pre-grasp to grasp the handle keypoint stays within this of the tool's z axis (x and
+    y in the tool frame), m, at `path_samples` times: the open fingers come in straight over the
+    bar, not sideways onto it."""
+    rigid_hold: bool = False
+    """From the grasp on, the tool keeps its orientation relative to the handle (the one the grasp's
+    IK found, turned as the handle's waypoint frame turns), within `rigid_tolerance_deg`, instead of
+    turning freely about the bar within `follow_cone_deg`: fingers that hold a bar by friction
+    slip when the hand turns on it (`grasp_planner`)."""
+    rigid_tolerance_deg: float = 3.0
     bar_tolerance_deg: float = 3.0
     """Allowed angle between the tool's x axis and the handle's bar axis."""
     grasp_cone_deg: float = 30.0
@@ -132,6 +150,16 @@ class PlannerConfig:
             raise NfrDrakeError("planner: end_stop_overshoot must not be negative")
         if self.max_lift < 0.0:
             raise NfrDrakeError("planner: max_lift must not be negative")
+
+
+def grasp_planner(config: PlannerConfig, grasp: str) -> PlannerConfig:
+    """`config` for a simulated grasp ("constraint" or "contact"): a grasp by contact holds the
+    bar deeper (`GRASP_DEPTH`), keeps the hand still on the handle (`rigid_hold`) and stops at the
+    predicted end (no `end_stop_overshoot`: a stiff arm pulling past the stop drags the bar out of
+    the fingers)."""
+    if grasp == "contact":
+        return replace(config, grasp_depth=GRASP_DEPTH[grasp], rigid_hold=True, end_stop_overshoot=0.0)
+    return replace(config, grasp_depth=GRASP_DEPTH[grasp])
 
 
 def _swept_points(kt: KeypointTrajectory, waypoints: list[HandleWaypoint]) -> np.ndarray:
@@ -235,6 +263,8 @@ class _Stage:
                  flip: bool):
         self.name, self.p_WQ, self.p_GQ, self.wp = name, p_WQ, p_GQ, wp
         self.cone, self.flip = np.radians(cone_deg), flip
+        self.R_WG: RotationMatrix | None = None
+        """The tool's orientation, once fixed (`PlannerConfig.rigid_hold`); else the cones."""
 
     def bar_W(self) -> np.ndarray:
         return -self.wp.bar_W if self.flip else self.wp.bar_W
@@ -244,14 +274,32 @@ def _constraints(scene: PlanningScene, stage: _Stage, cfg: PlannerConfig):
     """(description, constraint) pairs fixing the tool frame for `stage`."""
     plant, ctx, W, G = scene.plant, scene.plant_context, scene.plant.world_frame(), scene.tool_frame
     tol = np.full(3, cfg.position_tolerance)
+    position = (f"{stage.name} position", PositionConstraint(plant, W, stage.p_WQ - tol, stage.p_WQ + tol,
+                                                             G, stage.p_GQ, ctx))
+    if stage.R_WG is not None:
+        return [position, _held_orientation(scene, stage.R_WG, stage.name, cfg)]
     return [
-        (f"{stage.name} position", PositionConstraint(plant, W, stage.p_WQ - tol, stage.p_WQ + tol,
-                                                      G, stage.p_GQ, ctx)),
+        position,
         (f"{stage.name} bar alignment", AngleBetweenVectorsConstraint(
             plant, W, stage.bar_W(), G, np.array([1.0, 0, 0]), 0.0, np.radians(cfg.bar_tolerance_deg), ctx)),
         (f"{stage.name} approach cone", AngleBetweenVectorsConstraint(
             plant, W, stage.wp.approach_W, G, np.array([0, 0, 1.0]), 0.0, stage.cone, ctx)),
     ]
+
+
+def _held_orientation(scene: PlanningScene, R_WG: RotationMatrix, name: str, cfg: PlannerConfig):
+    """(description, constraint): the tool frame at R_WG within `rigid_tolerance_deg`."""
+    return (f"{name} held orientation", OrientationConstraint(
+        scene.plant, scene.plant.world_frame(), R_WG, scene.tool_frame, RotationMatrix(),
+        np.radians(cfg.rigid_tolerance_deg), scene.plant_context))
+
+
+def _hold_rigidly(stages: list[_Stage], R_WG_grasp: RotationMatrix) -> None:
+    """Fix the orientation of the grasp (stage 1) and of every later stage: R_WG_grasp turned as
+    the waypoint frame turns from the grasp's waypoint to the stage's."""
+    R_grasp = stages[1].wp.X_WG(stages[1].flip).rotation()
+    for stage in stages[1:]:
+        stage.R_WG = stage.wp.X_WG(stage.flip).rotation() @ R_grasp.inverse() @ R_WG_grasp
 
 
 def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
@@ -294,6 +342,10 @@ def _chained_ik(scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray, cfg:
             return None, stage.name
         q_prev = q_seed = result.GetSolution(q)
         sols.append(q_prev)
+        if k == 1 and cfg.rigid_hold:
+            plant, context = stage_scene.plant, stage_scene.plant_context
+            plant.SetPositions(context, q_prev)
+            _hold_rigidly(stages, stage_scene.tool_frame.CalcPoseInWorld(context).rotation())
     return sols, ""
 
 
@@ -306,6 +358,19 @@ def _initial_guess(trajopt: KinematicTrajectoryOptimization, s_knots: np.ndarray
     cps = np.stack([np.interp(s_cp, s_knots, q_knots[:, j]) for j in range(q_knots.shape[1])])
     basis = trajopt.basis()
     return BsplineTrajectory(BsplineBasis(basis.order(), np.asarray(basis.knots()) * duration), cps)
+
+
+def _on_segment(scene: PlanningScene, p_WA: np.ndarray, p_WB: np.ndarray, p_GQ: np.ndarray, tol: float
+                ) -> PositionConstraint:
+    """The tool's point p_GQ within `tol` (m) of the segment from p_WA to p_WB (m, in W): a box
+    along it, `tol` wider at its ends."""
+    along = p_WB - p_WA
+    length = float(np.linalg.norm(along))
+    x = along / length if length > 1e-9 else np.array([1.0, 0.0, 0.0])
+    R_WS = RotationMatrix.MakeFromOneVector(x, 0)
+    return PositionConstraint(scene.plant, scene.plant.world_frame(), RigidTransform(R_WS, p_WA),
+                              np.array([-tol, -tol, -tol]), np.array([length + tol, tol, tol]),
+                              scene.tool_frame, p_GQ, scene.plant_context)
 
 
 def _knot_times(stages: list[_Stage], q_knots: np.ndarray, vmax: np.ndarray, cfg: PlannerConfig
@@ -375,6 +440,26 @@ def _optimise_at(scenes: _Scenes, stages: list[_Stage], s_knots: np.ndarray, q_k
     for stage, s in zip(stages, s_knots[1:], strict=True):
         for name, c in _constraints(scene, stage, cfg):
             described.append((name, trajopt.AddPathPositionConstraint(c, s)))
+    first = stages[1]
+    in_line = np.array([cfg.approach_tolerance, cfg.approach_tolerance, 0.0])
+    straight_in = PositionConstraint(plant, scene.tool_frame, -in_line + [0.0, 0.0, first.p_GQ[2] - 0.01],
+                                     in_line + [0.0, 0.0, stages[0].p_GQ[2] + 0.01], plant.world_frame(),
+                                     first.p_WQ, scene.plant_context)
+    for f in np.arange(1, cfg.path_samples + 1) / (cfg.path_samples + 1):
+        s = s_knots[1] + f * (s_knots[2] - s_knots[1])
+        described.append(("straight approach", trajopt.AddPathPositionConstraint(straight_in, s)))
+    for k in range(2, len(stages)):  # the handle's path, from the grasp (stage 1) on
+        a, b = stages[k - 1], stages[k]
+        on_line = _on_segment(scene, a.p_WQ, b.p_WQ, b.p_GQ, cfg.path_tolerance)
+        for f in np.arange(1, cfg.path_samples + 1) / (cfg.path_samples + 1):
+            s = s_knots[k] + f * (s_knots[k + 1] - s_knots[k])
+            described.append((f"handle path from {a.name} to {b.name}", trajopt.AddPathPositionConstraint(
+                on_line, s)))
+            if a.R_WG is not None and b.R_WG is not None:
+                R_ab = (a.R_WG.inverse() @ b.R_WG).ToAngleAxis()
+                R_s = a.R_WG @ RotationMatrix(AngleAxis(f * R_ab.angle(), R_ab.axis()))
+                name, held = _held_orientation(scene, R_s, f"handle path from {a.name} to {b.name}", cfg)
+                described.append((name, trajopt.AddPathPositionConstraint(held, s)))
     collision = {name: MinimumDistanceLowerBoundConstraint(sc.plant, cfg.min_distance, sc.plant_context,
                                                            None, 0.05)
                  for name, sc in (("approach", scenes.approach), ("follow", scene), ("end", scenes.end))}

@@ -49,6 +49,7 @@ from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.plan import PlanResult
 from nfr_drake.world.robot import (
+    FINGER_JOINTS,
     FINGER_OPEN,
     HAND_BODIES,
     NUM_ARM_JOINTS,
@@ -138,9 +139,10 @@ class SimulationResult:
         joint_error: |final - target| joint value, rad or m.
         grasp_offset: distance from the tool origin to the grip point when the fingers closed, m
             (inside the capture region when grasped; the closing fingers take it up).
-        max_drift: largest distance between the tool origin and the held grip point from the end
-            of the grasp (fingers closed) on: the hand slipping on or dragging the handle, m. When
-            not grasped, the distance at the end.
+        max_drift: largest move of the held grip point in the tool frame from the end of the
+            grasp (fingers closed) on: the hand slipping on or dragging the handle, m (the hold's own
+            offset, e.g. a bar held `PlannerConfig.grasp_depth` deep, is not drift). When not
+            grasped, the distance from the tool origin to the grip point at the end.
         max_constraint_force: largest force the hand (and any contact) exerts on the moving part
             from the end of the grasp on (the end stop's impact included), from its bodies'
             momentum balance, N.
@@ -171,6 +173,15 @@ class SimulationResult:
                 f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
                 f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N, "
                 f"{self.grasp} grasp")
+
+
+def couple_fingers(plant: MultibodyPlant, robot) -> None:
+    """Move the hand's two fingers together (a SAP coupler constraint, as the Panda hand's one
+    motor and rack do), so a squeezed handle or item stays centred between them: with each finger
+    on its own PD they slid across together (about 6 N per cm, from the gains' imbalance) until
+    one reached its stop and a knob slipped out. Before `plant.Finalize()`; discrete SAP plants."""
+    plant.AddCouplerConstraint(plant.GetJointByName(FINGER_JOINTS[0], robot),
+                               plant.GetJointByName(FINGER_JOINTS[1], robot), 1.0, 0.0)
 
 
 def set_arm_gains(plant: MultibodyPlant, robot) -> None:
@@ -266,6 +277,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     add_pedestal(plant, plan.X_WB)
     model = obj.add_to(plant)
     set_arm_gains(plant, robot)
+    couple_fingers(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
     handle_body = plant.GetBodyByName(obj.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
@@ -337,7 +349,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     end = plan.duration + config.dwell + config.settle
     t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
     grasped, grasp_offset = False, float("nan")
-    times, q_obj, p_tool, p_handle, forces = [], [], [], [], []
+    times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
     samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, end])
     for t in samples:
         simulator.AdvanceTo(t)
@@ -356,6 +368,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         q_obj.append((joint.GetOnePosition(plant_context) - shut) / span)
         p_tool.append(X_WT.translation())
         p_handle.append(p_WH)
+        p_held.append(X_WT.inverse() @ p_WH)
         if grasped and t >= t_pull:
             forces.append(_force_on_moving_part(plant, plant_context, moving_bodies, joint))
     if meshcat is not None:
@@ -364,8 +377,10 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
 
     p_tool, p_handle = np.array(p_tool), np.array(p_handle)
     times = np.array(times)
-    drift = np.linalg.norm(p_tool - p_handle, axis=1)
-    max_drift = float(drift[times >= t_pull].max()) if grasped else float(drift[-1])
+    max_drift = float(np.linalg.norm(p_tool[-1] - p_handle[-1]))
+    if grasped:
+        p_TG = np.array(p_held)[times >= t_pull]
+        max_drift = float(np.linalg.norm(p_TG - p_TG[0], axis=1).max())
     revolute = joint.type_name() == "revolute"
     joint_error = abs(q_obj[-1] - q_target) * abs(span)
     tolerance = config.revolute_tolerance if revolute else config.prismatic_tolerance

@@ -33,7 +33,7 @@ from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.perception.object_pose import ObjectPoseError
-from nfr_drake.planning.planner import GRASP_DEPTH
+from nfr_drake.planning.planner import grasp_planner
 from nfr_drake.systems.perception import AddNfrPerception
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
@@ -168,7 +168,7 @@ def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
          replay: Path | None) -> TaskOutcome | PlaceTaskOutcome:
     """Phase 2: the scenario's task planned with `keypoints` (None: the object's own)."""
     simulation = replace(scenario.simulation, grasp=scenario.grasp)
-    planner = replace(scenario.planner, grasp_depth=GRASP_DEPTH[scenario.grasp])
+    planner = grasp_planner(scenario.planner, scenario.grasp)
     if scenario.task == "open-and-place":
         return run_place_task(obj, scenario.X_WO, scenario.q_start, scenario.q_target, scenario.sample_item(),
                               keypoints=keypoints, reference=reference, replay=replay, planner_config=planner,
