@@ -1,0 +1,175 @@
+"""Perception in a room: a room placed at the object's pose, cameras that see it, the segmenter's
+masks in the fit, and a pose the masks do not give."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import CameraDistribution
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
+from nfr_drake.data.rooms import RoomDistribution, sample_room
+from nfr_drake.errors import ConfigError
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.nfr.checkpoint import write_model_folder
+from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.model import NFRAutoDecoder
+from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
+from nfr_drake.objects.plant import add_articulated_object
+from nfr_drake.perception.object_pose import ObjectPoseError
+from nfr_drake.systems import perception as perception_module
+from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
+from nfr_drake.systems.pipeline import perception_room, run_scenario
+from nfr_drake.systems.scenario import Scenario
+
+SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                       keypoint_hidden=16)
+FAST = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32, eval_rays=64)
+SEGMENTER = Path(__file__).parents[2] / SEGMENTER_DIR
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("m") / "closet"
+    torch.manual_seed(0)
+    write_model_folder(folder, NFRAutoDecoder(SMALL, 2),
+                       {"category": "closet",
+                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    return folder
+
+
+def _needs_segmenter():
+    if not (SEGMENTER / "model.safetensors").is_file():
+        pytest.skip(f"no shipped segmenter at {SEGMENTER}")
+
+
+def _room_plant(room, X_PW=None):
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    room.add_to(plant, X_PW)
+    plant.Finalize()
+    diagram = builder.Build()
+    inspector = scene_graph.model_inspector()
+    world = {inspector.GetName(g): inspector.GetPoseInFrame(g)
+             for g in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(plant.world_body().index()))}
+    return plant, plant.GetMyContextFromRoot(diagram.CreateDefaultContext()), world
+
+
+def test_a_room_placed_at_X_PW_is_the_same_room_moved():
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 9, 0))
+    cameras = np.array([[2.0, 0.3, 1.0], [1.8, -0.6, 1.4]])
+    room = sample_room(np.random.default_rng(3), obj, cameras,
+                       RoomDistribution(style="heldout", neighbours=(2, 2), robot_probability=1.0))
+    assert room.robot is not None and len(room.neighbours) == 2
+    X_PW = RigidTransform(RollPitchYaw(0.0, 0.0, 2.1), [0.7, -1.2, 0.0])
+    (plant_0, context_0, world_0), (plant_1, context_1, world_1) = (
+        _room_plant(room), _room_plant(room, X_PW.GetAsMatrix4()))
+    for name in ("room_panda::panda", "room_furniture_0", "room_furniture_1"):
+        model_0, model_1 = plant_0.GetModelInstanceByName(name), plant_1.GetModelInstanceByName(name)
+        for i_0, i_1 in zip(plant_0.GetBodyIndices(model_0), plant_1.GetBodyIndices(model_1), strict=True):
+            X_0 = plant_0.EvalBodyPoseInWorld(context_0, plant_0.get_body(i_0))
+            X_1 = plant_1.EvalBodyPoseInWorld(context_1, plant_1.get_body(i_1))
+            np.testing.assert_allclose((X_PW @ X_0).GetAsMatrix4(), X_1.GetAsMatrix4(), atol=1e-9)
+    # Floor, walls and clutter are the world body's geometry, at X_PW times their pose in W.
+    assert len(world_0) == len(room.surfaces) + len(room.clutter) and world_0.keys() == world_1.keys()
+    for name, X_0 in world_0.items():
+        np.testing.assert_allclose((X_PW @ X_0).GetAsMatrix4(), world_1[name].GetAsMatrix4(), atol=1e-9)
+    lights = room.lighting.moved(X_PW.GetAsMatrix4()).lights
+    for before, after in zip(room.lighting.lights, lights, strict=True):
+        if before.frame == "camera":
+            assert after == before
+        else:
+            np.testing.assert_allclose(after.position, X_PW.multiply(np.array(before.position)), atol=1e-12)
+            np.testing.assert_allclose(after.direction, X_PW.rotation().multiply(np.array(before.direction)),
+                                       atol=1e-12)
+
+
+def _perception_scene(model_dir, scene, X_WO, known=True):
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
+    scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
+                        object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    model = add_articulated_object(plant, obj, X_WO)
+    X_OCs = CameraDistribution().sample(np.random.default_rng(1), 3, obj.look_at_target())
+    X_WCs = [X_WO @ RigidTransform(X) for X in X_OCs]
+    lighting = None
+    if scene == "room":
+        room = perception_room(scenario, obj, X_WCs)
+        room.add_to(plant, X_WO.GetAsMatrix4())
+        lighting = room.lighting.moved(X_WO.GetAsMatrix4())
+    plant.Finalize()
+    camera = PinholeCamera.from_fov(32, 32, math.radians(50))
+    system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
+                              X_WCs, camera, FAST, lighting, scene=scene, segmenter=SEGMENTER)
+    return builder.Build(), system
+
+
+def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_dir, monkeypatch):
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    seen = {}
+    for scene in ("alone", "room"):
+        diagram, _ = _perception_scene(model_dir, scene, X_WO)
+        context = diagram.CreateDefaultContext()
+        sensor = diagram.GetSubsystemByName("nfr_camera_0")
+        image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context))
+        seen[scene] = image.data[..., :3]
+    background = np.round(255 * np.array(DEFAULT_BACKGROUND_RGB))
+    off_background = lambda image: np.mean(np.abs(image.astype(float) - background).max(-1) > 8)  # noqa: E731
+    assert off_background(seen["alone"]) < 0.7  # the object alone before the training background
+    assert off_background(seen["room"]) > 0.99  # floor, walls: no background left
+    # The fit gets the segmenter's masks (the masked image loss), one per view, of the image's size.
+    calls = []
+    real_infer = perception_module.infer
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs.get("masks"))
+        return real_infer(*args, **kwargs)
+
+    monkeypatch.setattr(perception_module, "infer", spy)
+    diagram, system = _perception_scene(model_dir, "room", X_WO)
+    Simulator(diagram).Initialize()
+    assert system.fit_count == 1 and len(calls) == 1
+    masks = calls[0]
+    assert masks is not None and len(masks) == 3 and all(m.shape == (32, 32) for m in masks)
+    assert all(0.0 <= m.min() and m.max() <= 1.0 for m in masks)
+
+
+def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):
+    """An object the segmenter's masks miss: the pipeline plans nothing, its errors are inf, and
+    eval-pipeline writes a refused row."""
+    import csv
+
+    from nfr_drake.eval import pipeline_eval
+    from nfr_drake.systems import pipeline
+
+    def no_object(scenario, obj, part=None):
+        raise ObjectPoseError("object pose: the masks agree on no object in front of the cameras")
+
+    monkeypatch.setattr(pipeline, "perceive_scene", no_object)
+    monkeypatch.setattr(pipeline, "check_category", lambda *args: None)
+    scenario = Scenario(category="drawer", object_pose="estimated", perceive="room")
+    outcome = run_scenario(scenario)
+    assert outcome.task is None and outcome.predicted is None
+    assert outcome.refused.startswith("nothing planned: object pose:")
+    assert math.isinf(outcome.keypoint_rmse_cm) and outcome.pose_error == (math.inf, math.inf)
+    assert "nothing planned" in outcome.report()
+    rows = pipeline_eval.evaluate_pipeline(scenario, 1, tmp_path / "rows.csv")
+    assert rows[0]["refused"] == "True" and rows[0]["success"] == "False"
+    assert float(rows[0]["pose_error_cm"]) == math.inf and float(rows[0]["handle_error_cm"]) == math.inf
+    assert "1 with no object pose" in pipeline_eval.perception_summary(rows)
+    assert list(csv.DictReader(open(tmp_path / "rows.csv")))[0]["failure"].startswith("nothing planned")
+
+
+def test_an_unknown_perception_scene_is_refused():
+    with pytest.raises(ConfigError, match="perceive must be one of alone, room"):
+        Scenario(perceive="kitchen")
