@@ -4,6 +4,10 @@ Board frame B (OpenCV's): origin at the board's outer corner next to the first c
 x along the rows of squares, y along the columns, both in the board plane, z = x cross y (into the
 board when it is seen from the front). A board pose in a photo gives X_BC, the camera in B, in
 metres: this is what makes a reconstruction metric with `--charuco`.
+
+Floor frame F of a board lying face up on the floor (`floor_frame_in_board`): origin on the floor
+under B's origin, x_F = x_B, y_F = -y_B, z_F = -z_B (up); the board's face lies at z_F = its
+thickness.
 """
 
 from __future__ import annotations
@@ -38,6 +42,9 @@ class CharucoBoardSpec:
     """OpenCV's predefined ArUco dictionary, e.g. DICT_4X4_50, DICT_5X5_100, DICT_6X6_250."""
     legacy_pattern: bool = False
     """Boards printed by OpenCV before 4.6 with an even number of rows need the legacy layout."""
+    thickness_m: float = 0.0
+    """Height of the printed face above the surface the board lies on, metres (a print on card:
+    about 0.001-0.003); with `poses --world floor` the floor is this far below the face."""
 
     def board(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV board. Raises NfrDrakeError for an unknown dictionary or bad sizes."""
@@ -45,10 +52,20 @@ class CharucoBoardSpec:
             raise NfrDrakeError(f"unknown ArUco dictionary {self.dictionary!r}")
         if min(self.squares) < 2 or not 0 < self.marker_m < self.square_m:
             raise NfrDrakeError("ChArUco board: at least 2x2 squares and 0 < marker_m < square_m")
+        if not 0.0 <= self.thickness_m < 0.1:
+            raise NfrDrakeError(f"ChArUco board: thickness_m {self.thickness_m} must lie in [0, 0.1) m")
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
         board = cv2.aruco.CharucoBoard(tuple(self.squares), self.square_m, self.marker_m, dictionary)
         board.setLegacyPattern(self.legacy_pattern)
         return board
+
+
+def floor_frame_in_board(thickness_m: float = 0.0) -> np.ndarray:
+    """X_BF (4x4): the floor frame F (module docstring) of a board lying face up on the floor,
+    its face `thickness_m` above the floor (B's z points down, so the floor is at z_B = thickness)."""
+    X_BF = np.diag([1.0, -1.0, -1.0, 1.0])
+    X_BF[2, 3] = thickness_m
+    return X_BF
 
 
 @dataclass(frozen=True)

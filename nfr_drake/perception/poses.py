@@ -1,10 +1,12 @@
 """`nfr-drake poses`: a folder of photos -> a capture set with metric camera poses in frame O.
 
 Steps: resize the photos to the working size; structure from motion (`sfm`); a similarity into
-metres from a ChArUco board in the photos or from known camera centres (`alignment`); the object's
-pose X_WO takes the world frame W (the board's frame B, or the anchors' frame) to O; undistorted
-images and poses X_OC are written as a capture set (docs/DATASET_FORMAT.md) with `report.json` (`report`) and
-the sparse points in O (`points3D.ply`, metres).
+metres from a ChArUco board in the photos or from known camera centres (`alignment`); the world
+frame W is the board's frame B, the floor frame under a board lying on the floor (z up, the floor
+at z = 0; checked against the floor the sparse points show, `floor`), or the anchors' frame; the
+object's pose X_WO takes W to O; undistorted images and poses X_OC are written as a capture set
+(docs/DATASET_FORMAT.md) with `report.json` (`report`) and the sparse points in O
+(`points3D.ply`, metres).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import cv2
 import numpy as np
@@ -34,7 +36,13 @@ from nfr_drake.perception.alignment import (
     parse_object_pose,
     read_anchors,
 )
-from nfr_drake.perception.charuco import BoardNotFoundError, CharucoBoardSpec, CharucoPoseEstimator
+from nfr_drake.perception.charuco import (
+    BoardNotFoundError,
+    CharucoBoardSpec,
+    CharucoPoseEstimator,
+    floor_frame_in_board,
+)
+from nfr_drake.perception.floor import FloorPlane, floor_plane
 from nfr_drake.perception.photos import WorkingPhoto, prepare_photos
 from nfr_drake.perception.report import PoseReport
 from nfr_drake.perception.sfm import (
@@ -51,6 +59,12 @@ POINTS_FILE = "points3D.ply"
 _ASPECT_TOLERANCE = 0.01
 DEFAULT_BOARD = CharucoBoardSpec()
 DEFAULT_SFM = SfmOptions()
+WorldFrame = Literal["board", "floor"]
+"""W with a board: its own frame B, or the floor frame F under it (`charuco.floor_frame_in_board`)."""
+
+
+class FloorError(AlignmentError):
+    """The board does not lie on the floor that the photos show (`--world floor`)."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +77,10 @@ class Alignment:
     allow_unaligned: bool = False
     max_anchor_residual: float = MAX_ANCHOR_RESIDUAL
     """Refuse anchors whose RMS residual after alignment exceeds this fraction of their spread."""
+    world: WorldFrame = "board"
+    """With the board: W is the board frame B, or the floor frame under it ("floor", z up)."""
+    floor_check: bool = True
+    """With `world` "floor": refuse a board that does not lie on the floor the sparse points show."""
 
 
 def _progress(message: str) -> None:
@@ -150,6 +168,9 @@ def _focal_priors(photos_dir: Path, photos: list[WorkingPhoto]) -> dict[tuple[in
 def _check_request(alignment: Alignment, out: Path, max_size: int) -> None:
     if alignment.charuco is not None and alignment.anchors is not None:
         raise ConfigError("align with either a ChArUco board or anchors, not both")
+    if alignment.world == "floor" and alignment.charuco is None:
+        raise ConfigError("--world floor needs --charuco: the floor frame lies under a ChArUco board "
+                          "lying face up on the floor")
     if alignment.charuco is None and alignment.anchors is None and not alignment.allow_unaligned:
         raise ConfigError("no metric alignment: pass --charuco (board in the photos) or --anchors "
                           "centres.json (known camera centres), or --allow-unaligned for poses in "
@@ -178,6 +199,31 @@ def _align(alignment: Alignment, estimator: CharucoPoseEstimator | None, image_d
     return None, {}
 
 
+def _world_in_alignment_frame(alignment: Alignment) -> np.ndarray:
+    """X_AW (4x4): the world frame W in the frame A that the similarity maps into (B, or the
+    anchors' frame)."""
+    if alignment.world == "floor":
+        return floor_frame_in_board(alignment.charuco.thickness_m)
+    return np.eye(4)
+
+
+def _check_floor(p_W: np.ndarray, alignment: Alignment, progress) -> FloorPlane | None:
+    """The floor plane of the sparse points p_W (N, 3) in the floor frame W; FloorError when it
+    contradicts the board lying on it (unless the check is off). None unless `world` is floor."""
+    if alignment.world != "floor":
+        return None
+    plane = floor_plane(p_W)
+    if not plane.found:
+        progress(f"floor check: no floor plane in the sparse points ({plane.support} of {plane.points} "
+                 "points on the best nearly horizontal plane); the board is taken to lie on the floor")
+    elif alignment.floor_check and plane.problem():
+        raise FloorError(plane.problem())
+    else:
+        progress(f"floor check: {plane.support} sparse points on a floor tilted {plane.tilt_deg:.2f} deg, "
+                 f"{100 * plane.height_m:+.1f} cm from the board's floor")
+    return plane
+
+
 def _undistorted_images(image_dir: Path, work_names: list[str], cameras: list[PinholeCamera]
                         ) -> tuple[list[np.ndarray], list[PinholeCamera] | PinholeCamera]:
     """Undistorted RGB images (H, W, 3) and their pinhole camera(s): one if all are equal."""
@@ -200,7 +246,7 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
         alignment: the board or the anchors (camera centres in W, metres, by photo name).
         camera: intrinsics of the photos at their original size, held fixed; None to
             self-calibrate (SIMPLE_RADIAL, started from the EXIF focal length when there is one).
-        X_WO: pose of the object frame O in W (4x4); None means O = W.
+        X_WO: pose of the object frame O in W (4x4; W per `alignment.world`); None means O = W.
         max_size: the photos' longer side for SfM and in the capture set, pixels.
         min_registered: fewer registered photos is an error.
         work_dir: keeps the resized photos, COLMAP database and models; default a temporary folder.
@@ -244,19 +290,25 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             alignment, estimator, image_dir,
             {n: work_name[n] for n in registered if n in with_board}, X_RCs, cameras)
         S = aligned.similarity if aligned else Similarity.identity()
-        X_OW = np.linalg.inv(X_WO) if X_WO is not None else np.eye(4)
-        X_OCs = [X_OW @ S.apply_pose(X_RCs[n]) for n in registered]
+        X_WA = np.linalg.inv(_world_in_alignment_frame(alignment))
         points = list(rec.points3D.values())
-        p_O = S.apply(np.array([p.xyz for p in points]).reshape(-1, 3)) @ X_OW[:3, :3].T + X_OW[:3, 3]
+        p_A = S.apply(np.array([p.xyz for p in points]).reshape(-1, 3))
+        floor = _check_floor(p_A @ X_WA[:3, :3].T + X_WA[:3, 3], alignment, progress)
+        X_OA = (np.linalg.inv(X_WO) if X_WO is not None else np.eye(4)) @ X_WA
+        X_OCs = [X_OA @ S.apply_pose(X_RCs[n]) for n in registered]
+        p_O = p_A @ X_OA[:3, :3].T + X_OA[:3, 3]
         colors = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
 
         progress(f"writing the capture set {out}")
         images, pinholes = _undistorted_images(image_dir, [work_name[n] for n in registered],
                                                [cameras[n] for n in registered])
+        world = "the floor under the board (z up)" if alignment.world == "floor" else None
         if aligned is None:
             frame = "R (unaligned: SfM's frame and arbitrary scale)"
+        elif X_WO is not None:
+            frame = "O" + (f" (W: {world})" if world else "")
         else:
-            frame = "O" if X_WO is not None else "O = W (no object pose given)"
+            frame = f"O = W ({world or 'no object pose given'})"
         report = PoseReport(
             photos=len(photos), working_size_px=max(photos[0].size), registered=registered,
             unregistered=unregistered,
@@ -267,6 +319,7 @@ def estimate_poses(photos_dir: Path, out: Path, alignment: Alignment,
             alignment=aligned, frame=frame,
             frames={f"images/frame_{i:03d}.png": n for i, n in enumerate(registered)},
             cameras={n: cameras[n].to_json() for n in registered}, board_poses=board_details,
+            floor=None if floor is None else floor.to_json(),
             seconds={**sfm.seconds, "total": time.perf_counter() - start})
         write_capture_set(out, images, X_OCs, pinholes,
                           extra_files={REPORT_FILE: report.dumps(), POINTS_FILE: _ply_text(p_O, colors)},
@@ -281,6 +334,8 @@ def poses_command(
     max_size: int = 1024,
     charuco: bool = False,
     board: CharucoBoardSpec = DEFAULT_BOARD,
+    world: WorldFrame = "board",
+    floor_check: bool = True,
     anchors: Path | None = None,
     max_anchor_residual: float = MAX_ANCHOR_RESIDUAL,
     object_pose: str | None = None,
@@ -298,8 +353,14 @@ def poses_command(
             centres at +0.5); the photos' camera, held fixed. Default: self-calibration.
         max_size: longer side of the images used and written, pixels.
         charuco: make the poses metric with the ChArUco board (--board.*) seen in the photos;
-            W is then the board frame.
-        board: the board's geometry.
+            W is then the board frame, or the floor frame with --world floor.
+        board: the board's geometry (--board.thickness-m: its face's height above the floor).
+        world: with --charuco, W is the board's own frame ("board": z into the board) or, for a
+            board lying face up on the floor, the floor frame under it ("floor": x along the
+            board's rows, z up, the floor at z = 0, the origin under the board's origin corner):
+            what `nfr-drake infer --estimate-pose` fits directly.
+        floor_check: with --world floor, refuse a board that does not lie on the floor that the
+            sparse points show (tilted over 3 deg or over 3 cm above or below it).
         anchors: JSON {"photo.jpg": [x, y, z], ...}: known camera centres in W, metres (3 or
             more, not on a line), keyed by the photos' file names.
         max_anchor_residual: refuse the anchors (they probably belong to other photos) when their
@@ -318,7 +379,8 @@ def poses_command(
     camera = PinholeCamera.from_json_file(intrinsics) if intrinsics else None
     alignment = Alignment(charuco=board if charuco else None,
                           anchors=read_anchors(anchors) if anchors else None,
-                          allow_unaligned=allow_unaligned, max_anchor_residual=max_anchor_residual)
+                          allow_unaligned=allow_unaligned, max_anchor_residual=max_anchor_residual,
+                          world=world, floor_check=floor_check)
     report = estimate_poses(photos_dir, out, alignment, camera, X_WO, max_size, min_registered,
                             sfm, work_dir)
     print(report.summary())

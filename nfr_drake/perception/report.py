@@ -18,6 +18,7 @@ class PoseReport:
     calibration: "known", "self-calibrated" or "self-calibrated from the EXIF focal length";
     cameras: the photos' intrinsics as used (nerfstudio keys + distortion, working size);
     board_poses: photo name -> ChArUco corners and PnP reprojection error, with --charuco;
+    floor: with --world floor, the floor plane of the sparse points (`floor.FloorPlane.to_json`);
     seconds: wall time per stage.
     """
 
@@ -34,6 +35,7 @@ class PoseReport:
     frames: dict[str, str] = field(default_factory=dict)
     cameras: dict[str, dict] = field(default_factory=dict)
     board_poses: dict[str, dict] = field(default_factory=dict)
+    floor: dict | None = None
     seconds: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict:
@@ -63,6 +65,11 @@ class PoseReport:
             if a.rotation_residuals_rad:
                 line += f", rotation max {math.degrees(max(a.rotation_residuals_rad.values())):.2f} deg"
             lines.append(line)
+        if self.floor is not None:
+            f = self.floor
+            lines.append(f"floor: {f['support']} of {f['points']} sparse points on a plane tilted "
+                         f"{f['tilt_deg']:.2f} deg, {100 * f['height_m']:+.1f} cm from z = 0" if f["found"]
+                         else "floor: no plane in the sparse points to check the board against")
         lines.append(f"poses are in frame {self.frame}; stages: "
                      + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items()))
         return "\n".join(lines)

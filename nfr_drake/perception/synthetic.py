@@ -1,20 +1,24 @@
-"""Synthetic photo folders: a closet in a textured room with a ChArUco board, rendered by Drake.
+"""Synthetic photo folders: a closet in a textured or furnished room with a ChArUco board, rendered
+by Drake.
 
 The objects of `nfr_drake.objects` are plain-coloured and give SIFT little to hold on to, so this
-scene adds what real rooms have: a floor and walls with random texture, and a ChArUco board
-lying on the floor in front of the object (for `nfr-drake poses --charuco`). Photos are rendered
-with Drake's RgbdSensor (RenderEngineVtk) at known poses X_OC; `write_photo_folder` stores them
-with `truth.json` so that the pose pipeline can be checked end to end.
+scene adds what real rooms have: a floor and walls with random texture (or a furnished room of
+`nfr_drake.data.rooms`: textured surfaces, other furniture, clutter, room lights), and a ChArUco
+board lying on the floor in front of the object (for `nfr-drake poses --charuco`). Photos are
+rendered with Drake's RgbdSensor (RenderEngineVtk) at known poses X_OC; `write_photo_folder`
+stores them with `truth.json` so that the pose pipeline can be checked end to end.
 
 Frames: the object frame O is the world frame of this scene. The board frame B is OpenCV's (see
-`charuco`); the board lies face up, so z_B points down: X_OB = [Rx(pi), p_OB].
+`charuco`); the board lies face up, so z_B points down: X_OB = [Rz(yaw) Rx(pi), p_OB]. The floor
+frame F under the board (`charuco.floor_frame_in_board`) is what `nfr-drake poses --world floor`
+writes poses in: X_OF = X_OB X_BF, O and F differ by a translation on the floor and a yaw.
 """
 
 from __future__ import annotations
 
 import json
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -32,9 +36,10 @@ from pydrake.math import RigidTransform
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
 from nfr_drake.data.capture import write_image
-from nfr_drake.data.render import Lighting, ObjectRenderer
+from nfr_drake.data.render import Lighting, ObjectRenderer, RenderedView
+from nfr_drake.data.rooms import Room, RoomDistribution, sample_room
 from nfr_drake.objects import ArticulatedObject
-from nfr_drake.perception.charuco import CharucoBoardSpec
+from nfr_drake.perception.charuco import CharucoBoardSpec, floor_frame_in_board
 
 TRUTH_FILE = "truth.json"
 _PX_PER_SQUARE = 200
@@ -55,14 +60,49 @@ class RoomSpec:
                                                                              marker_m=0.06))
     """The ChArUco board on the floor (larger than the test print, to be seen from 2 m)."""
     p_OB: tuple[float, float, float] = (0.6, 0.28, 0.001)
-    """Position of the board's origin corner, on (just above) the floor."""
+    """Position of the board's origin corner, on the floor; its z is the board's thickness."""
+    board_yaw_deg: float = 0.0
+    """The board's turn about the vertical: the angle from x_O to x_B, degrees."""
 
 
 def board_pose(room: RoomSpec) -> np.ndarray:
-    """X_OB (4x4): the board lies face up on the floor, x_B = x_O, y_B = -y_O, z_B = -z_O."""
-    X_OB = np.diag([1.0, -1.0, -1.0, 1.0])
+    """X_OB (4x4): the board lies face up on the floor turned by `board_yaw_deg`; at yaw 0,
+    x_B = x_O, y_B = -y_O, z_B = -z_O."""
+    yaw = np.deg2rad(room.board_yaw_deg)
+    R_OB = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1.0]])
+    X_OB = np.eye(4)
+    X_OB[:3, :3] = R_OB @ np.diag([1.0, -1.0, -1.0])
     X_OB[:3, 3] = room.p_OB
     return X_OB
+
+
+def floor_pose(room: RoomSpec) -> np.ndarray:
+    """X_OF (4x4): the floor frame F that `nfr-drake poses --world floor` puts under the board
+    (the board's thickness p_OB[2])."""
+    return board_pose(room) @ floor_frame_in_board(room.p_OB[2])
+
+
+def board_footprint(room: RoomSpec, margin_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The board's axis-aligned bounds on the floor in O, widened by `margin_m`: (lo, hi), (2,) each."""
+    nx, ny = room.board.squares
+    corners_B = np.array([[0, 0, 0], [nx, 0, 0], [0, ny, 0], [nx, ny, 0]]) * room.board.square_m
+    X_OB = board_pose(room)
+    corners_O = corners_B @ X_OB[:3, :3].T + X_OB[:3, 3]
+    return corners_O[:, :2].min(axis=0) - margin_m, corners_O[:, :2].max(axis=0) + margin_m
+
+
+def furnished_room(rng: np.random.Generator, obj: ArticulatedObject, cameras_O: np.ndarray,
+                   room: RoomSpec, distribution: RoomDistribution) -> Room:
+    """A random room of `nfr_drake.data.rooms` around `obj` that leaves the cameras at cameras_O
+    (N, 3) clear, without the clutter that would stand on the board."""
+    furnished = sample_room(rng, obj, cameras_O, distribution)
+    lo, hi = board_footprint(room, margin_m=0.05)
+
+    def off_board(part) -> bool:
+        xy, reach = np.asarray(part.p_LP[:2]), max(part.size[:2]) if part.shape != "sphere" else part.size[0]
+        return part.p_LP[2] > 0.5 or not np.all((xy > lo - reach) & (xy < hi + reach))
+
+    return replace(furnished, clutter=tuple(p for p in furnished.clutter if off_board(p)))
 
 
 def random_texture(rng: np.random.Generator, size: int) -> np.ndarray:
@@ -110,18 +150,21 @@ class SyntheticPhotoScene:
         q: articulation in [0, 1].
         camera: intrinsics of every photo (no distortion).
         room: the room and board; seed: the textures' random seed.
+        furnishing: a furnished room (`furnished_room`) in place of the random textured floor and
+            back wall: its surfaces, furniture, clutter, arm and lights; the board stays.
     """
 
     def __init__(self, obj: ArticulatedObject, q: float, camera: PinholeCamera,
-                 room: RoomSpec | None = None, seed: int = 0):
+                 room: RoomSpec | None = None, seed: int = 0, furnishing: Room | None = None):
         self.obj, self.q, self.camera = obj, q, camera
         self.room = room or RoomSpec()
+        self.furnishing = furnishing
         self._assets = tempfile.TemporaryDirectory(prefix="nfr_synthetic_")
         assets = Path(self._assets.name)
         rng = np.random.default_rng(seed)
 
         surfaces = []
-        for name, X_OQ, size, texture in self._surfaces(rng):
+        for name, X_OQ, size, texture in self._surfaces(rng, board_only=furnishing is not None):
             write_image(assets / f"{name}.png", texture)
             _write_quad_obj(assets / f"{name}.obj", *size)
             surfaces.append((assets / f"{name}.obj", assets / f"{name}.png", X_OQ, name))
@@ -129,12 +172,16 @@ class SyntheticPhotoScene:
         def add_room(plant):
             for surface in surfaces:
                 self._add_textured_quad(plant, *surface)
+            if furnishing is not None:
+                furnishing.add_to(plant)
 
-        self._renderer = ObjectRenderer(obj, camera, Lighting(), background_rgb=(0.8, 0.8, 0.8),
+        lighting = Lighting() if furnishing is None else furnishing.lighting
+        self._renderer = ObjectRenderer(obj, camera, lighting, background_rgb=(0.8, 0.8, 0.8),
                                         add_scenery=add_room)
 
-    def _surfaces(self, rng: np.random.Generator):
-        """(name, X_OQ, (size_x, size_y), texture) of each textured rectangle Q, seen from -z_Q."""
+    def _surfaces(self, rng: np.random.Generator, board_only: bool = False):
+        """(name, X_OQ, (size_x, size_y), texture) of each textured rectangle Q, seen from -z_Q:
+        the floor, the back wall and the board, or the board alone."""
         r = self.room
         h, d, t = r.floor_half_size_m, r.wall_distance_m, r.texture_px
         floor = np.diag([1.0, -1.0, -1.0, 1.0])  # faces up
@@ -142,8 +189,9 @@ class SyntheticPhotoScene:
         back = np.eye(4)  # the plane x = -d, facing +x: x_Q = y_O, y_Q = -z_O, z_Q = -x_O
         back[:3, :3] = np.column_stack([[0, 1, 0], [0, 0, -1], [-1, 0, 0]])
         back[:3, 3] = (-d, -h, r.wall_height_m)
-        yield "floor", floor, (2 * h, 2 * h), random_texture(rng, t)
-        yield "back_wall", back, (2 * h, r.wall_height_m), random_texture(rng, t)
+        if not board_only:
+            yield "floor", floor, (2 * h, 2 * h), random_texture(rng, t)
+            yield "back_wall", back, (2 * h, r.wall_height_m), random_texture(rng, t)
         nx, ny = r.board.squares
         yield ("board", board_pose(r), (nx * r.board.square_m, ny * r.board.square_m),
                board_texture(r.board))
@@ -164,6 +212,10 @@ class SyntheticPhotoScene:
     def render(self, X_OC: np.ndarray) -> np.ndarray:
         """The photo from camera pose X_OC (4x4, OpenCV axes): uint8 RGB (H, W, 3)."""
         return self._renderer.render_rgb(self.q, X_OC)
+
+    def render_view(self, X_OC: np.ndarray) -> RenderedView:
+        """The pinhole view from X_OC with the object's labels (0 on everything else) and depth."""
+        return self._renderer.render(self.q, X_OC)
 
 
 def orbit_poses(n: int, target_O: np.ndarray, distance_m: float = 2.0,
@@ -201,8 +253,9 @@ def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray,
 
     distortion: OpenCV coefficients (k1, k2, p1, p2[, k3]) applied to the renders, as a real
     lens would. truth.json: `camera` (the photos' intrinsics, a valid `--intrinsics` file),
-    `X_OC` per photo name (4x4, OpenCV axes), `X_OB` (the board), the board's geometry, q and the
-    object's keypoints at q (metres, in O).
+    `X_OC` per photo name (4x4, OpenCV axes), `X_OB` (the board), `X_OF` (the floor frame under
+    it, `floor_pose`), the board's geometry and thickness, the category, q and the object's
+    keypoints at q (metres, in O).
     """
     c = scene.camera
     camera = PinholeCamera(c.fx, c.fy, c.cx, c.cy, c.width, c.height, tuple(distortion))
@@ -215,10 +268,10 @@ def write_photo_folder(out: Path, scene: SyntheticPhotoScene, X_OCs: np.ndarray,
         poses[name] = np.asarray(X_OC).tolist()
     b = scene.room.board
     truth = {"camera": camera.to_json(), "X_OC": poses,
-             "X_OB": board_pose(scene.room).tolist(),
+             "X_OB": board_pose(scene.room).tolist(), "X_OF": floor_pose(scene.room).tolist(),
              "board": {"squares": list(b.squares), "square_m": b.square_m, "marker_m": b.marker_m,
-                       "dictionary": b.dictionary},
-             "q": scene.q,
+                       "dictionary": b.dictionary, "thickness_m": scene.room.p_OB[2]},
+             "category": scene.obj.category, "q": scene.q,
              "keypoints": {k: v.tolist() for k, v in scene.obj.keypoints(scene.q).items()}}
     (out / TRUTH_FILE).write_text(json.dumps(truth, indent=2))
     return out
