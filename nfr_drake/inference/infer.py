@@ -105,6 +105,22 @@ def check_category(model_folder: Path, model_category: str, claimed: str | None,
                             f"{model_category} model; use a {claimed} model")
 
 
+MASK_SIZE_PX = 256
+"""Longer image side, pixels, at which the segmenter runs and the object's pose is estimated from
+the masks: near the scale of the segmenter's training photos (96 px), and the visual hull of ten
+1024 px masks took minutes."""
+
+
+def shrunk(image: np.ndarray, size: int = MASK_SIZE_PX) -> np.ndarray:
+    """`image` (H, W[, C]) scaled down (area interpolation) so that its longer side is at most `size`."""
+    h, w = image.shape[:2]
+    scale = size / max(h, w)
+    if scale >= 1.0:
+        return image
+    return cv2.resize(image, (max(1, round(w * scale)), max(1, round(h * scale))),
+                      interpolation=cv2.INTER_AREA)
+
+
 MIN_FIT_VIEWS = 3
 """Fewer views than this leave q and the object's shape poorly constrained: the fit warns."""
 
@@ -180,7 +196,7 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
     images = capture.load_images()
-    estimate = estimate_object_pose(masks, [f.X_OC for f in capture.frames],
+    estimate = estimate_object_pose([shrunk(m) for m in masks], [f.X_OC for f in capture.frames],
                                     [f.camera for f in capture.frames], category=fitted.category)
     X_OW = np.linalg.inv(estimate.X_WO)
     in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
@@ -233,15 +249,16 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
 
 
 def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.ndarray]:
-    """Object probability (H, W) per uint8 RGB image: the segmenter's in `segmenter` (a model
-    folder), or, with None, the pixels off the image border's median colour (an object alone
-    before a uniform background)."""
+    """Object probability (H, W) per uint8 RGB image (H, W, 3): the segmenter's in `segmenter` (a
+    model folder; run on the image shrunk to `MASK_SIZE_PX` and scaled back up), or, with None, the
+    pixels off the image border's median colour (an object alone before a uniform background)."""
     if segmenter is None:
         return [background_mask(image) for image in images]
     from nfr_drake.perception.segmentation.model import load_segmenter
 
     net, _ = load_segmenter(segmenter)
-    return [net.object_mask(image) for image in images]
+    return [cv2.resize(net.object_mask(shrunk(image)), image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
+            for image in images]
 
 
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
