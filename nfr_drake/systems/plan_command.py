@@ -6,10 +6,24 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
+from pydrake.math import RigidTransform
+
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.jsonio import read_json
 from nfr_drake.planning.planner import PlanningError
 from nfr_drake.systems.scene_objects import SceneObject, object_pose, sampled_part
 from nfr_drake.systems.task import run_task, task_span
+from nfr_drake.world.keypoints import KeypointTrajectory
+
+
+def fitted_keypoints(path: Path, X_WO: RigidTransform) -> KeypointTrajectory:
+    """The keypoint trajectory of a fit result JSON (`nfr-drake infer`) in W: a result whose pose was
+    estimated (`infer --estimate-pose`, `extra.object_pose`) is in W already, any other is in O and
+    placed at X_WO. Its present articulation is the fitted q."""
+    result = read_json(path, NfrDrakeError, "fit result")
+    in_W = isinstance(result, dict) and "object_pose" in (result.get("extra") or {})
+    return KeypointTrajectory.from_fit_result(result, RigidTransform() if in_W else X_WO)
 
 
 def plan_command(
@@ -28,6 +42,7 @@ def plan_command(
     closed_at: Literal["lower", "upper"] | None = None,
     replay: Path = Path("out/plan/replay.html"),
     live: bool = False,
+    keypoints: Path | None = None,
 ) -> int:
     """Plan grasping the handle and opening (or closing) an object, simulate it, write a replay.
 
@@ -51,6 +66,12 @@ def plan_command(
             limit nearer the joint's zero, the position the model is drawn in.
         replay: where to write the self-contained HTML replay.
         live: keep the live meshcat view open after the run until Enter is pressed.
+        keypoints: a fit result JSON (`nfr-drake infer`) to plan with instead of the object's own
+            keypoints: in W when `infer --estimate-pose` estimated the object's pose (photos
+            posed by `nfr-drake poses --world floor`), else in O and placed by --object-xyz and
+            --object-yaw-deg. It plans from the fitted q; the object (--object or --category) is
+            the true one the motion is simulated on, shown in the replay beside the fitted
+            keypoints with its own ("keypoints_true").
 
     Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
     """
@@ -75,12 +96,23 @@ def plan_command(
                   f"{part} ({obj.front(part).kind})")
     q0, q1 = task_span(scene_object.category, task, start_q, target_q)
     scene_object = replace(scene_object, ground_truth=scene_object.ground_truth.with_current(q0))
+    planned = None
+    if keypoints is not None:
+        planned = fitted_keypoints(keypoints, X_WO)
+        if planned.category != scene_object.category:
+            raise NfrDrakeError(f"{keypoints}: keypoints of a {planned.category}, but the object's joint "
+                                f"makes it a {scene_object.category}")
+        true = scene_object.ground_truth
+        apart = np.linalg.norm(planned.point("handle", planned.q_current) - true.point("handle", q0))
+        print(f"planning with the fitted keypoints of {keypoints} (q = {planned.q_current:.2f}; "
+              f"handle {100 * apart:.1f} cm from the object's at q = {q0:g})")
 
     from pydrake.geometry import Meshcat
 
     meshcat = Meshcat()
     print(f"live view: {meshcat.web_url()}")
-    outcome = run_task(scene_object, q1, meshcat=meshcat, replay=replay)
+    outcome = run_task(scene_object, q1, keypoints=planned, meshcat=meshcat, replay=replay,
+                       reference=None if planned is None else scene_object.ground_truth)
     if outcome.plan is None:
         shorter = f" (a shorter motion, --target-q between {q0:g} and {q1:g}, may be reachable)" \
             if abs(q1 - q0) > 0.3 else ""

@@ -126,3 +126,69 @@ def test_sampled_part_draws_the_part_from_the_pieces_stream_unless_given():
     other = (drawn + 1) % obj.num_fronts
     _, part, scene_object = sampled_part("furniture", 7, 3, RigidTransform(), other)
     assert part == other and scene_object.joint_name == obj.front(other).joint_name
+
+
+def _fit_result(path, X_WO, in_W: bool, shift=(0.0, 0.0, 0.0)):
+    """A fit result JSON (docs/CONVENTIONS.md) holding the true keypoints of sampled closet 3, in W
+    (placed at X_WO, with `extra.object_pose` as `infer --estimate-pose` writes it) or in O,
+    moved by `shift` (m)."""
+    import json
+
+    import numpy as np
+
+    from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
+
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
+    grid = np.linspace(0.0, 1.0, 21)
+    p = obj.keypoint_array(grid) + shift  # (N, K, 3) in O
+    if in_W:
+        p = p @ X_WO[:3, :3].T + X_WO[:3, 3]
+    doc = {"category": "closet", "q": 0.0,
+           "keypoints": {n: p[0, i].tolist() for i, n in enumerate(obj.keypoint_names)},
+           "trajectory": {"q": grid.tolist(),
+                          "keypoints": {n: p[:, i].tolist() for i, n in enumerate(obj.keypoint_names)}},
+           "image_loss": 0.0, "seconds": 0.0,
+           "extra": {"object_pose": {"X_WO": X_WO.tolist()}} if in_W else {}}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_fitted_keypoints_in_W_or_placed_from_O(tmp_path):
+    import numpy as np
+
+    from nfr_drake.systems.plan_command import fitted_keypoints
+    from nfr_drake.systems.scene_objects import object_pose
+
+    X_WO = object_pose((0.4, -0.2, 0.0), 30.0)
+    elsewhere = object_pose((5.0, 5.0, 0.0), 90.0)  # ignored: the result is in W already
+    in_W = fitted_keypoints(_fit_result(tmp_path / "w.json", X_WO.GetAsMatrix4(), True), elsewhere)
+    in_O = fitted_keypoints(_fit_result(tmp_path / "o.json", X_WO.GetAsMatrix4(), False), X_WO)
+    assert np.allclose(in_W.p_WK, in_O.p_WK) and in_W.q_current == 0.0
+
+
+def test_plans_with_fitted_keypoints_in_W(tmp_path, capsys):
+    """Keypoints in W (as `infer --estimate-pose` writes them) 1 cm off the true ones: the plan uses
+    them, the simulation opens the true closet and writes its replay."""
+    from nfr_drake.systems.scene_objects import object_pose
+
+    X_WO = object_pose((0.3, -0.4, 0.0), 25.0).GetAsMatrix4()
+    result = _fit_result(tmp_path / "result.json", X_WO, True, shift=(0.0, 0.01, 0.0))
+    replay = tmp_path / "replay.html"
+    status = main(["plan", "--category", "closet", "--seed", "3", "--object-xyz", "0.3", "-0.4", "0.0",
+                   "--object-yaw-deg", "25", "--keypoints", str(result), "--replay", str(replay)])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert "planning with the fitted keypoints" in out and "handle 1.0 cm from the object's" in out
+    assert "SUCCESS" in out and replay.stat().st_size > 100_000
+
+
+def test_fitted_keypoints_of_another_category_exit_2(tmp_path, capsys):
+    import numpy as np
+
+    result = _fit_result(tmp_path / "result.json", np.eye(4), True)
+    assert main(["plan", "--category", "drawer", "--keypoints", str(result),
+                 "--replay", str(tmp_path / "r.html")]) == 2
+    assert "keypoints of a closet, but the object's joint makes it a drawer" in capsys.readouterr().err
+    assert main(["plan", "--category", "closet", "--keypoints", str(tmp_path / "none.json"),
+                 "--replay", str(tmp_path / "r.html")]) == 2
+    assert "fit result not found" in capsys.readouterr().err
