@@ -20,10 +20,11 @@ A drawer's pull and depth trade along a shallow valley of the image loss (a deep
 out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
 the loss rises steeply on either side of the refined q, yet without the scan the fast fit ended
 1.4 cm from the true pull (median of 20 drawers; docs/BENCHMARKS.md). The valley scan
-(`FitConfig.valley_codes`), between the refinement and the close look, holds a few articulations
-around the refined one, starts each z_obj along the direction in which the keypoint head keeps
-the focus part in place, fits the z_obj of all of them together and goes on from the minimum of
-their losses' profile over q.
+(`FitConfig.valley_codes`), between the refinement and the close look when the focus part
+slides with q (a drawer's front; a door swings, and its angle shows in its plane), holds a few
+articulations around the refined one, starts each z_obj along the direction in which the
+keypoint head keeps the focus part in place, fits the z_obj of all of them together and goes on
+from the minimum of their losses' profile over q.
 
 A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
 steps, a `detail_fraction` share of the rays (half by default) is drawn among those passing within
@@ -127,9 +128,11 @@ class FitConfig:
     seed: int = 0
     """Seed of ray sampling."""
     valley_codes: int = 5
-    """Codes of the valley scan after the refinement (0: none; needs the focus part): the
-    refined code's q and z_obj trade along a shallow valley of the image loss (a deeper drawer
-    pulled out less puts its handle at the same point), along which Adam walks slowly. The scan
+    """Codes of the valley scan after the refinement (0: none), when the focus part slides (the
+    keypoint head moves it along a straight line with q, as a drawer's handle; a door's handle
+    swings, and its angle shows in the door's plane): the refined code's q and z_obj trade along
+    a shallow valley of the image loss (a deeper drawer pulled out less puts its handle at the
+    same point), along which Adam walks slowly. The scan
     holds `valley_codes` articulations evenly over `valley_span` around the refined q, each with
     z_obj moved along the keypoint head's valley (the focus part kept in place, to first
     order), fits their z_obj with q held for `valley_steps` shared steps, and continues from
@@ -484,6 +487,22 @@ def _close_look(model: NFRModel, rays: ObservedRays, config: FitConfig, focus: F
     return z_look[0], "kept", config.focus_steps
 
 
+_SLIDE_TOLERANCE = 0.05
+"""A part slides when the keypoint head's part at q = 1/2 lies within this share of the chord
+from q = 0 to 1 off that chord (a door's handle, on an arc, lies 0.2 or more off it)."""
+
+
+def _slides(model: NFRModel, z: torch.Tensor, keypoint: int) -> bool:
+    """Whether the keypoint head moves part `keypoint` of code z (D,) along a straight line with q
+    (a drawer's front), not on an arc (a door's)."""
+    q = torch.tensor([0.0, 0.5, 1.0], dtype=z.dtype, device=z.device)
+    with torch.no_grad():
+        p = model.keypoints(torch.cat([q_to_z_art(q), z[2:].expand(3, -1)], -1))[:, keypoint]
+    chord, middle = p[2] - p[0], p[1] - p[0]
+    off = middle - (middle @ chord) / (chord @ chord).clamp_min(1e-12) * chord
+    return bool(off.norm() <= _SLIDE_TOLERANCE * chord.norm())
+
+
 def _valley_direction(model: NFRModel, z: torch.Tensor, keypoint: int) -> torch.Tensor:
     """d z_obj / d q (k,) along which the keypoint head's part `keypoint` stays in place, to
     first order, at code z (D,): -J_obj^+ dp/dq, the smallest change of z_obj that undoes q's
@@ -636,7 +655,7 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
                    config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss)
     z_best = z_best.detach()[0]
-    if focus is not None and config.valley_codes:
+    if focus is not None and config.valley_codes and _slides(model, z_best, focus.keypoint):
         valley_index = rays.sample(config.eval_rays // 4, config.detail_fraction, generator)
 
         def valley_losses(c: torch.Tensor) -> torch.Tensor:

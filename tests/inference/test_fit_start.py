@@ -16,6 +16,7 @@ from nfr_drake.inference.fit import (
     _adam,
     _lookup_starts,
     _nearest_codes,
+    _slides,
     _valley_direction,
     _valley_scan,
     fit_latent,
@@ -197,3 +198,26 @@ def test_the_valley_scan_holds_q_and_goes_on_from_the_minimum_of_its_losses(mode
     torch.testing.assert_close(seen[0], torch.tensor([0.6, 0.7, 0.8, 0.9, 1.0]), atol=1e-5, rtol=0)
     with pytest.raises(ConfigError, match="valley_codes"):
         FitConfig(valley_codes=1)
+
+
+class _PartOnPath:
+    """A stand-in model whose keypoint head puts part 0 on a straight line (a drawer's pull) or on
+    a quarter circle (a door's handle) as q goes from 0 to 1."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def keypoints(self, z):
+        q = z_art_to_q(z[:, :2])
+        if self.path == "line":
+            p = torch.stack([0.3 * q, torch.zeros_like(q), torch.zeros_like(q)], -1)
+        else:
+            angle = 0.5 * torch.pi * q
+            p = torch.stack([0.5 * torch.cos(angle), 0.5 * torch.sin(angle), torch.zeros_like(q)], -1)
+        return p[:, None]
+
+
+def test_a_part_slides_on_a_line_not_on_an_arc():
+    z = torch.cat([q_to_z_art(torch.tensor(0.3)), torch.zeros(4)])
+    assert _slides(_PartOnPath("line"), z, 0)
+    assert not _slides(_PartOnPath("arc"), z, 0)
