@@ -186,6 +186,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           object_pose: Literal["given", "estimated"] = "given",
                           perceive: Literal["alone", "room"] = "alone",
                           segmenter: Path = Path(Scenario.segmenter),
+                          room_loss: Literal["background", "masked"] = "background",
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
@@ -216,6 +217,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         perceive: what the cameras see: the object "alone" (the paper's setting) or in a "room"
             (held-out textures and lights, the object's masks from `segmenter`; `Scenario.perceive`).
         segmenter: the segmenter's model folder (with `--perceive room`).
+        room_loss: with `--perceive room`, the photos' pixels off the object's mask are painted in
+            the training background ("background") or left out of the fit's loss ("masked").
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -223,7 +226,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     q_target=1.0 if q_target is None else q_target, keypoints=keypoints, fit=fit,
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
-                    perceive=perceive, segmenter=str(segmenter))
+                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss)
     rows = evaluate_pipeline(base, n, csv_path, part_target=q_target is None)
     print(SUMMARY_HEADER)
     print(summary_row(rows))

@@ -12,11 +12,13 @@ the perception render engine sees the object alone (the robot, the floor and any
 lose their perception role), against the background colour and lighting of the training renders:
 a stand-in for segmenting the object out of a real photo. Perceiving the "room", it sees every
 geometry of the plant (floor, walls, other furniture, clutter, the robot) under the lights given,
-a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo and only
-the pixels on its mask count in the fit's image loss. Frame O of the model is the object's frame.
-Its pose X_WO in the world is estimated from the views (W's floor at z = 0, z up): the object's
-masks give a visual hull and a floor box (`perception.object_pose`), and the fit runs in that O.
-The paper's setting passes a known X_WO instead.
+a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo, and the
+fit sees the photos with everything off the object's mask painted in the training background
+(`paint_background`; or, `room_loss` "masked", only the pixels on the mask count in its loss).
+Frame O of the model is the object's frame. Its pose X_WO in the world is estimated from the views
+(W's floor at z = 0, z up): the object's masks give a visual hull and a floor box
+(`perception.object_pose`), and the fit runs in that O. The paper's setting passes a known X_WO
+instead.
 """
 
 from __future__ import annotations
@@ -61,6 +63,11 @@ PerceptionScene = Literal["alone", "room"]
 """What the perception cameras see: the object "alone" before the training background (the
 paper's setting), or the whole "room" (every geometry of the plant), the object found by a
 segmenter."""
+RoomLoss = Literal["background", "masked"]
+"""How the fit treats the pixels of a room photo off the object's mask: painted in the training
+background, so that the field's silhouette must match the mask ("background"), or left out of the
+image loss ("masked"; the field may then grow where the mask is not: an open door, a taller
+carcass)."""
 
 
 class NfrPerceptionSystem(LeafSystem):
@@ -89,8 +96,9 @@ class NfrPerceptionSystem(LeafSystem):
     X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities, and
-    only the pixels on them count in the fit's image loss; without, the pixels off
-    `background_rgb` (the object alone), every pixel counting in the loss.
+    the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
+    only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
+    object alone), every pixel counting in the loss.
     X_WO None: the pose is estimated at each fit from the masks, the result's
     `extra["object_pose"]` says how (and `extra["warnings"]` names a size outside the model's
     category). The fit runs in an initialisation event and whenever
@@ -111,7 +119,8 @@ class NfrPerceptionSystem(LeafSystem):
                  keypoint_source: KeypointSource = "head", hull_config: HullConfig | None = None,
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
                  segmenter: Segmenter | None = None, part: int | None = None,
-                 furniture_config: FurnitureFitConfig = FurnitureFitConfig()):
+                 furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
+                 room_loss: RoomLoss = "background"):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -125,7 +134,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WCs = list(X_WCs)
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
-        self._segmenter = segmenter
+        self._segmenter, self._room_loss = segmenter, room_loss
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self.fit_count = 0
         self._image_ports = [
@@ -215,13 +224,16 @@ class NfrPerceptionSystem(LeafSystem):
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
-        loss_masks = masks if self._segmenter is not None else None
+        masked = self._segmenter is not None and self._room_loss == "masked"
+        if self._segmenter is not None and not masked:
+            images = paint_background(images, masks, self._background_rgb)
         if self._model.num_slots > 1:
             result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
-                                    self._part(context), loss_masks)
+                                    self._part(context), masks if masked else None)
         else:
             result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
-                              self._keypoint_source, masks=loss_masks)
+                              self._keypoint_source, masks=masks if self._segmenter else None,
+                              masked_loss=masked)
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1
@@ -261,6 +273,16 @@ class NfrPerceptionSystem(LeafSystem):
         output.set_value(self._stored(context)[1])
 
 
+def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
+                     background_rgb: tuple[float, float, float]) -> list[np.ndarray]:
+    """Each uint8 RGB image (H, W, 3) blended into `background_rgb` (in [0, 1]) by its object
+    mask (H, W) in [0, 1]: m image + (1 - m) background, so that a photo of a room looks like the
+    training renders of the object alone wherever the mask holds."""
+    background = 255.0 * np.asarray(background_rgb, np.float32)
+    return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
+            for image, m in zip(images, masks, strict=True)]
+
+
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:
     """Remove the perception role of every geometry of `plant` outside model instance `keep`, so
     render engines (RgbdSensors) see that model alone; Meshcat (illustration role) and contact
@@ -283,13 +305,15 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      fit_config: FitConfig = FitConfig(), lighting: LightSet | None = None,
                      keypoint_source: KeypointSource = "head", scene: PerceptionScene = "alone",
                      segmenter: Path = SEGMENTER_DIR, part: int | None = None,
-                     furniture_config: FurnitureFitConfig = FurnitureFitConfig()) -> NfrPerceptionSystem:
+                     furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
+                     room_loss: RoomLoss = "background") -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
     then see the object alone (`render_only`) under `lighting` (default the training renders'
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
-    `RoomLighting.moved`), and the `segmenter` model folder finds the object. X_WO: the object's
+    `RoomLighting.moved`), the `segmenter` model folder finds the object and `room_loss` says how the
+    fit treats the pixels off its mask (`NfrPerceptionSystem`). X_WO: the object's
     known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
     parts (furniture): `part` and `furniture_config` as in `NfrPerceptionSystem`. Returns the
     system; its RgbdSensors are named `nfr_camera_{i}`.
@@ -306,7 +330,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                             ClippingRange(0.05, 20.0), RigidTransform())
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
-        keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config))
+        keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
+        room_loss=room_loss))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

@@ -135,7 +135,8 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None 
     known = X_WO if scenario.object_pose == "given" else None
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
                                   X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
-                                  scenario.perceive, Path(scenario.segmenter), part)
+                                  scenario.perceive, Path(scenario.segmenter), part,
+                                  room_loss=scenario.room_loss)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),

@@ -33,6 +33,7 @@ KEYPOINT_SOURCES = ("head", "geometry", "ground_truth")
 TASKS = ("open", "open-and-place")
 OBJECT_POSE_SOURCES = ("given", "estimated")
 PERCEPTION_SCENES = ("alone", "room")
+ROOM_LOSSES = ("background", "masked")
 
 
 @dataclass
@@ -110,9 +111,13 @@ class Scenario:
     background and lights (the paper's setting), or "room", the object in a random room drawn
     from the seed and index (floor, walls, other furniture, clutter, the arm; the held-out textures
     and lights, which the segmenter never saw, `nfr_drake.data.rooms`), its masks found by
-    `segmenter` and only the pixels on them counting in the fit's image loss."""
+    `segmenter` (`room_loss` says what the fit does with them)."""
     segmenter: str = "models/segmenter"
     """Segmenter model folder (read when perceiving a room)."""
+    room_loss: str = "background"
+    """Perceiving a room, what the fit does with the photos' pixels off the object's mask:
+    "background", painted in the training background (the field's silhouette must match the
+    mask), or "masked", left out of the image loss (`systems.perception.RoomLoss`)."""
     part: int = -1
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning
@@ -143,6 +148,8 @@ class Scenario:
         if self.perceive not in PERCEPTION_SCENES:
             raise ConfigError(f"perceive must be one of {', '.join(PERCEPTION_SCENES)}, "
                               f"got {self.perceive!r}")
+        if self.room_loss not in ROOM_LOSSES:
+            raise ConfigError(f"room_loss must be one of {', '.join(ROOM_LOSSES)}, got {self.room_loss!r}")
         if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
             raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:

@@ -127,21 +127,27 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
     off_background = lambda image: np.mean(np.abs(image.astype(float) - background).max(-1) > 8)  # noqa: E731
     assert off_background(seen["alone"]) < 0.7  # the object alone before the training background
     assert off_background(seen["room"]) > 0.99  # floor, walls: no background left
-    # The fit gets the segmenter's masks (the masked image loss), one per view, of the image's size.
+    # The fit gets the segmenter's masks, one per view, of the image's size, and the photos painted
+    # in the training background off them (the whole image in the loss).
     calls = []
     real_infer = perception_module.infer
 
     def spy(*args, **kwargs):
-        calls.append(kwargs.get("masks"))
+        calls.append((args[4], kwargs))
         return real_infer(*args, **kwargs)
 
     monkeypatch.setattr(perception_module, "infer", spy)
     diagram, system = _perception_scene(model_dir, "room", X_WO)
     Simulator(diagram).Initialize()
     assert system.fit_count == 1 and len(calls) == 1
-    masks = calls[0]
+    images, kwargs = calls[0]
+    masks = kwargs["masks"]
+    assert kwargs["masked_loss"] is False
     assert masks is not None and len(masks) == 3 and all(m.shape == (32, 32) for m in masks)
     assert all(0.0 <= m.min() and m.max() <= 1.0 for m in masks)
+    for image, mask in zip(images, masks, strict=True):
+        off = mask < 0.01
+        assert off.any() and np.abs(image[off].astype(float) - background).max() <= 3
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):
