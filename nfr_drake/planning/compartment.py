@@ -124,6 +124,12 @@ def compartment_entry(kt: KeypointTrajectory, q: float) -> tuple[np.ndarray, flo
     return -_Z, float(_drawer_tops(kt, q)[0] - goal[2])
 
 
+def front_normal(kt: KeypointTrajectory, q: float) -> np.ndarray:
+    """The compartment's front's outward normal at articulation q, horizontal, unit, (3,) in W (a
+    closet: its shut door's; a drawer: the way it is pulled out)."""
+    return _frame(_door_normal(kt) if kt.category == "closet" else handle_tangent(kt, q))[0]
+
+
 def _drawer_tops(kt: KeypointTrajectory, q: float) -> tuple[float, float]:
     """A drawer's walls' top in W, m: the front's height were its handle at mid-height, and, for
     its front (which the arm reaches over), the most the category allows for that handle."""

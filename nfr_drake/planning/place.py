@@ -1,10 +1,13 @@
 """Place: after opening, pick an item from a table beside the robot and put it at the goal keypoint.
 
 The motion starts where the opening plan ends (the hand on the handle at q_target, base unchanged)
-and has three segments of knots, each knot a chained-IK pose; from knot to knot one
+or, on a base re-placed in front of the open compartment after the opening (`place_bases`; a
+mobile manipulator's base driven to a second spot), from a ready posture (`ready_posture`). It
+has three segments of knots, each knot a chained-IK pose; from knot to knot one
 `KinematicTrajectoryOptimization` (SNOPT) with minimum-distance constraints at evenly spaced
 samples, at rest at both ends:
-1. "to pick": back off the handle along its approach, to the pre-pick pose, to the pick pose;
+1. "to pick": back off the handle along its approach (on the opening's base), to the pre-pick
+   pose, to the pick pose;
 2. "carry": lift, up, over to above the pre-place pose outside the compartment, down to it, in
    along a straight line (the way into the compartment: horizontal through a closet's front, down
    into a drawer) to the place pose: the item's bottom centre `drop_height` above the goal
@@ -25,7 +28,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.inverse_kinematics import (
     AngleBetweenVectorsConstraint,
     InverseKinematics,
@@ -38,13 +41,14 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles
+from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
 from nfr_drake.planning.planner import _ACCEL_LIMITS, PlanningError, _initial_guess
 from nfr_drake.planning.scene import PlanningScene, build_planning_scene
 from nfr_drake.world.items import Item
 from nfr_drake.world.keypoints import KeypointTrajectory
-from nfr_drake.world.plan import ObstacleBox, PlanResult
-from nfr_drake.world.robot import NUM_ARM_JOINTS, Q_HOME
+from nfr_drake.world.obstacles import distance_to_box
+from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
+from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME
 
 _Z = np.array([0.0, 0.0, 1.0])
 _IK_ITERATIONS = 80
@@ -55,6 +59,10 @@ PLACE_REACH = {"closet": (0.6, 0.7, 0.85), "drawer": (0.5, 0.55, 0.7)}
 """`PlannerConfig.place_reach` values for an opening a place follows, tried in turn (the nearer
 base first), by category, m: a closet's goal is reached by a level hand through its front, a
 drawer's from above, over the front (a forearm that comes down steeply: the base nearer)."""
+_BASE_LATERAL = (0.0, 0.15, -0.15, 0.3, -0.3)
+"""A re-placed base's offsets across the compartment's front from in front of its goal, m."""
+_BASE_CLEARANCE = 0.25
+"""A re-placed base's axis clears the compartment and the open door by this much, m."""
 _EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
@@ -140,6 +148,36 @@ def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig
     entry, opening = compartment_entry(kt, q_target)
     along = item.half_extents[0] if kt.category == "closet" else 0.0
     return entry, opening + along + cfg.entry_margin
+
+
+def place_bases(kt: KeypointTrajectory, q_target: float, obstacles: list[ObstacleBox],
+                heights: tuple[float, ...] = (0.0,)) -> list[RigidTransform]:
+    """Poses of a base re-placed after the opening to place in the compartment opened to q_target
+    (a mobile manipulator's base driven to a second spot): in front of it (`front_normal`), its
+    goal `PLACE_REACH` away (nearest first) and up to 0.3 m to either side (`_BASE_LATERAL`), at
+    each of `heights` above the floor (m), facing the goal, the base's axis `_BASE_CLEARANCE`
+    clear of `obstacles` (boxes in W: the compartment and its open front)."""
+    goal = kt.point("goal", q_target)
+    n = front_normal(kt, q_target)
+    lateral = np.cross(_Z, n)
+    bases = []
+    for height in heights:
+        for reach in PLACE_REACH[kt.category]:
+            for offset in _BASE_LATERAL:
+                p_WB = goal + reach * n + offset * lateral
+                p_WB[2] = height
+                column = p_WB + np.outer(np.linspace(0.0, 0.6, 7), _Z)
+                if all(distance_to_box(box, column).min() >= _BASE_CLEARANCE for box in obstacles):
+                    yaw = np.arctan2(*(goal - p_WB)[1::-1])
+                    bases.append(RigidTransform(RollPitchYaw(0.0, 0.0, yaw), p_WB))
+    return bases
+
+
+def ready_posture(X_WB: RigidTransform, p_W: np.ndarray) -> np.ndarray:
+    """The arm's positions (9,) on a re-placed base X_WB before the place: the home posture turned
+    about the base axis to face p_W (m, in W), the fingers open."""
+    p_B = X_WB.inverse() @ p_W
+    return np.r_[np.arctan2(p_B[1], p_B[0]), Q_HOME[1:], FINGER_OPEN, FINGER_OPEN]
 
 
 def place_reach_points(kt: KeypointTrajectory, q_target: float, item: Item,
@@ -352,23 +390,27 @@ def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
     return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
 
 
-def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig | None = None) -> PlacePlan:
-    """Plan the pick and place (module docstring) from the end of `open_plan`. Raises PlanningError
-    naming the stage or the constraints that failed, for each grasp tried (the hand either way
-    round about its approach)."""
+def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, config: PlaceConfig | None = None,
+               handle: HandleWaypoint | None = None) -> PlacePlan:
+    """Plan the pick and place (module docstring) for the arm at base X_WB, from its positions q0
+    (9,): the end of the opening plan, the hand on `handle` (it backs off the handle first), or,
+    with `handle` None, a base re-placed after the opening (`place_bases`, `ready_posture`).
+    Raises PlanningError naming the stage or the constraints that failed, for each grasp tried
+    (the hand either way round about its approach)."""
     cfg = config or PlaceConfig()
     t0 = time.perf_counter()
-    pb, X_WB = problem, open_plan.X_WB
+    pb = problem
     side = pb.grasp == "side"
-    q0 = open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel()
     item_box = ObstacleBox("item", 2 * pb.item.half_extents,
                            pb.X_WI @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
     everything = [*pb.fixed, *pb.moving, pb.table]
     base_scenes = {"off handle": build_planning_scene(X_WB, [*pb.fixed, pb.table], touching=pb.moving),
                    "to pre-pick": build_planning_scene(X_WB, [*everything, item_box]),
                    "free": build_planning_scene(X_WB, everything)}
-    end = open_plan.waypoints[-1]
-    p_off = end.p_WH - cfg.retreat_distance * end.approach_W
+    p_start = _tool_pose_at(base_scenes["free"], q0).translation() if handle is None else handle.p_WH
+    off_handle = [] if handle is None else [
+        _Stage("backing off the handle", "off handle", handle.p_WH - cfg.retreat_distance * handle.approach_W,
+               _tool_at(handle.p_WH - cfg.retreat_distance * handle.approach_W, 0.01))]
     p_place = pb.goal + cfg.drop_height * _Z
     failures = []
     for flip in (False, True):
@@ -381,7 +423,7 @@ def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig
         scenes = {**base_scenes,
                   "held off table": build_planning_scene(X_WB, [*pb.fixed, *pb.moving], (pb.item, X_GI)),
                   "held": build_planning_scene(X_WB, everything, (pb.item, X_GI))}
-        to_pick = [_Stage("backing off the handle", "off handle", p_off, _tool_at(p_off, 0.01)),
+        to_pick = [*off_handle,
                    _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg)),
                    _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg))]
         sols_a, failed = _solve_chain(scenes, to_pick, q0, cfg)
@@ -415,7 +457,7 @@ def plan_place(open_plan: PlanResult, problem: PlaceProblem, config: PlaceConfig
         if sols_c is None:
             failures.append(f"IK of {failed}")
             continue
-        segments, q, p = [], q0, end.p_WH
+        segments, q, p = [], q0, p_start
         for name, stages, sols in (("to pick", to_pick, sols_a), ("carry", carry, sols_b),
                                    ("retreat", retreat, sols_c)):
             pieces = []

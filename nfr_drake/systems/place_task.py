@@ -1,7 +1,11 @@
 """Open, then place: the paper's last step (its Fig. 1e), planned and simulated on the true object.
 
 The scene: the object, the arm where the opening plan put its base, a small table beside the
-arm (`table_beside`) with an item on it (`nfr_drake.world.items`).
+arm (`table_beside`) with an item on it (`nfr_drake.world.items`). Where the base moves between
+the opening and the place (`MOVE_BASE`: closets), the opening is simulated first
+(`simulate_articulation`) and the place from the second base in a second simulation that starts
+with the front where the opening left it; the base's drive between the two (the hand letting go,
+the arm tucking in) is not simulated, and the table stands beside the second base.
 """
 
 from __future__ import annotations
@@ -26,19 +30,25 @@ from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
     PlacePlan,
+    place_bases,
     place_problem,
     place_reach_points,
     plan_place,
+    ready_posture,
 )
-from nfr_drake.planning.planner import GRASP_DEPTH, PlannerConfig, PlanningError, plan_articulation
+from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.systems.articulation import (
     CompliantCommand,
     SimulationConfig,
+    SimulationResult,
     _desired_state_trajectory,
     add_gravity_compensation,
+    add_joint_friction,
+    couple_fingers,
     grip_points,
     hydroelastic_grip,
     set_arm_gains,
+    simulate_articulation,
 )
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
@@ -117,11 +127,12 @@ class PlaceSimulationConfig:
 class PlaceSimulationResult:
     """What the simulated arm did. The opening (attributes as `SimulationResult`'s): grasped (the
     handle), q_opened (articulation in [0, 1] when the opening ends), joint_error there (rad or
-    m), max_drift (hand to held grip point while pulling, m). The place: picked (the item left the
-    table in the hand), item_error (its bottom centre to the true goal at the end, m), inside (its
-    centre in the compartment's inner box), resting (speed under `rest_speed`), q_final
-    (articulation at the end; `still_open`: within the opening's tolerance of the target). times
-    (s, (M,)), q_object ((M,)), p_W_item (m, (M, 3)): the samples."""
+    m), max_drift (largest move of the held grip point in the tool frame while pulling, m). The
+    place: picked (the item left the table in the hand), item_error (its bottom centre to the
+    true goal at the end, m), inside (its centre in the compartment's inner box), resting (speed
+    under `rest_speed`), q_final (articulation at the end; `still_open`: within the opening's
+    tolerance of the target). times (s, (M,)), q_object ((M,)), p_W_item (m, (M, 3)): the
+    samples."""
 
     grasp: str
     joint_type: str
@@ -179,14 +190,22 @@ class _Timeline:
     t_end: float
 
 
-def _desired_states(open_plan: PlanResult, place: PlacePlan, cfg: PlaceSimulationConfig, finger_closed: float,
-                    item_half_width: float, finger_item: float) -> tuple[PiecewisePolynomial, _Timeline]:
+def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSimulationConfig,
+                    finger_closed: float, item_half_width: float, finger_item: float
+                    ) -> tuple[PiecewisePolynomial, _Timeline]:
     """[q; v] of the robot (9 + 9) over the whole run: the opening as `simulate_articulation`
-    plays it, the fingers opening, the segments with the fingers closing on the item after the
-    first (to its sides in 70% of the dwell, then to `finger_item`: a contact grasp does not hit
-    it) and opening after the second, the settling time."""
-    opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
-    t_o = opening.end_time()
+    plays it (none when `open_plan` is None: the arm starts at the place's first positions, the
+    fingers open, and the timeline's opening times are -1), the fingers opening, the segments with
+    the fingers closing on the item after the first (to its sides in 70% of the dwell, then to
+    `finger_item`: a contact grasp does not hit it) and opening after the second, the settling
+    time."""
+    if open_plan is None:
+        start = np.r_[place.segments[0].value(0.0), np.zeros(NUM_ARM_JOINTS + 2)]
+        opening = PiecewisePolynomial.ZeroOrderHold([0.0, 1.0], np.column_stack([start, start]))
+        t_o, finger_closed = 0.0, FINGER_OPEN
+    else:
+        opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
+        t_o = opening.end_time()
     to_pick, carry, retreat = place.segments
     t1 = t_o + cfg.release
     t2 = t1 + to_pick.duration
@@ -227,12 +246,13 @@ def _desired_states(open_plan: PlanResult, place: PlacePlan, cfg: PlaceSimulatio
     v[:, NUM_ARM_JOINTS:] = 0.0
     head_t = np.array(opening.get_segment_times())
     head_t = head_t[head_t < t_o]
-    head = np.array([opening.value(t).ravel() for t in head_t])
+    head = np.array([opening.value(t).ravel() for t in head_t]).reshape(len(head_t), 2 * len(q[0]))
     knots = np.r_[head_t, times]
     values = np.vstack([head, np.hstack([q, v])]).T
-    t_g = open_plan.t_grasp
-    timeline = _Timeline(t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o,
-                         t2 + 0.5 * cfg.pick_dwell, t4, end)
+    t_g = -1.0 if open_plan is None else open_plan.t_grasp
+    opened = (-1.0, -1.0, -1.0) if open_plan is None else (
+        t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o)
+    timeline = _Timeline(*opened, t2 + 0.5 * cfg.pick_dwell, t4, end)
     return PiecewisePolynomial.FirstOrderHold(knots, values), timeline
 
 
@@ -251,21 +271,24 @@ def _interior(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> tuple[R
 
 
 def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float,
-                            open_plan: PlanResult, place: PlacePlan, item: Item, table: ObstacleBox,
-                            meshcat: Meshcat | None = None,
-                            config: PlaceSimulationConfig | None = None) -> PlaceSimulationResult:
+                            open_plan: PlanResult | None, place: PlacePlan, item: Item, table: ObstacleBox,
+                            meshcat: Meshcat | None = None, config: PlaceSimulationConfig | None = None,
+                            opening: SimulationResult | None = None) -> PlaceSimulationResult:
     """Open front 0 of `obj` (at X_WO, shut at q_start) with `open_plan`, then pick `item` from
-    `table` and place it with `place`, in one SAP simulation; records into `meshcat` if given."""
+    `table` and place it with `place`, in one SAP simulation; records into `meshcat` if given.
+    With `open_plan` None the opening was simulated before (`opening`, its outcome) from another
+    base: the run starts with the front at q_start and the arm on the place's base (`place.X_WB`)."""
     cfg = config or PlaceSimulationConfig()
     sim = cfg.opening
+    X_WB = place.X_WB if open_plan is None else open_plan.X_WB
     contact = sim.contact
     scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=sim.time_step, discrete_contact_approximation="sap"), builder)
-    robot = add_panda(plant, open_plan.X_WB)
+    robot = add_panda(plant, X_WB)
     add_floor(plant)
-    add_pedestal(plant, open_plan.X_WB)
+    add_pedestal(plant, X_WB)
     model = scene_object.add_to(plant)
     shape = Box(*table.size)
     world = plant.world_body()
@@ -277,6 +300,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
                           grip_bodies)
     set_arm_gains(plant, robot)
+    couple_fingers(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
     handle_body = plant.GetBodyByName(scene_object.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
@@ -298,7 +322,8 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeBetween(hand_set, held))
 
-    _controller_plant = add_gravity_compensation(builder, plant, robot, open_plan.X_WB)  # kept alive here
+    _controller_plant = add_gravity_compensation(builder, plant, robot, X_WB)  # kept alive here
+    add_joint_friction(builder, plant, joint)
     desired, times = _desired_states(open_plan, place, cfg, sim.finger_target(sim.finger_closed),
                                      item.width / 2, sim.finger_target(item.width / 2))
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
@@ -317,7 +342,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     lower = joint.position_lower_limits()[0]
     span = joint.position_upper_limits()[0] - lower
     set_joint_value(plant, ctx, joint, lower + q_start * span)
-    plant.SetPositions(ctx, robot, open_plan.trajectory.value(0.0).ravel())
+    plant.SetPositions(ctx, robot, desired.value(0.0).ravel()[:plant.num_positions(robot)])
     plant.SetFreeBodyPose(ctx, item_body, place.X_WI_pick)
     for cid in [*handle_ids, *([item_id] if item_id is not None else [])]:
         plant.SetConstraintActiveStatus(ctx, cid, False)
@@ -328,6 +353,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
     samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_activate,
                               times.t_opened, times.t_item, times.t_item_release, times.t_end])
+    samples = samples[samples >= 0.0]
     grip, held_handle, drift, p_item, q_object, q_opened, lifted = 0, [], [], [], [], float("nan"), 0.0
     for t in samples:
         simulator.AdvanceTo(t)
@@ -341,7 +367,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
             if held_handle[0] and not contact:
                 plant.SetConstraintActiveStatus(ctx, handle_ids[grip], True)
         if times.t_pull <= t <= times.t_opened:
-            drift.append(np.linalg.norm(X_WT.translation() - p_grip))
+            drift.append(X_WT.inverse() @ p_grip)
         if t == times.t_opened:
             q_opened = (joint.GetOnePosition(ctx) - lower) / span
             if not contact and held_handle[0]:
@@ -365,9 +391,12 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     tolerance = sim.revolute_tolerance if revolute else sim.prismatic_tolerance
     q_final = (joint.GetOnePosition(ctx) - lower) / span
     joint_error = abs(q_opened - q_target) * span
-    max_drift = float(max(drift)) if drift else float("nan")
+    max_drift = float(np.linalg.norm(np.array(drift) - drift[0], axis=1).max()) if drift else float("nan")
     grasped = bool(held_handle and held_handle[0])
     opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
+    if opening is not None:
+        grasped, q_opened, joint_error = opening.grasped, opening.q_final, opening.joint_error
+        max_drift, opened = opening.max_drift, opening.success
     X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
     goal = scene_object.ground_truth.point("goal", q_final)
     item_error = float(np.linalg.norm(X_WI.translation() - goal))
@@ -413,6 +442,51 @@ def true_compartment(obj: ArticulatedObject, X_WO: RigidTransform, q: float
     return [b for b in boxes if not b.name.startswith("front0_")], moving
 
 
+MOVE_BASE = {"closet": True, "drawer": False}
+"""Whether the base moves between the opening and the place, by category: a closet's door must be
+opened from where its sweep allows and its floor reached through the open front from in front
+of it, which one base seldom does; a drawer's box is reached from where its handle was pulled
+(there the base moves only when no one base serves both)."""
+
+
+def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
+              place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
+    """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`)."""
+    errors = []
+    for reach in PLACE_REACH[kt.category]:
+        try:
+            plan = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
+                                     must_reach=place_reach_points(kt, q_target, item, place_config))
+            table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
+                                       ITEM_REACH[GRASP_OF[kt.category]])
+            q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+            problem = place_problem(kt, q_target, item, X_WI, table, obstacles, place_config)
+            place = plan_place(plan.X_WB, q_end, problem, place_config, plan.waypoints[-1])
+            return plan, place, table
+        except PlanningError as err:
+            errors.append(f"base within {reach:.2f} m of the goal: {err}")
+    raise PlanningError("; ".join(errors))
+
+
+def _moved_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
+                place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
+    """The opening from the base the opening alone chooses, then the place from a base re-placed in
+    front of the open compartment (`place_bases`, first that plans)."""
+    plan = plan_articulation(kt, q_target, config=config)
+    boxes = [*obstacles[0], *obstacles[1]]
+    errors = []
+    for X_WB in place_bases(kt, q_target, boxes):
+        try:
+            table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
+            problem = place_problem(kt, q_target, item, X_WI, table, obstacles, place_config)
+            place = plan_place(X_WB, ready_posture(X_WB, kt.point("goal", q_target)), problem, place_config)
+            return plan, place, table
+        except PlanningError as err:
+            errors.append(str(err))
+    raise PlanningError("no base in front of the open compartment plans the place: "
+                        + ("; ".join(dict.fromkeys(errors)) or "none clears it"))
+
+
 def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float, item: Item,
                    keypoints: KeypointTrajectory | None = None, reference: KeypointTrajectory | None = None,
                    replay: Path | None = None, planner_config: PlannerConfig | None = None,
@@ -421,9 +495,11 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     """Open front 0 of `obj` (a closet or a drawer at X_WO, at q_start) to q_target and place
     `item` (standing on a table beside the robot) at the goal keypoint, planned with `keypoints`
     (default: the object's own, with its true geometry as obstacles; given keypoints are planned
-    with keypoint-derived boxes only), then simulated on the true object. The base is sought
-    nearest the goal first (`PLACE_REACH`), until both plans succeed. `replay`: an HTML replay of
-    the run, with the keypoint paths used (and `reference`'s under "keypoints_true")."""
+    with keypoint-derived boxes only), then simulated on the true object. A closet's place is
+    planned from a base re-placed after the opening (`MOVE_BASE`, `_moved_base`); a drawer's from
+    the opening's base (`_one_base`), or a re-placed one when that fails. `replay`: an HTML replay
+    of the run (with a moved base, of the place; the opening's beside it, `*_opening.html`), with
+    the keypoint paths used (and `reference`'s under "keypoints_true")."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
@@ -431,25 +507,21 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         obstacles = true_compartment(obj, X_WO, q_target)
     else:
         kt, obstacles = keypoints, compartment_obstacles(keypoints, q_target)
-    errors, simulation_config = [], simulation_config or PlaceSimulationConfig()
-    depth = GRASP_DEPTH[simulation_config.opening.grasp]
-    for reach in PLACE_REACH[kt.category]:
-        config = replace(planner_config or PlannerConfig(), place_reach=reach, grasp_depth=depth)
+    simulation_config = simulation_config or PlaceSimulationConfig()
+    config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
+    errors = []
+    for planner in ([] if MOVE_BASE[kt.category] else [_one_base]) + [_moved_base]:
         try:
-            plan = plan_articulation(kt, q_target, config=config,
-                                     must_reach=place_reach_points(kt, q_target, item, place_config))
-            table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
-                                       ITEM_REACH[GRASP_OF[kt.category]])
-            place = plan_place(plan, place_problem(kt, q_target, item, X_WI, table, obstacles, place_config),
-                               place_config)
+            plan, place, table = planner(kt, q_target, item, obstacles, config, place_config)
             break
         except PlanningError as err:
-            errors.append(f"base within {reach:.2f} m of the goal: {err}")
+            errors.append(("base moved after the opening: " if planner is _moved_base else "") + str(err))
     else:
         return PlaceTaskOutcome(q_target, kt, None, None, "; ".join(errors), float("nan"), None, None)
     seconds = time.perf_counter() - started
-    meshcat = Meshcat() if replay is not None else None
-    if meshcat is not None:
+    moved = planner is _moved_base
+    meshcats = [Meshcat() if replay is not None else None for _ in range(1 + moved)]
+    for meshcat in meshcats if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
         if reference is not None:
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true", (reference.q_current, q_target),
@@ -457,12 +529,19 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         for box in (*obstacles[0], *obstacles[1]):
             draw_obstacle(meshcat, box)
         goal = kt.point("goal", q_target)
-        centre = (goal + plan.X_WB.translation()) / 2 + [0.0, 0.0, 0.3]
-        away = plan.X_WB.translation() - goal
+        centre = (goal + place.X_WB.translation()) / 2 + [0.0, 0.0, 0.3]
+        away = place.X_WB.translation() - goal
         away[2] = 0.0
         side = np.cross([0.0, 0.0, 1.0], away / np.linalg.norm(away))
         frame_camera(meshcat, centre, centre + 0.6 * away + 1.2 * side + [0.0, 0.0, 0.9])
-    simulation = simulate_open_and_place(obj, X_WO, q_start, q_target, plan, place, item, table, meshcat,
-                                         simulation_config)
-    path = write_replay(meshcat, replay) if replay is not None else None
+    opening = None
+    if moved:
+        scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
+        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening)
+        if replay is not None:
+            write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+    simulation = simulate_open_and_place(obj, X_WO, opening.q_final if moved else q_start, q_target,
+                                         None if moved else plan, place, item, table, meshcats[0],
+                                         simulation_config, opening)
+    path = write_replay(meshcats[0], replay) if replay is not None else None
     return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path)

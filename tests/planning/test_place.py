@@ -34,7 +34,9 @@ def test_place_plan_ends_at_the_goal(category, seed, q_target):
     fixed, moving = compartment_obstacles(kt, q_target)
     grasp = "side" if category == "closet" else "top"
     table, X_WI = table_beside(opening.X_WB, [*fixed, *moving], ITEM_REACH[grasp])
-    plan = plan_place(opening, place_problem(kt, q_target, item, X_WI, table))
+    q_end = opening.trajectory.value(opening.duration).ravel()
+    plan = plan_place(opening.X_WB, q_end, place_problem(kt, q_target, item, X_WI, table),
+                      handle=opening.waypoints[-1])
 
     goal = obj.keypoints(q_target)["goal"]
     assert plan.place_error() < 0.03
