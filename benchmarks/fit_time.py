@@ -1,9 +1,9 @@
 """Fit time and accuracy of the neural field per capture set: fit presets side by side, or a profile.
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
-       [--n 20] [--threads 1] [--variants thorough fast] [--variant NAME:FIELD=VALUE,...]
+       [--n 20] [--first 0] [--threads 1] [--variants thorough fast] [--variant NAME:FIELD=VALUE,...]
        [--profile K] [--step-costs] [--csv FILE] [--halves]
-       python benchmarks/fit_time.py --captures DIR [--n 20] --from-csv FILE [--halves]
+       python benchmarks/fit_time.py --captures DIR --from-csv FILE [FILE ...] [--halves]
 Create the captures with `nfr-drake captures --category closet --n 20 --out DIR --size 64`.
 
 Side by side (default): every capture is fitted (`nfr_drake.inference.infer.infer`: the fit and the
@@ -18,8 +18,8 @@ torch thread), wall seconds, steps, and the errors against gt.json
 error, handle trajectory RMSE). Prints one markdown row per variant: medians and 90th
 percentiles, and the ratio of the medians to the first variant's; with `--halves`, the same
 for the first and the second half of the captures too (a choice tuned on the first half is
-checked on the second). `--from-csv FILE` prints the tables of a CSV written by `--csv` without
-fitting.
+checked on the second). `--from-csv FILE ...` prints the tables of CSVs written by `--csv` (e.g. of
+two halves fitted in parallel with `--first`) without fitting.
 
 `--step-costs`: CPU milliseconds of one Adam step of one code (forward, backward, update) on 64
 to 512 rays of the first capture.
@@ -141,12 +141,13 @@ def tables(rows: dict[str, list[dict]], unit: str, halves: bool) -> str:
     return text
 
 
-def read_rows(csv_path: Path) -> dict[str, list[dict]]:
-    """The rows per variant of a CSV written by `side_by_side`, in its order."""
+def read_rows(csv_paths: list[Path]) -> dict[str, list[dict]]:
+    """The rows per variant of CSVs written by `side_by_side`, in their order."""
     rows: dict[str, list[dict]] = {}
-    with open(csv_path, newline="") as f:
-        for row in csv.DictReader(f):
-            rows.setdefault(row["variant"], []).append({k: float(row[k]) for k, _ in METRICS})
+    for path in csv_paths:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                rows.setdefault(row["variant"], []).append({k: float(row[k]) for k, _ in METRICS})
     return rows
 
 
@@ -244,6 +245,8 @@ def main() -> None:
     parser.add_argument("--model", type=Path, help="the model folder to fit (not with --from-csv)")
     parser.add_argument("--captures", type=Path, required=True)
     parser.add_argument("--n", type=int, default=20)
+    parser.add_argument("--first", type=int, default=0,
+                        help="index of the first capture used (captures FIRST to FIRST + n - 1)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--variants", nargs="*", default=["thorough", "fast"],
                         help="presets to compare, in this order (the first is the reference: "
@@ -257,10 +260,11 @@ def main() -> None:
                         help="CPU time of one Adam step by rays per step instead")
     parser.add_argument("--halves", action="store_true",
                         help="the tables of the first and the second half of the captures too")
-    parser.add_argument("--from-csv", type=Path, default=None,
-                        help="print the tables of the rows of a --csv file instead of fitting")
+    parser.add_argument("--from-csv", type=Path, nargs="+", default=None,
+                        help="print the tables of the rows of --csv files (joined in this order) "
+                             "instead of fitting")
     args = parser.parse_args()
-    dirs = capture_dirs(args.captures)[:args.n]
+    dirs = capture_dirs(args.captures)[args.first:args.first + args.n]
     warm = read_capture_set(dirs[0])  # the first fit of a process pays for lazy set-up
     unit = "deg" if warm.gt["object"]["joint_type"] == "revolute" else "cm"
     if args.from_csv is not None:
