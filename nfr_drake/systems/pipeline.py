@@ -34,7 +34,7 @@ from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.planning.planner import grasp_planner
-from nfr_drake.systems.perception import AddNfrPerception
+from nfr_drake.systems.perception import AddNfrPerception, NfrPerceptionSystem
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.scene_objects import SceneObject
@@ -114,6 +114,21 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None 
     the object in `perception_room`. A piece of furniture is framed as its captures are (its
     bounds over every articulation in view, `CameraDistribution` "bounds") and the trajectory is
     that of its part `part` (the perception system's `part`)."""
+    simulator, perception = perception_simulator(scenario, obj, part)
+    started = time.perf_counter()
+    simulator.Initialize()  # the perception system fits here, once
+    seconds = time.perf_counter() - started
+    context = perception.GetMyContextFromRoot(simulator.get_context())
+    return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
+            perception.get_confidence_output_port().Eval(context),
+            perception.get_X_WO_output_port().Eval(context))
+
+
+def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int | None = None
+                         ) -> tuple[Simulator, NfrPerceptionSystem]:
+    """The diagram `perceive_scene` photographs `obj` with (the object at X_WO and q_start, the
+    perception cameras, named `nfr_camera_{i}`, and `NfrPerceptionSystem`) in a Simulator not yet
+    initialised, so nothing is fitted until `Initialize`."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
@@ -141,13 +156,7 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None 
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
                      obj, model, scenario.q_start)
-    started = time.perf_counter()
-    simulator.Initialize()  # the perception system fits here, once
-    seconds = time.perf_counter() - started
-    context = perception.GetMyContextFromRoot(simulator.get_context())
-    return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
-            perception.get_confidence_output_port().Eval(context),
-            perception.get_X_WO_output_port().Eval(context))
+    return simulator, perception
 
 
 def perception_room(scenario: Scenario, obj: ArticulatedObject, X_WCs: list[RigidTransform]) -> Room:
