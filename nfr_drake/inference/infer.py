@@ -15,6 +15,7 @@ import tyro
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.confidence import ConfidenceModel, code_scale, fit_features
@@ -121,6 +122,23 @@ def shrunk(image: np.ndarray, size: int = MASK_SIZE_PX) -> np.ndarray:
                       interpolation=cv2.INTER_AREA)
 
 
+RoomLoss = Literal["background", "masked"]
+"""How the fit treats the pixels of a room photo off the object's mask: painted in the training
+background, so that the field's silhouette must match the mask ("background"), or left out of the
+image loss ("masked"; the field may then grow where the mask is not: an open door, a taller
+carcass)."""
+
+
+def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
+                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
+    """Each uint8 RGB image (H, W, 3) blended into `background_rgb` (in [0, 1]) by its object
+    mask (H, W) in [0, 1]: m image + (1 - m) background, so that a photo of a room looks like the
+    training renders of the object alone wherever the mask holds."""
+    background = 255.0 * np.asarray(background_rgb, np.float32)
+    return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
+            for image, m in zip(images, masks, strict=True)]
+
+
 MIN_FIT_VIEWS = 3
 """Fewer views than this leave q and the object's shape poorly constrained: the fit warns."""
 
@@ -185,13 +203,14 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
 
 
 def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
-                   q_grid: np.ndarray, masks: list[np.ndarray], masked_loss: bool = True,
+                   q_grid: np.ndarray, masks: list[np.ndarray], room_loss: RoomLoss = "background",
                    keypoint_source: KeypointSource = "head", room: bool = True
                    ) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), the
-    fit runs in that O (its image loss `masked_loss` or over every pixel; `room`: the masks are a
-    room segmenter's, the confidence's silhouette, see `infer`), and the result's
+    fit runs in that O (the pixels off the masks painted in the training background or left out of
+    the image loss, `room_loss`; `room`: the masks are a room segmenter's, the confidence's
+    silhouette, see `infer`), and the result's
     positions are moved into W (`extra["object_pose"]`: X_WO, the carcass size; a size outside
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
@@ -201,13 +220,15 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     X_OW = np.linalg.inv(estimate.X_WO)
     in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
                       capture.gt, capture.extra)
+    if room_loss == "background":
+        images = paint_background(images, masks)
     result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
-                            masked_loss, room)
+                            room_loss == "masked", room)
     R, t = estimate.X_WO[:3, :3], estimate.X_WO[:3, 3]
     result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
     result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
     result.extra["object_pose"] = {"X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
-                                   "masked_loss": masked_loss}
+                                   "room_loss": room_loss}
     problem = estimate.size_problem(fitted.category)
     if problem:
         result.extra["warnings"].append(problem)
@@ -413,7 +434,7 @@ def infer_command(
     estimate_pose: bool = False,
     masks: Literal["segmenter", "background"] = "segmenter",
     segmenter: Path = Path("models/segmenter"),
-    masked_loss: bool = True,
+    room_loss: RoomLoss = "background",
     part: int | None = None,
     furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
     threads: int | None = None,
@@ -440,7 +461,9 @@ def infer_command(
             a room; they are also the fit confidence's observed silhouette) or "background" (an
             object alone before a uniform background).
         segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
-        masked_loss: with --estimate-pose, only pixels on the object's mask count in the image loss.
+        room_loss: with --estimate-pose, the pixels off the object's mask are painted in the
+            training background ("background": the field's silhouette must match the mask) or
+            left out of the image loss ("masked").
         part: a model with several parts (furniture): the part whose q, keypoints and trajectory
             are the result's single-part fields (default: the first part found); every part found
             is listed under `parts`.
@@ -477,7 +500,7 @@ def infer_command(
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
         views = object_masks(cap.load_images(), segmenter if masks == "segmenter" else None)
-        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, masked_loss, keypoints,
+        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
                                               room=masks == "segmenter")
         pose = np.array(result.extra["object_pose"]["X_WO"])
         print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "

@@ -50,7 +50,14 @@ from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
-from nfr_drake.inference.infer import FittedModel, KeypointSource, infer, infer_parts
+from nfr_drake.inference.infer import (
+    FittedModel,
+    KeypointSource,
+    RoomLoss,
+    infer,
+    infer_parts,
+    paint_background,
+)
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
@@ -63,11 +70,6 @@ PerceptionScene = Literal["alone", "room"]
 """What the perception cameras see: the object "alone" before the training background (the
 paper's setting), or the whole "room" (every geometry of the plant), the object found by a
 segmenter."""
-RoomLoss = Literal["background", "masked"]
-"""How the fit treats the pixels of a room photo off the object's mask: painted in the training
-background, so that the field's silhouette must match the mask ("background"), or left out of the
-image loss ("masked"; the field may then grow where the mask is not: an open door, a taller
-carcass)."""
 
 
 class NfrPerceptionSystem(LeafSystem):
@@ -271,16 +273,6 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _CalcX_WO(self, context, output) -> None:
         output.set_value(self._stored(context)[1])
-
-
-def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
-                     background_rgb: tuple[float, float, float]) -> list[np.ndarray]:
-    """Each uint8 RGB image (H, W, 3) blended into `background_rgb` (in [0, 1]) by its object
-    mask (H, W) in [0, 1]: m image + (1 - m) background, so that a photo of a room looks like the
-    training renders of the object alone wherever the mask holds."""
-    background = 255.0 * np.asarray(background_rgb, np.float32)
-    return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
-            for image, m in zip(images, masks, strict=True)]
 
 
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:

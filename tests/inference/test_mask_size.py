@@ -5,6 +5,8 @@ keep the photo's size."""
 import numpy as np
 import pytest
 
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.capture import read_capture_set, write_capture_set
 from nfr_drake.inference import infer
 from nfr_drake.inference.infer import MASK_SIZE_PX, object_masks, shrunk
 
@@ -59,3 +61,36 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
         infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
                              np.linspace(0, 1, 3), [np.ones((768, 1024))] * 3)
     assert seen == [(MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX)] * 3
+
+
+@pytest.mark.parametrize("room_loss", ["background", "masked"])
+def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path, room_loss):
+    """With "background" the fit sees the photo painted in the training background off the mask
+    (so it cannot grow an open door where the mask is not) and every pixel counts; with "masked"
+    the photo as it is and only the mask's pixels."""
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    estimate = type("Estimate", (), {"X_WO": np.eye(4)})()
+    monkeypatch.setattr(infer, "estimate_object_pose", lambda *args, **kwargs: estimate)
+
+    def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room):
+        seen.update(images=images, masked_loss=masked_loss)
+        raise Stop
+
+    monkeypatch.setattr(infer, "infer", fake_infer)
+    photo = np.full((40, 60, 3), 50, np.uint8)
+    mask = np.zeros((40, 60), np.float32)
+    mask[10:30, 20:40] = 1.0
+
+    write_capture_set(tmp_path / "capture", [photo] * 3, [np.eye(4)] * 3, PinholeCamera.from_fov(60, 40, 1.0))
+    with pytest.raises(Stop):
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(),
+                             read_capture_set(tmp_path / "capture"), None, np.linspace(0, 1, 3),
+                             [mask] * 3, room_loss)
+    image = seen["images"][0]
+    assert (image[10:30, 20:40] == 50).all()
+    assert (image[0, 0] == (235 if room_loss == "background" else 50)).all()
+    assert seen["masked_loss"] is (room_loss == "masked")
