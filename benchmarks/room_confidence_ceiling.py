@@ -1,6 +1,7 @@
 """What the fit confidence would say of a fit that is exactly right, in held-out rooms.
 
     python benchmarks/room_confidence_ceiling.py --rooms 30 --threads 1
+    python benchmarks/room_confidence_ceiling.py --rooms 30 --threads 1 --band 0   # no edge band
 
 For the first `rooms` rooms of each held-out room set of closets and drawers (docs/ROOMS.md;
 written as capture sets by `nfr_drake.eval.confidence_rooms`), two features of a perfect fit
@@ -27,13 +28,14 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.eval.confidence_data import SEGMENTER
 from nfr_drake.eval.confidence_rooms import room_captures
-from nfr_drake.inference.confidence import edge_band, silhouette_iou
+from nfr_drake.inference.confidence import EDGE_BAND, edge_band, silhouette_iou
 from nfr_drake.inference.infer import FittedModel, object_masks
 from nfr_drake.perception.handle_triangulation import locate_handle
 
 
-def perfect_fit(fitted: FittedModel, capture_dir: Path) -> dict:
-    """The room-dependent features of a perfect fit to a room capture (module docstring)."""
+def perfect_fit(fitted: FittedModel, capture_dir: Path, band: float = EDGE_BAND) -> dict:
+    """The room-dependent features of a perfect fit to a room capture (module docstring), the
+    silhouettes compared outside the edge band `band` (0: everywhere)."""
     capture = read_capture_set(capture_dir)
     images = capture.load_images()
     labels = np.load(Path(capture.gt["room"]) / "label.npy")[0]
@@ -42,7 +44,8 @@ def perfect_fit(fitted: FittedModel, capture_dir: Path) -> dict:
         mask = prob > 0.5
         if (label > 0).any():  # a view where the object is wholly hidden has no silhouette
             ious.append(silhouette_iou((label > 0).reshape(-1), mask.reshape(-1),
-                                       ~edge_band(mask).reshape(-1)))
+                                       ~edge_band(mask, band).reshape(-1) if band else
+                                       np.ones(mask.size, bool)))
         border.append(np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]]).mean())
     seen = locate_handle(fitted.handle_detector.detect(images), capture.frames)
     return {"silhouette_iou_worst_view": min(ious), "edge_contact": max(border),
@@ -50,7 +53,7 @@ def perfect_fit(fitted: FittedModel, capture_dir: Path) -> dict:
 
 
 def main(rooms: int = 30, rooms_data: Path = Path("data/rooms"), out: Path = Path("data/eval/rooms"),
-         threads: int | None = 1) -> None:
+         threads: int | None = 1, band: float = EDGE_BAND) -> None:
     set_torch_threads(threads)
     print("| set | rooms | worst-view IoU, median (p10) | sighted | perfect fits refused | "
           "refused, sighting term held at sighted |\n|---|---|---|---|---|---|")
@@ -62,7 +65,7 @@ def main(rooms: int = 30, rooms_data: Path = Path("data/rooms"), out: Path = Pat
                    "code_distance": mean["code_distance"],
                    "sighting_gap_m": (10 ** mean["sighting_gap_m"] - 0.5) / 100.0}
         for name, captures in room_captures(rooms_data, out, category, rooms).items():
-            rows = [typical | perfect_fit(fitted, c) for c in captures]
+            rows = [typical | perfect_fit(fitted, c, band) for c in captures]
             iou = np.array([r["silhouette_iou_worst_view"] for r in rows])
             refused = [model.probability(r) < model.threshold for r in rows]
             sighted = [model.probability(r | {"sighting_missing": 0.0}) < model.threshold for r in rows]
@@ -70,7 +73,7 @@ def main(rooms: int = 30, rooms_data: Path = Path("data/rooms"), out: Path = Pat
             print(f"| {name} | {len(rows)} | {np.median(iou):.2f} ({np.percentile(iou, 10):.2f}) | "
                   f"{seen} | {sum(refused)} | {sum(sighted)} |")
     print(f"\n{datetime.date.today()}, {os.cpu_count()}-core CPU; calibration: models/C/confidence.json "
-          f"(threshold {model.threshold:.2f}); segmenter {SEGMENTER}")
+          f"(threshold {model.threshold:.2f}); segmenter {SEGMENTER}; edge band {band}")
 
 
 if __name__ == "__main__":
