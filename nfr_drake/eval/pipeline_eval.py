@@ -32,8 +32,9 @@ class PipelineRow:
     """One object's run; errors in cm (keypoints) and deg or cm (articulation, `unit`).
 
     handle_error_cm: predicted against true handle at the observed state. hinge_side_correct
-    (closets; empty for drawers): whether the predicted hinge lies on the true hinge's side of the
-    handle (the horizontal handle-to-hinge vectors point the same way). p_handle_within_2cm: the
+    (doors; empty for drawers): whether the predicted hinge lies on the true hinge's side of the
+    handle (the horizontal handle-to-hinge vectors point the same way; False for a door predicted
+    as a drawer). p_handle_within_2cm: the
     fit's confidence (nan without a calibration); refused: the fit was not planned on (`failure`
     says why); planned, grasped and success are then False. pose_error_cm (xy) and
     pose_error_deg (yaw): the estimated object pose's errors (nan when the pose was given).
@@ -99,7 +100,9 @@ def _row(scenario: Scenario) -> PipelineRow:
     handle = [kt.point("handle", kt.q_current) if kt else np.full(3, np.inf)
               for kt in (outcome.predicted, outcome.truth)]
     hinge_side = None
-    if revolute and outcome.predicted is not None:
+    if revolute and outcome.predicted is not None and outcome.predicted.category != "closet":
+        hinge_side = False  # a furniture door the field takes for a drawer: no hinge at all
+    elif revolute and outcome.predicted is not None:
         to_hinge = [(kt.point("hinge_bottom", kt.q_current) - h)[:2]
                     for kt, h in zip((outcome.predicted, outcome.truth), handle, strict=True)]
         hinge_side = bool(to_hinge[0] @ to_hinge[1] > 0.0)

@@ -42,3 +42,15 @@ def test_pipeline_rows_name_the_part_and_nothing_is_refused(furniture_model_fold
     assert rows[0]["part_type"] == obj.front(part).kind and rows[0]["refused"] == "False"
     assert rows[0]["unit"] == ("deg" if rows[0]["part_type"] == "door" else "cm")
     assert "no fit confidence for furniture (not calibrated): no fit refused" in capsys.readouterr().out
+
+
+def test_a_door_the_field_takes_for_a_drawer_is_a_row_with_the_hinge_on_no_side(furniture_model_folder):
+    # Piece 2 of seed 200 opens its part 1, a door; slot 1 of the tiny model is a drawer. Before,
+    # the row looked for the predicted hinge and stopped the evaluation.
+    from nfr_drake.eval.pipeline_eval import _row
+
+    base = Scenario(category="furniture", seed=200, model=str(furniture_model_folder), image_size=16)
+    scenario = object_scenario(base, 2, part_target=True)
+    assert scenario.part == 1 and scenario.sample_piece()[0].front(1).kind == "door"
+    row = _row(scenario)
+    assert row.part_type == "door" and row.hinge_side_correct is False and row.unit == "deg"
