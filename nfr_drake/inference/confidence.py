@@ -160,6 +160,7 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
         else 0.0,
         "code_distance": code_distance,
         "views": float(len(frames)),
+        "room": float(room_masks is not None),
     }
     return features, per_view
 
@@ -261,6 +262,9 @@ ADVICE = {
     "sighting_gap_m": ("the handle detector's handle and the fitted one disagree: photograph the "
                        "handle closer, or use a model of this kind of object"),
     "code_distance": "the object is unlike the model's training objects: use a model of this kind",
+    "room": ("in a room the fit confidence is not calibrated yet (docs/CONFIDENCE.md, \"In rooms\"): "
+             "photograph the object alone before a plain background, or act on the fit at your own "
+             "risk with --min-confidence 0"),
     None: "take more views, closer, or use a model of this kind of object",
 }
 """What to do, by the weakest feature of a refused fit (`ConfidenceModel.weakest`)."""
@@ -278,8 +282,10 @@ def refusal(confidence: dict | None, threshold: float | None = None) -> str | No
     if p >= threshold:
         return None
     f = confidence["features"]
-    # Below 3 views the detector cannot triangulate a handle at all: more views come first.
-    weakest = "views" if f["views"] < 3 else confidence.get("weakest")
+    # In a room the calibration does not hold at all; below 3 views the detector cannot
+    # triangulate a handle: those come before the weakest feature.
+    weakest = ("room" if f.get("room") else "views" if f["views"] < 3
+               else confidence.get("weakest"))
     advice = ADVICE.get(weakest, ADVICE[None])
     if weakest == "silhouette_iou_worst_view":
         advice = advice.format(f["silhouette_iou_worst_view"])

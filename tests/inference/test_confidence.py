@@ -24,7 +24,7 @@ from nfr_drake.inference.confidence import (
 
 FEATURES = ("image_loss", "image_loss_worst_view", "silhouette_iou", "silhouette_iou_worst_view",
             "edge_contact", "sighting_missing", "sighting_gap_m", "start_loss_ratio",
-            "code_distance", "views")
+            "code_distance", "views", "room")
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +109,8 @@ def test_refusal_says_why_and_what_to_do():
     two_views = {**confidence, "features": features | {"views": 2.0}, "weakest": "sighting_missing"}
     assert "more sides" in refusal(two_views)  # no sighting is possible below 3 views
     assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
+    room = refusal({**confidence, "features": features | {"room": 1.0}})
+    assert "not calibrated" in room and "--min-confidence 0" in room and "\n" not in room
 
 
 def test_background_mask_finds_an_object_on_a_uniform_background():
@@ -169,6 +171,7 @@ def test_in_a_room_the_silhouette_is_the_mask_and_not_compared_along_the_sides_i
     _, room_images = apply_variant("background", cap, images, 0)  # another background: a "room"
     alone, alone_views = _room_features(capture, model_folder, images, None)
     room, room_views = _room_features(capture, model_folder, room_images, masks)
+    assert room["room"] == 1.0 and alone["room"] == 0.0
     # Only the background changed: the object's pixels, their image loss and the silhouettes
     # are the same as before the uniform background.
     same, _ = _room_features(capture, model_folder, images, masks)
