@@ -19,8 +19,8 @@ import tyro
 
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import image_grid
+from nfr_drake.inference.infer import paint_background
 from nfr_drake.perception.segmentation.model import load_segmenter
-from nfr_drake.systems.perception import paint_background
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
 
