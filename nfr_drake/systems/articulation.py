@@ -435,8 +435,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:
     """Compliant hydroelastic finger pads on the collision geometries of the bodies `pads` (modulus
     `PAD_MODULUS`, 4 mm resolution) and rigid hydroelastic ones on those of `held` (what they
-    squeeze: the handle's bodies, an item), friction 1; before Finalize. With point contact the
-    squeezed pads sank about a centimetre into an item and squeezed it out."""
+    squeeze: the handle's bodies; an item is compliant itself), friction 1; before Finalize.
+    With point contact the squeezed pads sank about a centimetre into an item and squeezed it
+    out."""
     for bodies, compliant in ((pads, True), (held, False)):
         for g in [g for body in bodies for g in plant.GetCollisionGeometriesForBody(body)]:
             props = ProximityProperties()
@@ -446,6 +447,16 @@ def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:
             else:
                 AddRigidHydroelasticProperties(0.004, props)
             scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
+
+
+def rigid_hydroelastic(plant: MultibodyPlant, scene_graph, bodies) -> None:
+    """Rigid hydroelastic collision geometries for `bodies`, their friction kept (what a
+    compliant hydroelastic item, `nfr_drake.world.items`, rests on); before Finalize."""
+    inspector = scene_graph.model_inspector()
+    for g in [g for body in bodies for g in plant.GetCollisionGeometriesForBody(body)]:
+        props = ProximityProperties(inspector.GetProximityProperties(g))
+        AddRigidHydroelasticProperties(0.004, props)
+        scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
 
 
 def lock_shut(plant: MultibodyPlant, plant_context, joints) -> None:

@@ -15,7 +15,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, Meshcat, MeshcatVisualizer
+from pydrake.geometry import (
+    AddContactMaterial,
+    AddRigidHydroelasticProperties,
+    Box,
+    CollisionFilterDeclaration,
+    GeometrySet,
+    Meshcat,
+    MeshcatVisualizer,
+    ProximityProperties,
+)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
@@ -47,6 +56,7 @@ from nfr_drake.systems.articulation import (
     couple_fingers,
     grip_points,
     hydroelastic_grip,
+    rigid_hydroelastic,
     set_arm_gains,
     simulate_articulation,
 )
@@ -292,13 +302,18 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     model = scene_object.add_to(plant)
     shape = Box(*table.size)
     world = plant.world_body()
-    plant.RegisterCollisionGeometry(world, table.X_WB, shape, "table", CoulombFriction(0.8, 0.8))
+    table_props = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(0.8, 0.8), properties=table_props)
+    AddRigidHydroelasticProperties(0.004, table_props)
+    plant.RegisterCollisionGeometry(world, table.X_WB, shape, "table", table_props)
     plant.RegisterVisualGeometry(world, table.X_WB, shape, "table", np.array([0.55, 0.4, 0.3, 1.0]))
-    item_body = item.add_to(plant)
+    item_body = item.add_to(plant)  # compliant hydroelastic; the object rigid, to rest on
+    object_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
     if contact:
-        grip_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)] + [item_body]
         hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
-                          grip_bodies)
+                          object_bodies)
+    else:
+        rigid_hydroelastic(plant, scene_graph, object_bodies)
     set_arm_gains(plant, robot)
     couple_fingers(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)

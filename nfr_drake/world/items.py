@@ -10,7 +10,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, Cylinder, Shape
+from pydrake.geometry import (
+    AddCompliantHydroelasticProperties,
+    AddContactMaterial,
+    Box,
+    Cylinder,
+    ProximityProperties,
+    Shape,
+)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import RigidBody, SpatialInertia, UnitInertia
@@ -18,6 +25,10 @@ from pydrake.multibody.tree import RigidBody, SpatialInertia, UnitInertia
 from nfr_drake.errors import NfrDrakeError
 
 ITEM_KINDS = ("box", "can", "mug")
+ITEM_MODULUS = 1e7
+"""Hydroelastic modulus of an item's collision shapes, Pa (hard plastic, as Drake's hydroelastic
+guidance has it for stiff objects). With point contact a can or a mug standing on a closet's
+floor rocked on its rim for ever (1-5 cm/s at the end of the run: never 'resting')."""
 _MUG_HANDLE = (0.012, 0.025)  # the mug handle's thickness (along y) and reach beyond its wall (along x), m
 MAX_GRASP_WIDTH = 0.07
 """Widest item the open gripper (2 x `FINGER_OPEN` = 8 cm) takes with 5 mm to spare each side, m."""
@@ -71,14 +82,18 @@ class Item:
     def add_to(self, plant: MultibodyPlant, name: str = "item",
                rgba: tuple[float, float, float, float] = (0.85, 0.55, 0.15, 1.0)) -> RigidBody:
         """A free body with the item's collision and visual shapes and a solid-box inertia of its
-        bounding box; before Finalize()."""
+        bounding box; before Finalize(). The collision shapes are compliant hydroelastic
+        (`ITEM_MODULUS`), so the item rests on rigid hydroelastic surfaces on a contact patch."""
         p_Icm = np.array([0.0, 0.0, self.height / 2])
         G_Icm = UnitInertia.SolidBox(*(2 * self.half_extents))
         body = plant.AddRigidBody(name, plant.AddModelInstance(name),
                                   SpatialInertia(self.mass, p_Icm, G_Icm.ShiftFromCenterOfMass(-p_Icm)))
-        friction = CoulombFriction(self.friction, self.friction)
+        props = ProximityProperties()
+        AddContactMaterial(dissipation=1.0, friction=CoulombFriction(self.friction, self.friction),
+                           properties=props)
+        AddCompliantHydroelasticProperties(0.005, ITEM_MODULUS, props)
         for part, shape, X_IS in self.shapes():
-            plant.RegisterCollisionGeometry(body, X_IS, shape, f"{name}_{part}", friction)
+            plant.RegisterCollisionGeometry(body, X_IS, shape, f"{name}_{part}", props)
             plant.RegisterVisualGeometry(body, X_IS, shape, f"{name}_{part}", np.asarray(rgba))
         return body
 
