@@ -76,7 +76,7 @@ class FitConfig:
     preset: Literal["fast", "thorough"] = "fast"
     """"fast", the defaults below: starts looked up, explored 30 steps at lr 0.03 with 64 rays
     each, at most 120 steps of 128 rays with early stopping on fixed rays, a valley scan of 5
-    codes for 15 steps of 64 rays each (a drawer), a close look of 20 steps. Or "thorough"
+    codes for 15 steps of 128 rays each (a drawer), a close look of 20 steps. Or "thorough"
     (`THOROUGH`, the default before the valley scan): 4 starts spread over q explored 120
     steps, up to 400 steps of 256 rays, a close look of 150 steps; about three times the CPU time
     for the same accuracy (docs/BENCHMARKS.md). Fields left at their default take the preset's
@@ -92,8 +92,7 @@ class FitConfig:
     """Articulations of the lookup's candidates, q = (i + 0.5) / lookup_q."""
     lookup_rays: int = 512
     """Rays (edge-weighted like the steps') on which the lookup scores its candidates; as many
-    fixed rays measure the refinement's loss for early stopping and compare the valley scan's
-    codes."""
+    fixed rays measure the refinement's loss for early stopping."""
     restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
     """Codes explored in parallel (see `start`); the lowest image loss wins. At most `lookup_q`
     with start "lookup"."""
@@ -138,15 +137,17 @@ class FitConfig:
     same point), along which Adam walks slowly. The scan holds `valley_codes` articulations
     evenly over `valley_span` around the refined q, each with z_obj moved along the keypoint
     head's valley (the focus part kept in place, to first order), fits their z_obj with q held
-    for `valley_steps` shared steps, and goes on from the best of them on `lookup_rays` fixed
-    rays or, when its loss there is lower, the code at the minimum of a parabola through their
+    for `valley_steps` shared steps, and goes on from the best of them on `valley_held_rays`
+    fixed rays or, when its loss there is lower, the code at the minimum of a parabola through their
     losses (z_obj interpolated between its neighbours)."""
     valley_span: float = 0.2
     """Width of the valley scan's grid of q (shifted to lie in [0, 1])."""
     valley_steps: int = 15
     """Adam steps of the valley scan's codes, all together, `valley_rays` rays each."""
-    valley_rays: int = 64
+    valley_rays: int = 128
     """Random pixels per valley scan step and code, shared by the codes."""
+    valley_held_rays: int = 1024
+    """Fixed rays (drawn like the steps') on which the valley scan's codes are compared."""
     focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 20
     """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
@@ -195,7 +196,7 @@ class FitConfig:
             raise ConfigError(f"FitConfig.restarts ({self.restarts}) must be at most lookup_q "
                               f"({self.lookup_q}): the looked-up starts lie at distinct q")
         for name in ("restarts", "max_steps", "explore_rays", "rays_per_step", "patience",
-                     "eval_rays", "lookup_q", "lookup_rays", "valley_rays"):
+                     "eval_rays", "lookup_q", "lookup_rays", "valley_rays", "valley_held_rays"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"FitConfig.{name} must be >= 1")
         if not 0 <= self.explore_steps <= self.max_steps:
@@ -661,7 +662,7 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
                    config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss)
     z_best = z_best.detach()[0]
     if focus is not None and config.valley_codes and _slides(model, z_best, focus.keypoint):
-        valley_index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
+        valley_index = rays.sample(config.valley_held_rays, config.detail_fraction, generator)
 
         def valley_losses(c: torch.Tensor) -> torch.Tensor:
             return eval_losses(c, valley_index) + _sighting_loss(model, c, sighting, config).cpu()
