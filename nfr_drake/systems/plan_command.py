@@ -11,9 +11,9 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.jsonio import read_json
-from nfr_drake.planning.planner import PlanningError
+from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.systems.scene_objects import SceneObject, object_pose, sampled_part
-from nfr_drake.systems.task import run_task, task_span
+from nfr_drake.systems.task import replay_plan, run_task, task_span
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 
@@ -71,13 +71,17 @@ def plan_command(
             posed by `nfr-drake poses --world floor`), else in O and placed by --object-xyz and
             --object-yaw-deg. It plans from the fitted q; the object (--object or --category) is
             the true one the motion is simulated on, shown in the replay beside the fitted
-            keypoints with its own ("keypoints_true").
+            keypoints with its own ("keypoints_true"). Without --object or --category (photos of
+            a real object, no model of it) the motion is planned and replayed, not simulated.
 
     Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
     """
     X_WO = object_pose(object_xyz, object_yaw_deg, object_rpy_deg)
+    if object is None and category is None and keypoints is not None:
+        return _plan_only(fitted_keypoints(keypoints, X_WO), keypoints, task, start_q, target_q, replay)
     if (object is None) == (category is None):
-        raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category")
+        raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category "
+                            "(or --keypoints alone, to plan without simulating)")
     if object is None and (closed_at is not None or any(object_rpy_deg)):
         raise NfrDrakeError("--closed-at and --object-rpy-deg apply to a model file (--object)")
     if object is not None and part is not None:
@@ -122,3 +126,20 @@ def plan_command(
     if live:
         input("press Enter to quit (the live view closes) ")
     return 0 if outcome.success else 1
+
+
+def _plan_only(planned: KeypointTrajectory, source: Path, task: str, start_q: float | None,
+               target_q: float | None, replay: Path) -> int:
+    """Plan with fitted keypoints alone (no model of the object to simulate on) and write the
+    planned motion's replay. Returns 0; a planning failure raises PlanningError (exit 2)."""
+    q0, q1 = task_span(planned.category, task, planned.q_current if start_q is None else start_q, target_q)
+    planned = planned.with_current(q0)
+    plan = plan_articulation(planned, q1, config=PlannerConfig())
+    path = replay_plan(planned, plan, q1, replay)
+    p = plan.X_WB.translation()
+    yaw = np.degrees(np.arctan2(plan.X_WB.rotation().matrix()[1, 0], plan.X_WB.rotation().matrix()[0, 0]))
+    print(f"planned with the fitted keypoints of {source}: {planned.category} from q = {q0:.2f} to "
+          f"{q1:.2f}, the robot's base at x {p[0]:.2f} m, y {p[1]:.2f} m, z {p[2]:.2f} m, yaw {yaw:.0f} deg, "
+          f"{plan.duration:.1f} s of motion; planning {plan.seconds['total']:.2f} s; not simulated (no model "
+          f"of the object: give --object or --category to simulate); replay {path}")
+    return 0

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydrake.geometry import Meshcat
+from pydrake.geometry import Meshcat, MeshcatVisualizer
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
@@ -19,7 +19,8 @@ from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.keypoints import KeypointTrajectory
-from nfr_drake.world.plan import PlanResult
+from nfr_drake.world.plan import ObstacleBox, PlanResult
+from nfr_drake.world.robot import add_floor, add_panda, add_pedestal
 
 OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
 """Default articulation an `open` task reaches (and a `close` task starts from)."""
@@ -94,24 +95,58 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
     if replay is not None and meshcat is None:
         meshcat = Meshcat()
     if meshcat is not None:
-        meshcat.Delete()
-        meshcat.DeleteRecording()
-        draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
-        if reference is not None:
-            draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
-                                     (reference.q_current, q_target), line_width=2.0)
-        for box in (*(obstacles if obstacles is not None else [carcass_box(kt)]), door_panel_box(kt)):
-            if box is not None:
-                draw_obstacle(meshcat, box)
-        # Look at the handle path and the robot from the side, from above.
-        p_handle = kt.point("handle", (kt.q_current + q_target) / 2)
-        p_base = plan.X_WB.translation()
-        centre = (p_handle + p_base) / 2 + [0.0, 0.0, 0.2]
-        away = p_base - p_handle
-        away[2] = 0.0
-        away = away / np.linalg.norm(away)
-        side = np.cross([0.0, 0.0, 1.0], away)
-        frame_camera(meshcat, centre, centre + 0.3 * away + 1.2 * side + [0.0, 0.0, 0.8])
+        _show_plan(meshcat, kt, plan, q_target, obstacles, reference)
     simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig())
     path = write_replay(meshcat, replay) if replay is not None else None
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)
+
+
+def _show_plan(meshcat: Meshcat, kt: KeypointTrajectory, plan: PlanResult, q_target: float,
+               obstacles: list[ObstacleBox] | None, reference: KeypointTrajectory | None) -> None:
+    """Clear `meshcat`, draw the keypoint paths the planner used (and `reference`'s, under
+    "keypoints_true") and its obstacle boxes, and look at the handle path and the robot from the
+    side, from above."""
+    meshcat.Delete()
+    meshcat.DeleteRecording()
+    draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
+    if reference is not None:
+        draw_keypoint_trajectory(meshcat, reference, "keypoints_true",
+                                 (reference.q_current, q_target), line_width=2.0)
+    for box in (*(obstacles if obstacles is not None else [carcass_box(kt)]), door_panel_box(kt)):
+        if box is not None:
+            draw_obstacle(meshcat, box)
+    p_handle = kt.point("handle", (kt.q_current + q_target) / 2)
+    p_base = plan.X_WB.translation()
+    centre = (p_handle + p_base) / 2 + [0.0, 0.0, 0.2]
+    away = p_base - p_handle
+    away[2] = 0.0
+    away = away / np.linalg.norm(away)
+    side = np.cross([0.0, 0.0, 1.0], away)
+    frame_camera(meshcat, centre, centre + 0.3 * away + 1.2 * side + [0.0, 0.0, 0.8])
+
+
+def replay_plan(kt: KeypointTrajectory, plan: PlanResult, q_target: float, replay: Path,
+                meshcat: Meshcat | None = None, frames_per_second: float = 32.0) -> Path:
+    """The planned motion alone as an HTML replay written to `replay`: the arm on its base (and lift
+    column) following `plan.trajectory`, with the keypoint paths and the planner's boxes; nothing
+    is simulated (keypoints without a model of the object, e.g. a fit to photos). Returns the path."""
+    meshcat = meshcat or Meshcat()
+    _show_plan(meshcat, kt, plan, q_target, None, None)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    robot = add_panda(plant, plan.X_WB)
+    add_floor(plant)
+    add_pedestal(plant, plan.X_WB)
+    plant.Finalize()
+    MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    meshcat.StartRecording(frames_per_second=frames_per_second, set_visualizations_while_recording=False)
+    for t in np.r_[np.arange(0.0, plan.duration, 1.0 / frames_per_second), plan.duration]:
+        context.SetTime(t)
+        plant.SetPositions(plant_context, robot, plan.trajectory.value(t).ravel())
+        diagram.ForcedPublish(context)
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+    return write_replay(meshcat, replay)

@@ -192,3 +192,15 @@ def test_fitted_keypoints_of_another_category_exit_2(tmp_path, capsys):
     assert main(["plan", "--category", "closet", "--keypoints", str(tmp_path / "none.json"),
                  "--replay", str(tmp_path / "r.html")]) == 2
     assert "fit result not found" in capsys.readouterr().err
+
+
+def test_plans_with_fitted_keypoints_alone_and_replays_the_motion(tmp_path, capsys):
+    """Photos of a real object: no model to simulate on, so the motion is planned and replayed."""
+    from nfr_drake.systems.scene_objects import object_pose
+
+    result = _fit_result(tmp_path / "result.json", object_pose((0.3, -0.4, 0.0), 25.0).GetAsMatrix4(), True)
+    replay = tmp_path / "planned.html"
+    assert main(["plan", "--keypoints", str(result), "--replay", str(replay)]) == 0
+    out = capsys.readouterr().out
+    assert "closet from q = 0.00 to 0.60, the robot's base at" in out and "not simulated" in out
+    assert replay.stat().st_size > 100_000
