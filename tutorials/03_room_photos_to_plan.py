@@ -286,13 +286,19 @@ if chromium and not QUICK:  # a still of the replay, 6 s into it, in headless Ch
     print("wrote", out_dir / "tutorial_03_replay.png")
 
 # %% [markdown]
-# ## What to try with real photos
+# ## With real photos
+# There is no model of a real closet to simulate on: `--keypoints` alone plans the motion and
+# writes its replay (the arm following the plan, the fitted keypoint paths), nothing simulated.
+# The keypoints and X_WO in `result.json` are what a robot controller would take.
+
+# %%
+nfr_drake("plan", "--keypoints", result_path, "--replay", work / "planned.html")
+
+# %% [markdown]
 # Put the board flat on the floor where most photos see it, 10-30 photos around the front of
 # the object, each overlapping its neighbours; measure the board's squares and its thickness.
-# Without a model of the object to simulate, `--keypoints` still needs `--object` or
-# `--category` for the simulation; the keypoints and X_WO in `result.json` are what a robot
-# controller would take. Check `report.json` (the floor check, the board in each photo) and the
-# fit's warnings (a size outside the category means the masks or the poses are wrong).
+# Check `report.json` (the floor check, the board in each photo), the fit's warnings (a size
+# outside the category means the masks or the poses are wrong) and its confidence.
 
 # %%
 shutil.rmtree(work)
