@@ -82,8 +82,9 @@ def turned_board_photos(tmp_path_factory):
     scene = SyntheticPhotoScene(closet, 0.0, PinholeCamera.from_fov(1024, 768, np.deg2rad(50)), ROOM)
     folder = write_photo_folder(tmp_path_factory.mktemp("floor") / "photos", scene,
                                 orbit_poses(8, np.array([0.4, 0.0, 0.35])), (-0.12, 0.03, 5e-4, -3e-4))
-    (folder.parent / "camera.json").write_text(json.dumps(json.loads((folder / "truth.json").read_text())["camera"]))
-    return folder, json.loads((folder / "truth.json").read_text())
+    truth = json.loads((folder / "truth.json").read_text())
+    (folder.parent / "camera.json").write_text(json.dumps(truth["camera"]))
+    return folder, truth
 
 
 def _board_args(folder, out, *extra):
