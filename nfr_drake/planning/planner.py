@@ -294,12 +294,26 @@ def _held_orientation(scene: PlanningScene, R_WG: RotationMatrix, name: str, cfg
         np.radians(cfg.rigid_tolerance_deg), scene.plant_context))
 
 
-def _hold_rigidly(stages: list[_Stage], R_WG_grasp: RotationMatrix) -> None:
+def _hold_rigidly(kt: KeypointTrajectory, stages: list[_Stage], R_WG_grasp: RotationMatrix) -> None:
     """Fix the orientation of the grasp (stage 1) and of every later stage: R_WG_grasp turned as
-    the waypoint frame turns from the grasp's waypoint to the stage's."""
-    R_grasp = stages[1].wp.X_WG(stages[1].flip).rotation()
+    the handle turns from the grasp's articulation to the stage's (`_handle_turn`)."""
     for stage in stages[1:]:
-        stage.R_WG = stage.wp.X_WG(stage.flip).rotation() @ R_grasp.inverse() @ R_WG_grasp
+        stage.R_WG = _handle_turn(kt, stages[1].wp.q, stage.wp.q) @ R_WG_grasp
+
+
+def _handle_turn(kt: KeypointTrajectory, q0: float, q: float) -> RotationMatrix:
+    """The handle's rotation in W from articulation q0 to q: a door's about its hinge axis (the
+    hinge keypoints), by the angle its handle swept about it; none for a drawer. From the
+    handle's path and the axis rather than the waypoints' approach directions, which a fitted
+    field's keypoints make jitter by more than the hold's tolerance."""
+    if kt.category != "closet":
+        return RotationMatrix()
+    bottom = kt.point("hinge_bottom", q0)
+    axis = kt.point("hinge_top", q0) - bottom
+    axis = axis / np.linalg.norm(axis)
+    r0, r = (kt.point("handle", x) - bottom for x in (q0, q))
+    r0, r = r0 - (r0 @ axis) * axis, r - (r @ axis) * axis
+    return RotationMatrix(AngleAxis(float(np.arctan2(axis @ np.cross(r0, r), r0 @ r)), axis))
 
 
 def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> list[_Stage]:
@@ -314,8 +328,8 @@ def _stages(waypoints: list[HandleWaypoint], cfg: PlannerConfig, flip: bool) -> 
     return stages
 
 
-def _chained_ik(scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray, cfg: PlannerConfig
-                ) -> tuple[list[np.ndarray] | None, str]:
+def _chained_ik(kt: KeypointTrajectory, scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray,
+                cfg: PlannerConfig) -> tuple[list[np.ndarray] | None, str]:
     """Solve the stages in order, each seeded by and kept close to the last; (solutions, failed stage).
     Pre-grasp and grasp keep clear of the approach obstacles too."""
     scene = scenes.follow
@@ -345,7 +359,7 @@ def _chained_ik(scenes: _Scenes, stages: list[_Stage], q_start: np.ndarray, cfg:
         if k == 1 and cfg.rigid_hold:
             plant, context = stage_scene.plant, stage_scene.plant_context
             plant.SetPositions(context, q_prev)
-            _hold_rigidly(stages, stage_scene.tool_frame.CalcPoseInWorld(context).rotation())
+            _hold_rigidly(kt, stages, stage_scene.tool_frame.CalcPoseInWorld(context).rotation())
     return sols, ""
 
 
@@ -516,7 +530,7 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         scenes = _Scenes(build_planning_scene(X_WB, [*near, door]) if door else follow, follow, end)
         for flip in (True, False):
             stages = _stages(waypoints, config, flip)
-            sols, failed = _chained_ik(scenes, stages, q_start, config)
+            sols, failed = _chained_ik(kt, scenes, stages, q_start, config)
             if sols is None:
                 failures.append(f"IK of {failed}")
                 continue
