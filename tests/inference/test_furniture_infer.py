@@ -47,7 +47,8 @@ def test_infer_writes_every_part_found_and_one_part_in_the_single_part_fields(
     result = FitResult.read(out)
     assert result.part_of(0).part == {"index": 0, "type": "door", "found": True}
     assert list(result.part_of(0).keypoints) == ["handle", "goal", "hinge_top", "hinge_bottom"]
-    np.testing.assert_allclose(result.part_of(0).keypoints["hinge_top"], doc["parts"][0]["keypoints"]["axis_0"])
+    door = result.part_of(0)
+    np.testing.assert_allclose(door.keypoints["hinge_top"], doc["parts"][0]["keypoints"]["axis_0"])
 
 
 def test_a_furniture_result_gives_the_planner_its_part(furniture_model_folder, capture_dir):
