@@ -6,15 +6,15 @@ codes are fitted together for `explore_steps`, and the one with the lowest image
 evaluation set of rays is then refined alone until its loss has not improved by `min_improvement`
 for `patience` steps, or `max_steps` steps in all have run.
 
-The default (fast) fit looks its starts up (`FitConfig.start`): candidate codes at a grid of
+The fast preset looks its starts up (`FitConfig.start`): candidate codes at a grid of
 articulations, with the mean training code and with the training codes whose keypoint head puts
 the handle where the handle detector saw it, are scored by one forward pass without gradient, and
 the best candidate of each band of q is explored (at a larger learning rate, so that z_obj leaves
 its start quickly): the starts' losses say which basin of q is right only once z_obj has
 adapted, and a start at its band's best q, with codes near the sighting, adapts sooner. The
 refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
-from the noise of the steps' random rays, so the fit stops when it has converged. The thorough
-preset spreads its starts evenly over q and runs longer stages.
+from the noise of the steps' random rays, so the fit stops when it has converged. The default,
+thorough, fit spreads its starts evenly over q and runs longer stages.
 
 A drawer's pull and depth trade along a shallow valley of the image loss (a deeper drawer pulled
 out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
@@ -73,15 +73,14 @@ class FitConfig:
     `tune-head` and the scenario YAML (`fit:`). On the command line each option is `--fit.NAME`;
     the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
 
-    preset: Literal["fast", "thorough"] = "fast"
-    """"fast", the defaults below: starts looked up, explored 30 steps at lr 0.03 with 64 rays
-    each, at most 120 steps of 128 rays with early stopping on fixed rays, a valley scan of 5
-    codes for 15 steps of 128 rays each (a drawer), a close look of 20 steps. Or "thorough"
-    (`THOROUGH`, the default before the valley scan): 4 starts spread over q explored 120
-    steps, up to 400 steps of 256 rays, a close look of 150 steps; about three times the CPU time
-    for the same accuracy (docs/BENCHMARKS.md). Fields left at their default take the preset's
-    value."""
-    start: Literal["lookup", "spread"] = "lookup"
+    preset: Literal["thorough", "fast"] = "thorough"
+    """"thorough", the defaults below, or "fast" (`FAST`): starts looked up, explored 30 steps at
+    lr 0.03 with 64 rays each, at most 120 steps of 128 rays with early stopping on fixed rays,
+    a valley scan of 5 codes for 15 steps (where the handle slides: a drawer), a close look of 20
+    steps; about a third of the CPU time, as accurate on closets, a drawer's handle trajectory
+    about a quarter less accurate (docs/BENCHMARKS.md). Fields left at their default take the
+    preset's value."""
+    start: Literal["lookup", "spread"] = "spread"
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
     part the keypoint head puts nearest it at that articulation, are scored by one forward pass on
@@ -96,28 +95,28 @@ class FitConfig:
     restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
     """Codes explored in parallel (see `start`); the lowest image loss wins. At most `lookup_q`
     with start "lookup"."""
-    explore_steps: int = 30
+    explore_steps: int = 120
     """Adam steps of the exploration phase (all starts), at most `max_steps`."""
-    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 120
+    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 400
     """Adam steps at most, exploration included."""
-    explore_rays: int = 64
+    explore_rays: int = 128
     """Random pixels (over all views) per exploration step and start, shared by the starts."""
-    rays_per_step: int = 128
+    rays_per_step: int = 256
     """Random pixels per refinement step."""
     lr: float = 1e-2
     """Adam learning rate of z in the refinement."""
-    explore_lr: float = 3e-2
-    """Adam learning rate of the exploration (all starts, and the sighted start); larger than
-    `lr`, so that z_obj leaves its start within a few tens of steps and the starts' losses can be
-    compared sooner."""
+    explore_lr: float = 1e-2
+    """Adam learning rate of the exploration (all starts, and the sighted start); the fast preset's
+    is larger than `lr`, so that z_obj leaves its start within a few tens of steps and the starts'
+    losses can be compared sooner."""
     latent_weight: float = 1e-3
     """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
     seen them)."""
-    patience: int = 30
+    patience: int = 60
     """Refinement steps without an improvement of `min_improvement` that end the fit."""
     min_improvement: float = 0.01
     """Relative improvement of the refinement's loss that counts as progress."""
-    stop_every: int = 10
+    stop_every: int = 0
     """Early stopping measures the refined code's image loss on `lookup_rays` fixed rays (drawn
     like the steps'), without gradient, every `stop_every` refinement steps; 0: it watches the
     steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`)."""
@@ -129,7 +128,7 @@ class FitConfig:
     decide q and the hinge side weigh more in the loss."""
     seed: int = 0
     """Seed of ray sampling."""
-    valley_codes: int = 5
+    valley_codes: int = 0
     """Codes of the valley scan after the refinement (0: none), when the focus part slides (the
     keypoint head moves it along a straight line with q, as a drawer's handle; a door's handle
     swings, and its angle shows in the door's plane): the refined code's q and z_obj trade along
@@ -148,7 +147,7 @@ class FitConfig:
     """Random pixels per valley scan step and code, shared by the codes."""
     valley_held_rays: int = 1024
     """Fixed rays (drawn like the steps') on which the valley scan's codes are compared."""
-    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 20
+    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 150
     """Adam steps of the final close look at the focus part, the handle (0: none)."""
     focus_radius_m: float = 0.12
     """Rays passing within this distance of the part take part in the close look, m."""
@@ -172,22 +171,22 @@ class FitConfig:
     candidates, or (start "spread") a second start at the exploration's winner's q that the two
     explore for half of `explore_steps` (within `max_steps`)."""
 
-    THOROUGH: ClassVar[dict] = dict(start="spread", explore_steps=120, max_steps=400,
-                                    explore_rays=128, rays_per_step=256, explore_lr=1e-2,
-                                    patience=60, stop_every=0, valley_codes=0, focus_steps=150)
-    """The "thorough" preset's values."""
+    FAST: ClassVar[dict] = dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
+                                rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
+                                valley_codes=5, focus_steps=20)
+    """The "fast" preset's values."""
 
     @classmethod
-    def thorough(cls, **overrides) -> FitConfig:
-        """The "thorough" preset, with `overrides` on top."""
-        return cls(preset="thorough", **overrides)
+    def fast(cls, **overrides) -> FitConfig:
+        """The "fast" preset, with `overrides` on top."""
+        return cls(preset="fast", **overrides)
 
     def __post_init__(self):
         if self.preset not in ("fast", "thorough"):
             raise ConfigError(f"FitConfig.preset must be 'fast' or 'thorough', not {self.preset!r}")
-        if self.preset == "thorough":  # the preset's value for every field left at its default
+        if self.preset == "fast":  # the preset's value for every field left at its default
             defaults = {f.name: f.default for f in fields(self)}
-            for name, value in self.THOROUGH.items():
+            for name, value in self.FAST.items():
                 if getattr(self, name) == defaults[name]:
                     object.__setattr__(self, name, value)
         if self.start not in ("lookup", "spread"):

@@ -122,7 +122,7 @@ def test_close_look_is_kept_only_when_head_and_render_agree(model_folder, captur
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
     small = FitConfig(restarts=2, explore_steps=3, max_steps=6, explore_rays=32, rays_per_step=32,
-                      eval_rays=64, focus_steps=4, focus_radius_m=0.5, valley_codes=0)
+                      eval_rays=64, focus_steps=4, focus_radius_m=0.5)
     without = fit_latent(fitted.model, rays, replace(small, focus_steps=0), fitted.z_obj_mean)
     # The class this untrained model renders most near its "handle" stands in for the handle.
     handle = fitted.model.keypoints(without.z[None])[0, 0].detach()

@@ -124,17 +124,17 @@ def test_the_fit_stops_early_on_a_flat_loss(model_folder, capture):
 
 
 def test_presets():
-    thorough = FitConfig.thorough()
-    assert thorough.preset == "thorough" and FitConfig().preset == "fast"  # the default
-    for name, value in FitConfig.THOROUGH.items():
-        assert getattr(thorough, name) == value != getattr(FitConfig(), name)
-    assert FitConfig.thorough(max_steps=300).max_steps == 300  # a field set on top is kept
-    assert FitConfig.thorough(max_steps=300).focus_steps == FitConfig.THOROUGH["focus_steps"]
+    fast = FitConfig.fast()
+    assert fast.preset == "fast" and FitConfig().preset == "thorough"  # the default
+    for name, value in FitConfig.FAST.items():
+        assert getattr(fast, name) == value != getattr(FitConfig(), name)
+    assert FitConfig.fast(max_steps=300).max_steps == 300  # a field set on top is kept
+    assert FitConfig.fast(max_steps=300).focus_steps == FitConfig.FAST["focus_steps"]
 
     def command(fit: FitConfig = FitConfig()) -> FitConfig:
         return fit
 
-    assert tyro.cli(command, args=["--fit.preset", "thorough"]) == thorough
+    assert tyro.cli(command, args=["--fit.preset", "fast"]) == fast
     assert tyro.cli(command, args=[]) == FitConfig()
     with pytest.raises(ConfigError, match="preset"):
         FitConfig(preset="slow")
@@ -145,8 +145,8 @@ def test_presets():
     with pytest.raises(ConfigError, match="stop_every"):
         FitConfig(stop_every=-1)
     with pytest.raises(ConfigError, match="lookup_q"):
-        FitConfig(restarts=5, lookup_q=4)  # a band of q without a candidate
-    assert FitConfig.thorough(restarts=5, lookup_q=4).restarts == 5  # spread starts need no lookup
+        FitConfig.fast(restarts=5, lookup_q=4)  # a band of q without a candidate
+    assert FitConfig(restarts=5, lookup_q=4).restarts == 5  # spread starts need no lookup
     with pytest.raises(ConfigError, match="explore_lr"):
         FitConfig(explore_lr=0.0)
 

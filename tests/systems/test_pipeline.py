@@ -95,7 +95,7 @@ def test_pipeline_estimates_the_object_pose_from_cameras_placed_at_a_coarse_look
 
     scenario = Scenario(category="closet", model=str(_needs("closet")), seed=100, index=0, views=8,
                         object_xyz=[0.4, -0.3, 0.0], object_yaw_deg=25.0, object_pose="estimated",
-                        fit=FitConfig(max_steps=60))
+                        fit=FitConfig.fast(max_steps=60))
     look = scenario.X_WO.inverse() @ scenario.coarse_look()
     assert np.linalg.norm(look.translation()) > 0.01  # the cameras do not aim at the true object
     obj = scenario.sample_object()
