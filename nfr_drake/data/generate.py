@@ -8,6 +8,7 @@ front, a part-index image and per-part metadata (docs/DATASET_FORMAT.md).
 
 from __future__ import annotations
 
+import json
 import math
 import multiprocessing
 from collections.abc import Callable
@@ -22,11 +23,13 @@ from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.shards import (
     DEPTH_SCALE,
     OBJECT_DATASET,
+    OBJECTS_DIR,
     PART_CATEGORIES,
     DatasetFormat,
     DatasetSpec,
     completed_objects,
     dataset_lock,
+    object_dir_name,
     open_dataset_dir,
     remove_partial,
     write_object,
@@ -84,16 +87,43 @@ def part_meta(obj: ArticulatedObject, qs: np.ndarray) -> dict:
     return {"part_order": PART_ORDER, "parts": parts}
 
 
-def render_object_arrays(spec: DatasetSpec, index: int):
-    """Render object `index` of `spec`: (arrays, meta, sdf, files) ready for `write_object`."""
-    from nfr_drake.data.camera import PinholeCamera
-    from nfr_drake.data.object_records import portable_sdformat
-    from nfr_drake.data.render import ObjectRenderer, sample_lighting
+def draw_object(spec: DatasetSpec, index: int):
+    """Object `index` of `spec` as the generator draws it now: (object, lighting, its random
+    stream after them, which the articulations and cameras continue)."""
+    from nfr_drake.data.render import sample_lighting
     from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 
     rng = object_rng(SEED_DOMAIN_TRAIN, spec.seed, index)
     obj = sample_object(spec.category, rng, name=f"{spec.category}_{index:06d}")
-    lighting = sample_lighting(rng)
+    return obj, sample_lighting(rng), rng
+
+
+def _lighting_json(lighting) -> dict:
+    """meta.json's `lighting` entry."""
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lighting).items()}
+
+
+def stale_objects(spec: DatasetSpec, out: Path) -> list[int]:
+    """Complete objects in `out` that the generator now draws otherwise (their meta.json params or
+    lighting differ from a fresh draw, e.g. after a change to an object sampler): a resumed run
+    would mix two versions of the generator. Draws only, no rendering."""
+    stale = []
+    for index in completed_objects(out):
+        meta = json.loads((Path(out) / OBJECTS_DIR / object_dir_name(index) / "meta.json").read_text())
+        obj, lighting, _ = draw_object(spec, index)
+        now = json.loads(json.dumps({"params": obj.params, "lighting": _lighting_json(lighting)}))
+        if any(meta.get(k) != v for k, v in now.items()):
+            stale.append(index)
+    return stale
+
+
+def render_object_arrays(spec: DatasetSpec, index: int):
+    """Render object `index` of `spec`: (arrays, meta, sdf, files) ready for `write_object`."""
+    from nfr_drake.data.camera import PinholeCamera
+    from nfr_drake.data.object_records import portable_sdformat
+    from nfr_drake.data.render import ObjectRenderer
+
+    obj, lighting, rng = draw_object(spec, index)
     parts = spec.category in PART_CATEGORIES
     A, V, S = spec.articulations, spec.views, spec.size
     qs = part_articulations(rng, A, obj.num_fronts) if parts else articulation_values(rng, A)
@@ -119,8 +149,7 @@ def render_object_arrays(spec: DatasetSpec, index: int):
         meta.update(joint_upper=obj.joint_upper, keypoint_names=list(obj.keypoint_names))
     meta.update(q=qs.tolist(), X_OC=X_OC.tolist())
     meta.update(part_meta(obj, qs) if parts else {"keypoints": obj.keypoint_array(qs).tolist()})
-    meta.update(camera=camera.to_json(),
-                lighting={k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(lighting).items()})
+    meta.update(camera=camera.to_json(), lighting=_lighting_json(lighting))
     sdf, textures = portable_sdformat(obj)
     return arrays, meta, sdf, {rel: path.read_bytes() for rel, path in textures.items()}
 
@@ -147,8 +176,14 @@ def generate_dataset(spec: DatasetSpec, out: Path, workers: int = 2, shard: str 
     """Render the objects of `spec` that belong to `shard` and are not yet in `out`.
 
     Returns the indices rendered by this call. Safe to interrupt and call again; a second run
-    on `out` while this one writes it is refused (`dataset_lock`).
+    on `out` while this one writes it is refused (`dataset_lock`), and so is a run whose generator
+    draws objects already on disk otherwise (`stale_objects`).
     """
+    if (Path(out) / OBJECTS_DIR).is_dir() and (stale := stale_objects(spec, out)):
+        shown = ", ".join(object_dir_name(i) for i in stale[:5]) + (", ..." if len(stale) > 5 else "")
+        raise DatasetError(f"{out}: {len(stale)} objects on disk ({shown}) were drawn by another "
+                           "version of the generator; delete those object folders and rerun to "
+                           "draw them again, or use another --out")
     return render_dataset(spec, OBJECT_DATASET, spec.objects, _render_and_write, out, workers, shard,
                           progress, images_per_index=spec.articulations * spec.views)
 

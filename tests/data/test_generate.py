@@ -1,6 +1,8 @@
 """Dataset generation: determinism, sharding, resuming after kill -9, the torch Dataset."""
 
+import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -10,7 +12,7 @@ import torch
 from dataset_checks import assert_same_data, kill_after_first_object, object_arrays
 
 from nfr_drake.data.dataset import RenderedDataset
-from nfr_drake.data.generate import articulation_values, generate_dataset
+from nfr_drake.data.generate import articulation_values, generate_dataset, stale_objects
 from nfr_drake.data.shards import OBJECTS_DIR, DatasetSpec, completed_objects
 from nfr_drake.errors import DatasetError
 
@@ -51,6 +53,19 @@ def test_other_options_on_an_existing_folder_are_refused(reference):
     other = DatasetSpec("closet", objects=5, articulations=4, views=2, size=32, seed=4)
     with pytest.raises(DatasetError, match="articulations: 3 vs 4"):
         generate_dataset(other, reference, progress=False)
+
+
+def test_objects_drawn_by_another_generator_version_are_refused(reference, tmp_path):
+    """A rerun on a dataset whose objects the generator now draws otherwise (here: one object's
+    meta.json as an older sampler wrote it) names them instead of mixing two versions."""
+    shutil.copytree(reference, tmp_path / "d")
+    meta_path = tmp_path / "d" / OBJECTS_DIR / "obj_000002" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    meta["params"]["width"] += 0.01
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(DatasetError, match=r"1 objects on disk \(obj_000002\) were drawn by another"):
+        generate_dataset(SPEC, tmp_path / "d", progress=False)
+    assert stale_objects(SPEC, reference) == []
 
 
 def test_bad_shard_is_a_clean_cli_error(tmp_path):
