@@ -5,9 +5,10 @@ keeps what the fit found (z, q, the starts' losses and q, the triangulated handl
 error against gt.json. The confidence features are computed from the line (`case_features`), so a
 change of the features needs no new fit. The handle's truth is
 the capture's handle at its q; for a furniture capture (several fronts) the nearest front's handle.
-A room capture (`confidence_rooms`) is fitted with the segmenter's masks, with the given pose
-("room") or the pose estimated from the masks ("room_pose", the line keeps X_WO; the handle is
-compared in the room's frame).
+A room capture (`confidence_rooms`) is fitted with the segmenter's masks as `infer --estimate-pose`
+fits it (the pixels off the masks painted in the training background, `infer.paint_background`),
+with the given pose ("room") or the pose estimated from the masks ("room_pose", the line keeps
+X_WO; the handle is compared in the room's frame).
 """
 
 from __future__ import annotations
@@ -24,7 +25,13 @@ from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.eval.capture_variants import apply_variant
 from nfr_drake.inference.confidence import fit_features
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import FittedModel, infer, infer_in_world, object_masks
+from nfr_drake.inference.infer import (
+    FittedModel,
+    infer,
+    infer_in_world,
+    object_masks,
+    paint_background,
+)
 from nfr_drake.perception.object_pose import ObjectPoseError
 
 SEGMENTER = Path("models/segmenter")
@@ -101,7 +108,8 @@ def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
                         "failure": str(err)}
             X_WO = result.extra["object_pose"]["X_WO"]
         else:
-            result, outcome = infer(fitted, capture, fit, grid, images, masks=masks)
+            result, outcome = infer(fitted, capture, fit, grid, paint_background(images, masks),
+                                    masks=masks, masked_loss=False)
     else:
         result, outcome = infer(fitted, capture, fit, grid, images=images)
     handle = result.keypoints["handle"]
