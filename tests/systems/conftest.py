@@ -1,8 +1,14 @@
-"""Shared, expensive fixtures of the simulation tests: one planned and simulated drawer opening."""
+"""Shared fixtures of the simulation tests: one planned and simulated drawer opening, and a tiny
+closet model for the perception system."""
 
 import pytest
+import torch
 from pydrake.math import RigidTransform
 
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.nfr.checkpoint import write_model_folder
+from nfr_drake.nfr.config import NFRModelConfig
+from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import run_task
@@ -18,3 +24,23 @@ def drawer_object():
 def drawer_outcome(drawer_object, tmp_path_factory):
     """Open the drawer fully from ground-truth keypoints, recording an HTML replay."""
     return run_task(drawer_object, 1.0, replay=tmp_path_factory.mktemp("replay") / "drawer.html")
+
+
+TINY_MODEL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
+                            pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
+                            keypoint_hidden=16)
+"""An untrained field small enough that a perception test fits it in seconds."""
+TINY_FIT = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32,
+                     eval_rays=64)
+"""A fit of a few steps: what the perception tests check is the plumbing, not the accuracy."""
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory):
+    """A closet model folder holding the untrained `TINY_MODEL` with 2 training codes."""
+    folder = tmp_path_factory.mktemp("m") / "closet"
+    torch.manual_seed(0)
+    write_model_folder(folder, NFRAutoDecoder(TINY_MODEL, 2),
+                       {"category": "closet",
+                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    return folder

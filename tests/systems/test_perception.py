@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-import torch
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
@@ -15,28 +14,10 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.render import ObjectRenderer
-from nfr_drake.inference.fit import FitConfig
-from nfr_drake.nfr.checkpoint import write_model_folder
-from nfr_drake.nfr.config import NFRModelConfig
-from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.systems.perception import AddNfrPerception
-
-SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
-                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
-                       keypoint_hidden=16)
-FAST = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32, eval_rays=64)
-
-
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("m") / "closet"
-    torch.manual_seed(0)
-    write_model_folder(folder, NFRAutoDecoder(SMALL, 2),
-                       {"category": "closet",
-                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
-    return folder
+from tests.systems.conftest import TINY_FIT
 
 
 def _scene(model_dir, obj, X_WO, X_OCs, camera, known_pose=True):
@@ -53,7 +34,7 @@ def _scene(model_dir, obj, X_WO, X_OCs, camera, known_pose=True):
     plant.Finalize()
     X_WCs = [X_WO @ RigidTransform(X) for X in X_OCs]
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model,
-                              X_WO if known_pose else None, X_WCs, camera, FAST)
+                              X_WO if known_pose else None, X_WCs, camera, TINY_FIT)
     return builder.Build(), system
 
 

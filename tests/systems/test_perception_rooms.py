@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
@@ -17,10 +16,6 @@ from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.rooms import RoomDistribution, sample_room
 from nfr_drake.errors import ConfigError
-from nfr_drake.inference.fit import FitConfig
-from nfr_drake.nfr.checkpoint import write_model_folder
-from nfr_drake.nfr.config import NFRModelConfig
-from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.perception.object_pose import ObjectPoseError
@@ -28,22 +23,9 @@ from nfr_drake.systems import perception as perception_module
 from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
 from nfr_drake.systems.pipeline import perception_room, run_scenario
 from nfr_drake.systems.scenario import Scenario
+from tests.systems.conftest import TINY_FIT
 
-SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
-                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
-                       keypoint_hidden=16)
-FAST = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32, eval_rays=64)
 SEGMENTER = Path(__file__).parents[2] / SEGMENTER_DIR
-
-
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("m") / "closet"
-    torch.manual_seed(0)
-    write_model_folder(folder, NFRAutoDecoder(SMALL, 2),
-                       {"category": "closet",
-                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
-    return folder
 
 
 def _needs_segmenter():
@@ -109,7 +91,7 @@ def _perception_scene(model_dir, scene, X_WO, known=True):
     plant.Finalize()
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
-                              X_WCs, camera, FAST, lighting, scene=scene, segmenter=SEGMENTER)
+                              X_WCs, camera, TINY_FIT, lighting, scene=scene, segmenter=SEGMENTER)
     return builder.Build(), system
 
 
