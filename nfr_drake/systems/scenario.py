@@ -96,7 +96,8 @@ class Scenario:
     """How the simulated hand holds the handle (and the item): "constraint" (constraints switched
     on when the fingers close, the arm compliant while it pulls) or "contact" (the fingers squeeze,
     friction holds, the arm at full stiffness). It sets `simulation.grasp` and the planner's
-    `grasp_depth` (`GRASP_DEPTH`)."""
+    options for that grasp (`planning.planner.grasp_planner`: grip depth, and for contact the
+    rigid hold and no end-stop overshoot)."""
     object_pose: str = "given"
     """Where the perception system's X_WO comes from: "given" (the true pose, the paper's setting)
     or "estimated" (from the views' masks, `perception.object_pose`); estimated, the cameras are
