@@ -170,13 +170,18 @@ class SimulationResult:
     grasp: str = "constraint"
 
     def summary(self) -> str:
-        unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
         verdict = "SUCCESS" if self.success else "FAILURE"
         return (f"{verdict}: articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
-                f"{self.joint_error * scale:.1f} {unit}), grasped {self.grasped} (offset "
+                f"{joint_error_text(self.joint_type, self.joint_error)}), grasped {self.grasped} (offset "
                 f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
                 f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N, "
                 f"{self.grasp} grasp")
+
+
+def joint_error_text(joint_type: str, error: float) -> str:
+    """An error of the articulated joint in its unit: `error` in rad ("1.2 deg") for a revolute
+    joint, in m ("1.2 cm") for a prismatic one."""
+    return f"{np.degrees(error):.1f} deg" if joint_type == "revolute" else f"{error * 100:.1f} cm"
 
 
 def couple_fingers(plant: MultibodyPlant, robot) -> None:

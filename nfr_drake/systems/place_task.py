@@ -56,6 +56,7 @@ from nfr_drake.systems.articulation import (
     couple_fingers,
     grip_points,
     hydroelastic_grip,
+    joint_error_text,
     rigid_hydroelastic,
     set_arm_gains,
     simulate_articulation,
@@ -164,10 +165,10 @@ class PlaceSimulationResult:
     p_W_item: np.ndarray = field(repr=False)
 
     def summary(self) -> str:
-        unit, scale = ("deg", np.degrees(1.0)) if self.joint_type == "revolute" else ("cm", 100.0)
         verdict = "SUCCESS" if self.success else "FAILURE"
         return (f"{verdict} ({self.grasp} grasp): opened {self.opened} (articulation {self.q_opened:.3f}, "
-                f"target {self.q_target:.3f}, error {self.joint_error * scale:.1f} {unit}, handle grasped "
+                f"target {self.q_target:.3f}, error {joint_error_text(self.joint_type, self.joint_error)}, "
+                f"handle grasped "
                 f"{self.grasped}); item picked {self.picked}, {self.item_error * 100:.1f} cm from the goal, "
                 f"inside {self.inside}, resting {self.resting}; front still open {self.still_open} "
                 f"(articulation {self.q_final:.3f})")

@@ -102,3 +102,10 @@ def test_pull_past_a_short_prediction_reaches_the_stop(drawer_object):
                        planner_config=PlannerConfig(end_stop_overshoot=0.0))
     assert stopped.simulation.grasped and not stopped.success
     assert stopped.simulation.joint_error > 0.02
+
+
+def test_joint_error_is_told_in_the_joints_unit():
+    from nfr_drake.systems.articulation import joint_error_text
+
+    assert joint_error_text("revolute", np.radians(2.5)) == "2.5 deg"
+    assert joint_error_text("prismatic", 0.034) == "3.4 cm"
