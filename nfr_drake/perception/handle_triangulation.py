@@ -12,6 +12,13 @@ and several such views can agree with each other.
 
 With zero offsets the sighting is the blob's centroid, the visible middle of the handle (posts
 included), which lies 1-2 cm from the grip centre, between the bar and the door.
+
+Furniture has up to eight handles: `sightings` gives every peak of a view's votes (each handle
+pixel's vote, pixel + offset, weighted by its probability, summed into a vote image; peaks after
+non-maximum suppression, a peak's sighting the weighted mean of the votes near it, kept when their
+mass is at least `min_mass`), and `triangulate_handles` finds the handles one after the other: the
+point with the most agreeing mass (each view agreeing with at most one sighting, its nearest), its
+agreeing sightings removed, again, until no point has `min_views` views.
 """
 
 from __future__ import annotations
@@ -83,6 +90,37 @@ def sighting(handle_map: HandleMap, frame: int, threshold: float = 0.5,
     votes = np.stack([cols + 0.5, rows + 0.5], -1) + handle_map.offset_px[rows, cols]
     uv = (w[:, None] * votes).sum(0) / np.sum(w)
     return HandleSighting(frame, uv, float(masses[best - 1]))
+
+
+def sightings(handle_map: HandleMap, frame: int, threshold: float = 0.5, min_mass: float = 0.5,
+              radius_px: float = 2.5) -> list[HandleSighting]:
+    """Every handle in one view (module docstring), strongest first: peaks of the vote image at
+    least `radius_px` (scaled to a 128 px high image) apart; a sighting is the mean of the votes
+    within that radius of its peak, weighted by probability, each vote counted once."""
+    prob = handle_map.probability
+    H, W = prob.shape
+    rows, cols = np.nonzero(prob > threshold)
+    if rows.size == 0:
+        return []
+    w = prob[rows, cols].astype(np.float64)
+    votes = np.stack([cols + 0.5, rows + 0.5], -1) + handle_map.offset_px[rows, cols]
+    r = radius_px * H / _REFERENCE_HEIGHT_PX
+    image = np.zeros((H, W), np.float32)
+    inside = (votes[:, 0] >= 0) & (votes[:, 0] < W) & (votes[:, 1] >= 0) & (votes[:, 1] < H)
+    np.add.at(image, (votes[inside, 1].astype(int), votes[inside, 0].astype(int)), w[inside])
+    image = cv2.GaussianBlur(image, (0, 0), max(0.5, r / 2.5))
+    size = 2 * int(np.ceil(r)) + 1
+    peaks = np.argwhere((image >= cv2.dilate(image, np.ones((size, size), np.uint8))) & (image > 1e-3))
+    free = np.ones(len(votes), bool)
+    found = []
+    for pv, pu in sorted(peaks.tolist(), key=lambda rc: -image[rc[0], rc[1]]):
+        near = free & (np.linalg.norm(votes - [pu + 0.5, pv + 0.5], axis=1) <= r)
+        if w[near].sum() < min_mass:
+            continue
+        free &= ~near
+        found.append(HandleSighting(frame, (w[near, None] * votes[near]).sum(0) / w[near].sum(),
+                                    float(w[near].sum())))
+    return sorted(found, key=lambda s: -s.mass)
 
 
 def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,6 +198,100 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
     p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
     return TriangulatedHandle(p, tuple(sightings[i].frame for i in inliers), agreeing(p)[1],
                               len(sightings))
+
+
+def _project_many(frame: CaptureFrame, p_O: np.ndarray) -> np.ndarray:
+    """Pixels (m, 2) of points p_O (m, 3) in a frame, with its distortion; inf behind it."""
+    X_CO = np.linalg.inv(frame.X_OC)
+    p_C = p_O @ X_CO[:3, :3].T + X_CO[:3, 3]
+    cam = frame.camera
+    uv = cv2.projectPoints(p_C.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K_opencv,
+                           cam.dist_opencv)[0].reshape(-1, 2) + 0.5
+    uv[p_C[:, 2] <= 1e-6] = np.inf
+    return uv
+
+
+def _agreeing(frames: list[CaptureFrame], found: list[HandleSighting], tolerance: np.ndarray,
+              points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For points (m, 3): which sightings agree (m, n) bool, at most one per view (the nearest
+    projection within its tolerance), and their reprojection errors (m, n) px."""
+    n = len(found)
+    errors = np.full((len(points), n), np.inf)
+    agree = np.zeros((len(points), n), bool)
+    uv = np.array([s.uv for s in found])
+    for f in sorted({s.frame for s in found}):
+        idx = np.array([i for i, s in enumerate(found) if s.frame == f])
+        e = np.linalg.norm(_project_many(frames[f], points)[:, None] - uv[idx][None], axis=-1)
+        errors[:, idx] = e
+        nearest = np.argmin(e, axis=1)
+        ok = e[np.arange(len(points)), nearest] <= tolerance[idx][nearest]
+        agree[np.flatnonzero(ok), idx[nearest[ok]]] = True
+    return agree, errors
+
+
+def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
+                        max_error_px: float = 3.0, min_views: int = MIN_VIEWS
+                        ) -> list[TriangulatedHandle]:
+    """Several handles from the sightings of all views (module docstring), strongest first; a
+    point that projects within 2 `max_error_px` of an earlier one in all its views is the same
+    handle and dropped."""
+    found = list(found)
+    tolerance = np.array([max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
+                          for s in found])
+    rays = [_ray(frames[s.frame], s.uv) for s in found]
+    origins = np.array([o for o, _ in rays]).reshape(-1, 3)
+    directions = np.array([d for _, d in rays]).reshape(-1, 3)
+    mass = np.array([s.mass for s in found])
+    view = np.array([s.frame for s in found])
+    left = np.ones(len(found), bool)
+    handles: list[TriangulatedHandle] = []
+    while left.sum() >= max(2, min_views):
+        i, j = np.triu_indices(len(found), 1)
+        keep = (left[i] & left[j] & (view[i] != view[j])
+                & (np.abs(np.einsum("ij,ij->i", directions[i], directions[j])) < np.cos(np.radians(2.0))))
+        i, j = i[keep], j[keep]
+        if i.size == 0:
+            break
+        # nearest point to two rays: the middle of their common perpendicular
+        d_i, d_j, w0 = directions[i], directions[j], origins[i] - origins[j]
+        b = np.einsum("ij,ij->i", d_i, d_j)
+        d, e = np.einsum("ij,ij->i", d_i, w0), np.einsum("ij,ij->i", d_j, w0)
+        s_i, s_j = (b * e - d) / (1 - b * b), (e - b * d) / (1 - b * b)
+        points = 0.5 * (origins[i] + s_i[:, None] * d_i + origins[j] + s_j[:, None] * d_j)
+        agree, errors = _agreeing(frames, found, tolerance, points)
+        agree &= left
+        count = agree.sum(1)
+        score = np.where(count >= min_views, (agree * mass).sum(1), 0.0)
+        if score.max() == 0.0:
+            break
+        rms = np.sqrt(np.where(agree, errors ** 2, 0).sum(1) / np.maximum(count, 1))
+        inliers = np.flatnonzero(agree[np.lexsort((rms, -score))[0]])
+        for _ in range(3):  # refit on the agreeing sightings, then on those agreeing with the refit
+            p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+            agree_p, errors_p = _agreeing(frames, found, tolerance, p[None])
+            new = np.flatnonzero(agree_p[0] & left)
+            if len(new) < min_views:
+                break
+            inliers = new
+        left[inliers] = False
+        if len(new) < min_views:
+            continue
+        p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+        errors_p = _agreeing(frames, found, tolerance, p[None])[1]
+        rms_px = float(np.sqrt(np.mean(errors_p[0, inliers] ** 2)))
+        frames_in = tuple(int(view[k]) for k in inliers)
+        same = any(all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
+                                      - _project_many(frames[f], p[None])[0])
+                       <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
+                   for h in handles)
+        if not same:
+            handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))
+    return handles
+
+
+def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame]) -> list[TriangulatedHandle]:
+    """Every handle triangulated from per-frame handle maps, one per frame (furniture)."""
+    return triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)])
 
 
 def locate_handle(maps: list[HandleMap], frames: list[CaptureFrame]) -> TriangulatedHandle | None:

@@ -1,4 +1,5 @@
-"""The 2D handle detector: any image size, training that learns, resumes and round-trips."""
+"""The 2D handle detector: any image size, training that learns, resumes and round-trips; offset
+targets for one handle (closets) and for several (furniture)."""
 
 import json
 import pickle
@@ -11,7 +12,7 @@ from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.perception.handle_detector import training
-from nfr_drake.perception.handle_detector.data import sample_batch
+from nfr_drake.perception.handle_detector.data import projected_handles, sample_batch
 from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, load_detector
 from nfr_drake.perception.handle_detector.training import DetectorTrainConfig, train_detector
 
@@ -135,3 +136,35 @@ def test_resume_continues_where_the_killed_run_left_off(tiny_dataset, tmp_path, 
     (a,), (b,) = (load_detector(tmp_path / run)[0].detect([image]) for run in ("once", "twice"))
     np.testing.assert_allclose(a.probability, b.probability, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(a.offset_px, b.offset_px, rtol=1e-5, atol=1e-5)
+
+
+def test_furniture_pixels_vote_for_their_own_fronts_handle(furniture_dataset):
+    """Furniture: each handle pixel's target is the projected handle of its own front (the part
+    image), so a crop's votes are several points, each a front's projected handle (mirrored in a
+    mirrored crop); the projections agree with the handles' label pixels."""
+    data = RenderedDataset(furniture_dataset)
+    S = data.spec.size
+    A, V = data.spec.articulations, data.spec.views
+    targets = []
+    for j, rec in enumerate(data.records):
+        for a in range(A):
+            for v in range(V):
+                uv = projected_handles(data, j, a, v)
+                assert uv.shape == (len(rec.meta["parts"]), 2)
+                targets += [uv, uv * [-1, 1] + [S, 0]]
+                labels, part = np.asarray(rec.label[a, v]), np.asarray(rec.part[a, v])
+                for k in range(len(uv)):
+                    rows, cols = np.nonzero((labels == 3) & (part == k))
+                    if rows.size >= 2:
+                        assert np.linalg.norm([cols.mean() + 0.5, rows.mean() + 0.5] - uv[k]) < 3.0
+    targets = np.concatenate(targets)
+    rgb, mask, offset = sample_batch(data, 64, S, np.random.default_rng(0))
+    several = 0
+    for m, o in zip(mask.numpy() > 0.5, offset.numpy(), strict=True):
+        rows, cols = np.nonzero(m)
+        votes = np.stack([cols + 0.5 + o[0, rows, cols], rows + 0.5 + o[1, rows, cols]], -1)
+        if not len(votes):
+            continue
+        assert np.abs(votes[:, None] - targets[None]).max(-1).min(-1).max() < 1e-3
+        several += len(np.unique(np.round(votes, 3), axis=0)) >= 2
+    assert several >= 3

@@ -1,5 +1,7 @@
 """Training data of the detector: crops of rendered images with their handle masks (label class
-3) and, per pixel, the offset to the projected handle keypoint (the grip centre)."""
+3) and, per pixel, the offset to the projected handle keypoint (the grip centre) of the pixel's
+own part: furniture (several fronts) has one handle per front, and a handle pixel votes for its
+front's grip centre (the part image `part.npy`); closets and drawers have one."""
 
 from __future__ import annotations
 
@@ -10,14 +12,21 @@ from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.objects import SemanticClass
 
 
-def projected_handle(data: RenderedDataset, j: int, a: int, v: int) -> np.ndarray:
-    """Pixel (u, v) (top-left pixel centre at (0.5, 0.5)) of the handle keypoint of object j at
-    articulation a in view v."""
+def handle_points(data: RenderedDataset, j: int, a: int) -> np.ndarray:
+    """Handle keypoints (P, 3) in O, m, of object j at articulation a: one per part (furniture:
+    front k in row k), one for closets and drawers."""
     rec = data.records[j]
-    p_O = rec.keypoints[a, data.keypoint_names.index("handle")].astype(np.float64)
-    X_OC = rec.X_OC[a, v].astype(np.float64)
-    p_C = X_OC[:3, :3].T @ (p_O - X_OC[:3, 3])
-    return (data.camera.K @ (p_C / p_C[2]))[:2]
+    if data.has_parts:
+        return np.array([part["keypoints"]["handle"][a] for part in rec.meta["parts"]], np.float64)
+    return rec.keypoints[a, data.keypoint_names.index("handle")][None].astype(np.float64)
+
+
+def projected_handles(data: RenderedDataset, j: int, a: int, v: int) -> np.ndarray:
+    """Pixels (P, 2) (u, v; top-left pixel centre at (0.5, 0.5)) of the handle keypoints
+    (`handle_points`) of object j at articulation a in view v."""
+    X_OC = data.records[j].X_OC[a, v].astype(np.float64)
+    p_C = (handle_points(data, j, a) - X_OC[:3, 3]) @ X_OC[:3, :3]
+    return (p_C / p_C[:, 2:]) @ data.camera.K[:2].T
 
 
 def sample_batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
@@ -41,9 +50,15 @@ def sample_batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Genera
             r0, c0 = rng.integers(0, S - c + 1, 2)
         rgb[b] = np.asarray(rec.rgb[a, v, r0:r0 + c, c0:c0 + c], np.float32) / 255.0
         mask[b] = handle[r0:r0 + c, c0:c0 + c]
-        u, w = projected_handle(data, j, a, v)
-        offset[b, 0] = u - (c0 + np.arange(c) + 0.5)[None, :]
-        offset[b, 1] = w - (r0 + np.arange(c) + 0.5)[:, None]
+        uv = projected_handles(data, j, a, v)
+        if data.has_parts:  # each pixel's target: its front's handle (none: the crop's centre)
+            part = np.asarray(rec.part[a, v, r0:r0 + c, c0:c0 + c], np.int64)
+            target = np.where((part >= 0)[..., None], uv[np.clip(part, 0, len(uv) - 1)],
+                              [c0 + c / 2, r0 + c / 2])
+        else:
+            target = np.broadcast_to(uv[0], (c, c, 2))
+        offset[b, 0] = target[..., 0] - (c0 + np.arange(c) + 0.5)[None, :]
+        offset[b, 1] = target[..., 1] - (r0 + np.arange(c) + 0.5)[:, None]
     flip = rng.random(n) < 0.5  # mirror images: hinges on either side look alike
     rgb[flip], mask[flip] = rgb[flip, :, ::-1], mask[flip, :, ::-1]
     offset[flip] = offset[flip, :, :, ::-1]
