@@ -2,7 +2,8 @@
 simulation.
 
 Usage: python systems/run_scenario.py systems/open_closet.yaml [--replay out/x.html]
-Exit status 0 when the simulated task succeeds, 1 when it fails, 2 on bad input.
+Exit status 0 when the simulated task succeeds, 1 when it fails, 2 on bad input or when the fit
+is refused (its confidence below the threshold; one line says why, nothing is planned).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ def main() -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(outcome.report())
+    if outcome.refused:
+        return 2
     return 0 if outcome.task.success else 1
 
 

@@ -19,12 +19,20 @@ import os
 import platform
 import sys
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.eval.confidence_data import ROOM_VARIANTS, case_features, plan_cases, run_cases
+from nfr_drake.eval.confidence_data import (
+    ROOM_VARIANTS,
+    case_features,
+    case_part_features,
+    plan_cases,
+    plan_furniture_cases,
+    run_cases,
+)
 from nfr_drake.eval.confidence_rooms import room_captures
 from nfr_drake.inference.confidence import (
     CONFIDENCE_FILE,
@@ -41,6 +49,13 @@ TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_
          ("sighting_gap_m", "log10_cm"), ("code_distance", "identity"), ("views", "inverse")]
 """The logistic regression's terms (feature, transform; `inference.confidence.TRANSFORMS`), each
 oriented so that more means a worse fit: its coefficient is held <= 0 (`calibrate`)."""
+
+FURNITURE_TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
+                   ("edge_contact", "identity"), ("code_distance", "identity"), ("views", "inverse"),
+                   ("part_exists_logit", "negative"), ("start_spread_m", "log10_cm"),
+                   ("part_image_loss", "log10")]
+"""The terms of a model with several parts (furniture), per part: no handle detector, and the
+part's own features (`inference.confidence.part_features`)."""
 
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
@@ -69,6 +84,12 @@ def featurize(lines: list[dict]) -> list[dict]:
         if line["handle_error_m"] is None:
             continue
         fitted = models.setdefault(line["model"], FittedModel(Path(line["model"])))
+        if "part_errors" in line:  # a model of several parts: one row per true part
+            kind = Path(line["capture"]).parent.name if line["split"] == "evaluation" else line["variant"]
+            rows += [{"split": line["split"], "kind": kind, "model": line["model"],
+                      "capture": line["capture"], "variant": line["variant"], **part}
+                     for part in case_part_features(line, fitted)]
+            continue
         wrong = line["category"] != line["model_category"]
         kind = (f"{line['model_category']} model on {line['category']}" if wrong
                 else Path(line["capture"]).parent.name if line["split"] == "evaluation"
@@ -187,8 +208,16 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  rooms_data: Path = Path("data/rooms"),
                                  write_models: bool = False, check: Path | None = None,
                                  fit: FitConfig = FitConfig(),
+                                 category: Literal["closet-drawer", "furniture"] = "closet-drawer",
                                  threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
+
+    With `--category furniture` the furniture model (models/furniture, several parts) instead:
+    `calibration` captures of DATA/furniture_calib (seed 500), `evaluation` of
+    DATA/furniture_cams128 (seed 7) and `ood` of DATA/furniture_oodsrc (seed 600, variants
+    `FURNITURE_OOD_VARIANTS`), each fitted with the furniture fit's defaults; one row per true
+    part with a handle (P(that part's handle within 2 cm), `FURNITURE_TERMS`); the other counts
+    and `--rooms` are not used.
 
     Args:
         data: folder of the capture sets C_calib, C_train_cams, C_closed, C_shut128, C_oodsrc and
@@ -208,7 +237,9 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         check: a model folder whose confidence.json is checked instead (no calibration fits,
             nothing written to the models): e.g. the shipped calibration under another fit
             (`--fit.preset`).
-        fit: options of the fit.
+        fit: options of the fit (closets and drawers).
+        category: "closet-drawer" (models/closet and models/drawer, one calibration) or
+            "furniture" (models/furniture).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -216,11 +247,17 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     if check is not None and checked is None:
         raise NfrDrakeError(f"--check {check}: no {CONFIDENCE_FILE} there")
     out.mkdir(parents=True, exist_ok=True)
+    furniture_model = category == "furniture"
+    if furniture_model and rooms:
+        raise NfrDrakeError("--rooms: room fits are of closets and drawers, not --category furniture")
     room_sets = {} if rooms == 0 else {
         name: captures for c in ("closet", "drawer")
         for name, captures in room_captures(rooms_data, data / "rooms", c, rooms).items()}
-    cases = plan_cases(data, 0 if checked else calibration, evaluation, closed, shut128, ood,
-                       furniture, room_sets)
+    if furniture_model:
+        cases = plan_furniture_cases(data, 0 if checked else calibration, evaluation, ood)
+    else:
+        cases = plan_cases(data, 0 if checked else calibration, evaluation, closed, shut128, ood,
+                           furniture, room_sets)
     keys = {c.key for c in cases}
     lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
     rows = featurize(lines)
@@ -230,16 +267,21 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         writer.writeheader()
         writer.writerows(rows)
     command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
-    source = {"data": "calibration split: closet_calib and drawer_calib (capture seed 500), "
-                      f"{calibration} captures each, variants by index: clean, clean, few_views, "
-                      "occluded, edge_cut; both categories pooled",
+    data_text = ("calibration split: furniture_calib (capture seed 500), "
+                 f"{calibration} captures, variants by index: clean, clean, few_views, occluded, "
+                 "edge_cut; one row per true part with a handle" if furniture_model else
+                 "calibration split: closet_calib and drawer_calib (capture seed 500), "
+                 f"{calibration} captures each, variants by index: clean, clean, few_views, "
+                 "occluded, edge_cut; both categories pooled")
+    source = {"data": data_text,
               "fits": len([r for r in rows if r["split"] == "calibration"]),
               "command": command, "date": datetime.date.today().isoformat(),
               "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
-    model = checked or calibrate([r for r in rows if r["split"] == "calibration"], TERMS, source)
+    model = checked or calibrate([r for r in rows if r["split"] == "calibration"],
+                                 FURNITURE_TERMS if furniture_model else TERMS, source)
     model.write(out)
     if write_models and checked is None:
-        for folder in ("models/closet", "models/drawer"):
+        for folder in ("models/furniture",) if furniture_model else ("models/closet", "models/drawer"):
             print(f"calibration -> {model.write(Path(folder))}")
     table = refusal_table(rows, model)
     terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))

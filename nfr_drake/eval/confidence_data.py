@@ -22,13 +22,16 @@ import torch
 from tqdm import tqdm
 
 from nfr_drake.data.capture import CaptureSet, read_capture_set
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.eval.capture_variants import apply_variant
-from nfr_drake.inference.confidence import fit_features
+from nfr_drake.inference.confidence import fit_features, part_features, render_views
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
     FittedModel,
     infer,
     infer_in_world,
+    infer_parts,
     object_masks,
     paint_background,
 )
@@ -92,9 +95,54 @@ def case_features(line: dict, fitted: FittedModel, room: bool = True) -> tuple[d
                         fitted.keypoint_names.index("handle"), line["sighting_p_O"], masks)
 
 
+def part_errors(gt: dict, slot_handles: np.ndarray) -> dict[str, float]:
+    """Per true part with a handle of a furniture gt.json (`parts`), its index (a string, as JSON
+    keys are) -> the distance, m, of the handle of the field's slot of that index (slot_handles
+    (S, 3) in O) to the part's true handle."""
+    return {str(p["index"]): float(np.linalg.norm(slot_handles[p["index"]] - p["keypoints"]["handle"]))
+            for p in gt["parts"] if "handle" in p["keypoints"]}
+
+
+def run_furniture_case(case: Case, fitted: FittedModel, config: FurnitureFitConfig) -> dict:
+    """Fit `case` with a model of several parts (`infer_parts`) and return its JSON line: the fit
+    (z, the starts' final codes start_z and losses start_losses), each true part's handle error
+    (`part_errors`) and, as handle_error_m, the smallest of them."""
+    capture, images = load_case(case)
+    result, fit = infer_parts(fitted, capture, config, np.linspace(0.0, 1.0, 2), images=images)
+    errors = part_errors(capture.gt, fit.keypoints[:, SLOT_KEYPOINTS.index("handle")])
+    return {**asdict(case), "key": case.key, "category": capture.gt.get("category"),
+            "model_category": fitted.category, "z": result.z.tolist(),
+            "start_z": fit.start_z.double().tolist(), "start_losses": fit.start_losses.tolist(),
+            "exists": fit.exists.tolist(), "image_loss": result.image_loss,
+            "part_errors": errors,
+            "handle_error_m": min(errors.values()) if errors else None,
+            "failure": "" if errors else "no part with a handle in gt.json",
+            "seconds": result.seconds}
+
+
+def case_part_features(line: dict, fitted: FittedModel) -> list[dict]:
+    """Per true part of a furniture line's fit (`run_furniture_case`), as `infer_parts` computes
+    them: the fit's features (`fit_features`) and those of the part's slot (`part_features`),
+    with `part` its index and `handle_error_m` its handle's error."""
+    capture, images = load_case(line)
+    z = torch.tensor(line["z"])
+    views = render_views(fitted.model, z, capture.frames, images)
+    features, _ = fit_features(fitted.model, z, capture.frames, images,
+                               np.array(line["start_losses"]), fitted.codes, fitted.code_scale, 0,
+                               None, views=views)
+    start_z = torch.tensor(line["start_z"])
+    return [{"part": int(k), "handle_error_m": error, **features,
+             **part_features(fitted.model, z, start_z, int(k), capture.frames, views,
+                             line.get("handles"))}
+            for k, error in line["part_errors"].items()]
+
+
 def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
     """Fit `case` and return its JSON line (see module docstring); a room whose masks give no
-    object pose returns a line without a fit (handle_error_m None, `failure` why)."""
+    object pose returns a line without a fit (handle_error_m None, `failure` why). A model of
+    several parts (furniture) is fitted with the furniture fit's defaults (`run_furniture_case`)."""
+    if fitted.num_slots > 1:
+        return run_furniture_case(case, fitted, FurnitureFitConfig())
     capture, images = load_case(case)
     grid, X_WO = np.linspace(0.0, 1.0, 2), None
     if case.variant in ROOM_VARIANTS:
@@ -176,6 +224,29 @@ def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, shut1
                 category = name.split("_")[0]
                 cases += [Case(f"models/{category}", str(captures[i]), variant, i, "rooms")
                           for variant in ROOM_VARIANTS]
+    return cases
+
+
+FURNITURE_OOD_VARIANTS = ("background", "recoloured", "occluded", "edge_cut", "few_views")
+"""Variants of the out-of-distribution furniture captures (seed 600) fitted by the furniture
+model, by capture index modulo 5."""
+
+
+def plan_furniture_cases(data: Path, calibration: int, evaluation: int, ood: int) -> list[Case]:
+    """The cases of the furniture model's confidence (models/furniture): `calibration` captures
+    of furniture_calib (seed 500, 64 px as the training renders, `CALIBRATION_VARIANTS` by
+    index), `evaluation` of furniture_cams128 (seed 7, 128 px, clean) and `ood` of
+    furniture_oodsrc (seed 600, `FURNITURE_OOD_VARIANTS` by index)."""
+    model = "models/furniture"
+    cases = [Case(model, str(data / "furniture_calib" / f"furniture_{i:03d}"),
+                  CALIBRATION_VARIANTS[i % 5], 500 + i, "calibration") for i in range(calibration)]
+    for i in range(max(evaluation, ood)):
+        if i < evaluation:
+            cases.append(Case(model, str(data / "furniture_cams128" / f"furniture_{i:03d}"),
+                              "clean", i, "evaluation"))
+        if i < ood:
+            cases.append(Case(model, str(data / "furniture_oodsrc" / f"furniture_{i:03d}"),
+                              FURNITURE_OOD_VARIANTS[i % 5], 600 + i, "ood"))
     return cases
 
 

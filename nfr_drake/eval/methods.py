@@ -65,15 +65,23 @@ def neural_field_methods(model_dir: Path, config: FitConfig,
 
 def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     """The furniture fit of a model with several parts (`inference.infer.infer_parts`, a
-    `FittedModel`): a `PartsPrediction` with every slot swept over the q grid, the others held."""
+    `FittedModel`): a `PartsPrediction` with every slot swept over the q grid, the others held,
+    and every slot's confidence (refused below the calibration's threshold)."""
+    from nfr_drake.inference.confidence import refusal
     from nfr_drake.inference.furniture_fit import part_trajectory
-    from nfr_drake.inference.infer import infer_parts
+    from nfr_drake.inference.infer import infer_parts, parts_confidence
 
     def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
         fitted.check_capture(capture)
         result, fit = infer_parts(fitted, capture, config, grid)
         paths = np.stack([part_trajectory(fitted.model, fit.z, k, grid) for k in range(fitted.num_slots)])
-        return PartsPrediction(fit.q, fit.exists, fit.types, fit.keypoints, paths, result.seconds)
+        confidence = None
+        if fitted.confidence is not None:
+            confidence = parts_confidence(fitted, fit, capture, capture.load_images())[0]
+        return PartsPrediction(
+            fit.q, fit.exists, fit.types, fit.keypoints, paths, result.seconds,
+            None if confidence is None else np.array([c["p_handle_within_2cm"] for c in confidence]),
+            None if confidence is None else np.array([refusal(c) is not None for c in confidence]))
 
     return method
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from nfr_drake.data.capture import CaptureSet
 from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
+from nfr_drake.eval.evaluate import REFUSAL_COLUMNS, refusal_cells
 from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
 from nfr_drake.inference.result import PART_KEYPOINTS
 
@@ -28,7 +29,9 @@ class PartsPrediction:
     """One method's answer for a piece with S part slots, positions in O, metres: q (S,) in
     [0, 1]; exists bool (S,); types (S,) index into `PART_TYPES`; keypoints (S, 4, 3) at the
     observed state (`SLOT_KEYPOINTS`); trajectories (S, N, 4, 3), each slot swept over the q grid
-    asked for with the others held; seconds of wall time."""
+    asked for with the others held; seconds of wall time; confidence (S,) P(the slot's handle
+    within 2 cm) (`inference.confidence`) and refused (S,) bool (below the calibration's
+    threshold), both None without a calibration."""
 
     q: np.ndarray
     exists: np.ndarray
@@ -36,6 +39,8 @@ class PartsPrediction:
     keypoints: np.ndarray
     trajectories: np.ndarray
     seconds: float
+    confidence: np.ndarray | None = None
+    refused: np.ndarray | None = None
 
 
 @dataclass
@@ -46,7 +51,9 @@ class PartMetrics:
     count_right (per piece, repeated on its parts): slots found, and whether that is the true part
     count. articulation_error in degrees (doors) or cm (drawers); keypoint RMSE over the part's
     keypoints in gt.json (handle, goal and a door's hinge points); handle error at the observed
-    state; handle trajectory RMSE over the q grid; seconds: the piece's fit.
+    state; handle trajectory RMSE over the q grid; seconds: the piece's fit; confidence: the
+    fit's P(the part's handle within 2 cm) and refused: 1 when it is below the calibration's
+    threshold, 0 when not (both NaN without a calibration).
     """
 
     capture: str
@@ -63,6 +70,8 @@ class PartMetrics:
     handle_error_cm: float
     handle_trajectory_rmse_cm: float
     seconds: float
+    confidence: float = math.nan
+    refused: float = math.nan
 
 
 def score_parts(capture: CaptureSet, prediction: PartsPrediction, set_name: str, method: str
@@ -88,7 +97,9 @@ def score_parts(capture: CaptureSet, prediction: PartsPrediction, set_name: str,
                                              np.array([part["keypoints"]["handle"]])),
             handle_trajectory_rmse_cm=trajectory_rmse_cm(
                 prediction.trajectories[k, :, HANDLE], np.asarray(part["trajectory"]["keypoints"]["handle"])),
-            seconds=prediction.seconds))
+            seconds=prediction.seconds,
+            confidence=math.nan if prediction.confidence is None else float(prediction.confidence[k]),
+            refused=math.nan if prediction.refused is None else float(prediction.refused[k])))
     return rows
 
 
@@ -108,11 +119,13 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
     """Markdown table per set and method: pieces, parts, part count right (share of pieces),
     parts found and type right (share of parts), medians (and 90th percentiles) of the door and
     drawer articulation errors, keypoint RMSE, handle error and handle trajectory RMSE, the median
-    fit time; and per set a row saying that there is no encoder baseline for furniture."""
+    fit time, the parts refused by the fit confidence (`evaluate.refusal_cells`); and per set a
+    row saying that there is no encoder baseline for furniture."""
     results = list(results)
     lines = ["| set | method | pieces | parts | part count right | parts found | type right | "
              "door error (deg) | drawer error (cm) | keypoint RMSE (cm) | handle error (cm) | "
-             "handle trajectory RMSE (cm) | time (s) |", "|" + "---|" * 13]
+             "handle trajectory RMSE (cm) | time (s) | " + " | ".join(REFUSAL_COLUMNS) + " |",
+             "|" + "---|" * (13 + len(REFUSAL_COLUMNS))]
     for set_name in sorted({r.set_name for r in results}):
         for method in sorted({r.method for r in results if r.set_name == set_name}):
             rows = [r for r in results if (r.set_name, r.method) == (set_name, method)]
@@ -125,9 +138,10 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
                      _median([r.keypoint_rmse_cm for r in rows]),
                      _median([r.handle_error_cm for r in rows]),
                      _median([r.handle_trajectory_rmse_cm for r in rows]),
-                     _median([r.seconds for r in pieces], p90=False)]
+                     _median([r.seconds for r in pieces], p90=False)] + refusal_cells(rows)
             lines.append(f"| {set_name} | {method} | " + " | ".join(cells) + " |")
-        lines.append(f"| {set_name} | encoder baseline | {NO_BASELINE} |" + " |" * 10)
+        empty = " |" * (10 + len(REFUSAL_COLUMNS))
+        lines.append(f"| {set_name} | encoder baseline | {NO_BASELINE} |" + empty)
     return "\n".join(lines)
 
 

@@ -193,8 +193,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
-    own random stream, the others held shut; its fit has no confidence (not calibrated for
-    furniture), so none is refused.
+    own random stream, the others held shut; its fit's confidence is P(that part's handle within
+    2 cm) (models/furniture/confidence.json), and below the threshold the piece is refused.
 
     Args:
         category: object category.
@@ -283,12 +283,13 @@ def perception_summary(rows: list[dict]) -> str:
 
 
 def part_summary(rows: list[dict]) -> str:
-    """One line on furniture CSV rows (`PartRow`): successes per part type, and that no fit was
-    refused for want of a confidence calibration."""
+    """One line on furniture CSV rows (`PartRow`): successes and fits refused for low confidence
+    (P(the part's handle within 2 cm)) per part type."""
     types = sorted({r["part_type"] for r in rows})
-    wins = ", ".join(f"{t}s {sum(r['success'] == 'True' for r in rows if r['part_type'] == t)}/"
-                     f"{sum(r['part_type'] == t for r in rows)}" for t in types)
-    return f"by part: {wins}; no fit confidence for furniture (not calibrated): no fit refused"
+    count = lambda t, key: sum(r[key] == "True" for r in rows if r["part_type"] == t)  # noqa: E731
+    wins = ", ".join(f"{t}s {count(t, 'success')}/{sum(r['part_type'] == t for r in rows)}" for t in types)
+    refused = ", ".join(f"{t}s {count(t, 'refused')}" for t in types)
+    return f"by part: {wins}; refused for low fit confidence: {refused}"
 
 
 def place_summary(rows: list[dict]) -> str:

@@ -24,11 +24,14 @@ import numpy as np
 import torch
 
 from nfr_drake.data.capture import CaptureFrame
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import frame_ray_directions
+from nfr_drake.nfr.latent import split_z
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.nfr.rays import Rays
 from nfr_drake.objects import SemanticClass
+from nfr_drake.perception.handle_triangulation import project
 
 CONFIDENCE_FILE = "confidence.json"
 """The calibration in a model folder."""
@@ -99,23 +102,31 @@ def _grid(height: int, width: int) -> np.ndarray:
     return (rows * width + cols).reshape(-1)
 
 
-def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
-                 images: list[np.ndarray], start_losses: np.ndarray, codes: torch.Tensor,
-                 scale: float, handle_keypoint: int, sighting_p_O: np.ndarray | None,
-                 room_masks: list[np.ndarray] | None = None) -> tuple[dict, list[dict]]:
-    """The features of a fit (dict name -> float) and per view {image_loss, silhouette_iou,
-    edge_contact (share of the image border on the observed object)}.
+@dataclass
+class ViewRender:
+    """The fit rendered on one view's pixel grid (`_grid`): the view's features (image_loss,
+    silhouette_iou, edge_contact: `as_json`), the grid pixels' centres uv (P, 2), px, their
+    squared colour error (P,) (mean over RGB, 0..1 scale) and which of them count in the image
+    loss, counted (P,) bool."""
 
-    z (D,): the fitted code; frames and images (uint8 RGB (H, W, 3)): the views fitted;
-    start_losses (S,): the starts' losses after exploration (`FitOutcome`); codes (N, k): the
-    training z_obj, `scale` their spacing (`code_scale`); sighting_p_O (3,) in O, m: the detector's
-    triangulated handle, or None. room_masks: for photos of a room, the object's probability
-    (H, W) per view (the segmenter's): the observed silhouette is where it exceeds 0.5, the
-    image loss counts the pixels on it and the silhouette IoU leaves out the `edge_band` of the
-    sides it touches; None: an object alone before a uniform background
-    (`uniform_background_mask`, every pixel compared).
-    """
-    per_view = []
+    image_loss: float
+    silhouette_iou: float
+    edge_contact: float
+    uv: np.ndarray
+    error: np.ndarray
+    counted: np.ndarray
+
+    def as_json(self) -> dict:
+        return {"image_loss": self.image_loss, "silhouette_iou": self.silhouette_iou,
+                "edge_contact": self.edge_contact}
+
+
+def render_views(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
+                 images: list[np.ndarray], room_masks: list[np.ndarray] | None = None
+                 ) -> list[ViewRender]:
+    """Render the fitted code z (D,) on each view's pixel grid and compare with the photo (uint8
+    RGB (H, W, 3)); `room_masks` as in `fit_features`."""
+    views = []
     z = z.detach().float()
     with torch.no_grad():
         for i, (frame, image) in enumerate(zip(frames, images, strict=True)):
@@ -135,17 +146,43 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
                 observed_fg = mask.reshape(-1)[index]
                 compared = ~edge_band(mask).reshape(-1)[index]
                 counted = observed_fg if observed_fg.any() else compared
-            iou = silhouette_iou(rendered_fg, observed_fg, compared)
+            error = ((out.rgb[0] - observed) ** 2).mean(-1).numpy()
             border = np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]])
-            loss = ((out.rgb[0] - observed) ** 2).mean(-1)[torch.from_numpy(counted)]
-            per_view.append({"image_loss": float(loss.mean()), "silhouette_iou": iou,
-                             "edge_contact": float(border.mean())})
+            uv = np.stack([index % cam.width, index // cam.width], -1) + 0.5
+            views.append(ViewRender(float(error[counted].mean()),
+                                    silhouette_iou(rendered_fg, observed_fg, compared),
+                                    float(border.mean()), uv, error, counted))
+    return views
+
+
+def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
+                 images: list[np.ndarray], start_losses: np.ndarray, codes: torch.Tensor,
+                 scale: float, handle_keypoint: int, sighting_p_O: np.ndarray | None,
+                 room_masks: list[np.ndarray] | None = None,
+                 views: list[ViewRender] | None = None) -> tuple[dict, list[dict]]:
+    """The features of a fit (dict name -> float) and per view {image_loss, silhouette_iou,
+    edge_contact (share of the image border on the observed object)}.
+
+    z (D,): the fitted code; frames and images (uint8 RGB (H, W, 3)): the views fitted;
+    start_losses (S,): the starts' losses after exploration (`FitOutcome`); codes (N, k): the
+    training z_obj, `scale` their spacing (`code_scale`); handle_keypoint: the handle's index
+    among the keypoint head's outputs; sighting_p_O (3,) in O, m: the detector's triangulated
+    handle, or None. room_masks: for photos of a room, the object's probability
+    (H, W) per view (the segmenter's): the observed silhouette is where it exceeds 0.5, the
+    image loss counts the pixels on it and the silhouette IoU leaves out the `edge_band` of the
+    sides it touches; None: an object alone before a uniform background
+    (`uniform_background_mask`, every pixel compared). views: `render_views` of z already made.
+    """
+    views = render_views(model, z, frames, images, room_masks) if views is None else views
+    z = z.detach().float()
+    with torch.no_grad():
         handle = model.keypoints(z[None])[0, handle_keypoint].double().numpy()
-        code_d = torch.cdist(z[None, 2:].double(), codes.double())[0]
+        z_obj = split_z(z, model.config.num_slots)[1]
+        code_d = torch.cdist(z_obj[None].double(), codes.double())[0]
         code_distance = float(code_d.topk(min(NEAREST_CODES, len(code_d)), largest=False)
                               .values.mean()) / scale
-    losses = np.array([v["image_loss"] for v in per_view])
-    ious = np.array([v["silhouette_iou"] for v in per_view])
+    losses = np.array([v.image_loss for v in views])
+    ious = np.array([v.silhouette_iou for v in views])
     ordered = np.sort(np.asarray(start_losses, float))
     gap = None if sighting_p_O is None else float(np.linalg.norm(handle - np.asarray(sighting_p_O)))
     features = {
@@ -153,7 +190,7 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
         "image_loss_worst_view": float(losses.max()),
         "silhouette_iou": float(ious.mean()),
         "silhouette_iou_worst_view": float(ious.min()),
-        "edge_contact": max(v["edge_contact"] for v in per_view),
+        "edge_contact": max(v.edge_contact for v in views),
         "sighting_missing": float(gap is None),
         "sighting_gap_m": 0.0 if gap is None else gap,
         "start_loss_ratio": float(ordered[0] / ordered[1]) if len(ordered) > 1 and ordered[1] > 0
@@ -162,7 +199,51 @@ def fit_features(model: NFRModel, z: torch.Tensor, frames: list[CaptureFrame],
         "views": float(len(frames)),
         "room": float(room_masks is not None),
     }
-    return features, per_view
+    return features, [v.as_json() for v in views]
+
+
+PART_WINDOW = 0.08
+"""A part's local image loss counts the grid pixels within this share of the image's larger side
+of the projection of the part's handle."""
+
+
+def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot: int,
+                  frames: list[CaptureFrame], views: list[ViewRender],
+                  sighted_O: np.ndarray | None = None) -> dict:
+    """Features of one part (slot `slot`) of a fit of a model with several parts (furniture):
+
+    part_exists_logit: the keypoint head's existence logit of the slot (> 0: the field finds
+    the part); part_type_margin: |door logit - drawer logit|; start_spread_m: the largest
+    distance, m, between the slot's handle in the starts fitted together (start_z (B, D), their
+    final codes; 0 for one start); part_image_loss: the image loss (`ViewRender.error`) of the
+    counted grid pixels within `PART_WINDOW` of the handle's projection, mean over the views
+    where it falls in the image (the mean image loss when it falls in none); sighting_missing
+    (1: the handle detector sighted no handle, sighted_O (M, 3) in O empty or None) and
+    sighting_gap_m: the distance, m, from the slot's handle to the nearest sighted one (0 when
+    none). z (D,): the fit.
+    """
+    with torch.no_grad():
+        S = model.config.num_slots
+        logits = model.slot_logits(z.detach().float()[None])[0, slot]
+        handles = model.keypoints(torch.cat([z.detach().float()[None], start_z.detach().float()])
+                                  ).view(-1, S, len(SLOT_KEYPOINTS), 3)[:, slot, 0].double().numpy()
+    spread = float(np.linalg.norm(handles[1:, None] - handles[None, 1:], axis=-1).max())
+    local = []
+    for frame, view in zip(frames, views, strict=True):
+        uv = project(frame, handles[0])
+        cam = frame.camera
+        if uv is None or not (0 <= uv[0] <= cam.width and 0 <= uv[1] <= cam.height):
+            continue
+        near = view.counted & (np.linalg.norm(view.uv - uv, axis=-1)
+                               <= PART_WINDOW * max(cam.width, cam.height))
+        if near.any():
+            local.append(float(view.error[near].mean()))
+    sighted = np.zeros((0, 3)) if sighted_O is None else np.asarray(sighted_O, float).reshape(-1, 3)
+    gap = float(np.linalg.norm(sighted - handles[0], axis=-1).min()) if len(sighted) else 0.0
+    return {"sighting_missing": float(not len(sighted)), "sighting_gap_m": gap,
+            "part_exists_logit": float(logits[0]),
+            "part_type_margin": float(abs(logits[1] - logits[2])), "start_spread_m": spread,
+            "part_image_loss": float(np.mean(local if local else [v.image_loss for v in views]))}
 
 
 TRANSFORMS = {
@@ -171,6 +252,7 @@ TRANSFORMS = {
     "one_minus": lambda x: 1.0 - x,
     "log10_cm": lambda x: math.log10(100.0 * x + 0.5),
     "inverse": lambda x: 1.0 / max(x, 1.0),
+    "negative": lambda x: -x,
 }
 """Transforms of a feature before the logistic regression (`ConfidenceModel.terms`)."""
 
@@ -262,6 +344,11 @@ ADVICE = {
     "sighting_gap_m": ("the handle detector's handle and the fitted one disagree: photograph the "
                        "handle closer, or use a model of this kind of object"),
     "code_distance": "the object is unlike the model's training objects: use a model of this kind",
+    "part_exists_logit": ("the model does not find this part in the photos: photograph it closer, "
+                          "or use a model of this kind of object"),
+    "start_spread_m": "the fit's starts disagree on this part's handle: take more views, closer",
+    "part_image_loss": ("the fitted part does not match the photos around its handle: photograph "
+                        "this part closer, or use a model of this kind of object"),
     "room": ("in a room the fit confidence is not calibrated yet (docs/CONFIDENCE.md, \"In rooms\"): "
              "photograph the object alone before a plain background, or act on the fit at your own "
              "risk with --min-confidence 0"),

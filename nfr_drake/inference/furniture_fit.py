@@ -61,7 +61,9 @@ class FurnitureFitConfig:
 class FurnitureFit:
     """The fitted code z (2 S + k,); per slot q (S,), exists bool (S,) (existence logit > 0),
     types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`); image_loss
-    (MSE on the last step's rays), steps, seconds of wall time."""
+    (MSE on the last step's rays), steps, seconds of wall time; the starts fitted together
+    (`keep` of them): their final codes start_z (keep, 2 S + k) and image losses on the last
+    step's rays start_losses (keep,); z is the one of the lowest loss."""
 
     z: torch.Tensor
     q: np.ndarray
@@ -71,6 +73,8 @@ class FurnitureFit:
     image_loss: float
     steps: int
     seconds: float
+    start_z: torch.Tensor | None = None
+    start_losses: np.ndarray | None = None
 
 
 def _mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tensor) -> torch.Tensor:
@@ -112,7 +116,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         q = z_art_to_q(split_z(z_best, S)[0].view(S, 2))
     return FurnitureFit(z_best, q.double().cpu().numpy(), (logits[:, 0] > 0).cpu().numpy(),
                         logits[:, 1:].argmax(-1).cpu().numpy(), keypoints.double().cpu().numpy(),
-                        float(per_code[best].detach()), config.steps, time.perf_counter() - t0)
+                        float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
+                        start_z=z.detach().clone(), start_losses=per_code.detach().double().cpu().numpy())
 
 
 @torch.no_grad()

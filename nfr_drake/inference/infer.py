@@ -18,7 +18,13 @@ from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.inference.confidence import ConfidenceModel, code_scale, fit_features
+from nfr_drake.inference.confidence import (
+    ConfidenceModel,
+    code_scale,
+    fit_features,
+    part_features,
+    render_views,
+)
 from nfr_drake.inference.fit import (
     FitConfig,
     FitOutcome,
@@ -240,9 +246,9 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
                 masks: list[np.ndarray] | None = None) -> tuple[FitResult, FurnitureFit]:
     """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`);
     the result lists the parts the field finds (`parts`, each swept over q_grid (N,) with the
-    others held) and its single-part fields are those of `part` (default: the first part found,
-    slot 0 when none is; a part the field does not find adds a warning). No confidence: it is
-    calibrated for closets and drawers only. `images` and `masks` as in `infer`. NfrDrakeError
+    others held, each with its `confidence`, `parts_confidence`) and its single-part fields and
+    `confidence` are those of `part` (default: the first part found, slot 0 when none is; a part
+    the field does not find adds a warning). `images` and `masks` as in `infer`. NfrDrakeError
     for a part outside the model's slots."""
     started = time.perf_counter()
     if part is not None and not 0 <= part < fitted.num_slots:
@@ -259,12 +265,17 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
     if chosen not in found:
         warnings.append(f"the field finds no part {chosen} (parts found: {found or 'none'}); its "
                         "keypoints are the slot's all the same")
+    confidence, per_view = parts_confidence(fitted, fit, capture, images)
+    parts = parts_json(fitted.model, fit, q_grid)
+    for p in parts:
+        p["confidence"] = confidence[p["index"]]
     result = FitResult(
         category=fitted.category, q=0.0, keypoints={}, trajectory_q=np.asarray(q_grid, float),
         trajectory={}, image_loss=fit.image_loss, seconds=0.0, z=fit.z.double().cpu().numpy(),
-        parts=parts_json(fitted.model, fit, q_grid),
+        confidence={"per_view": per_view}, parts=parts,
         extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings})
-    result = result.with_part(part_json(fitted.model, fit, chosen, q_grid))
+    result = result.with_part({**part_json(fitted.model, fit, chosen, q_grid),
+                               "confidence": confidence[chosen]})
     result.seconds = time.perf_counter() - started
     return result, fit
 
@@ -295,11 +306,32 @@ def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet
         fitted.model, outcome.z, capture.frames, images, outcome.start_losses, fitted.codes,
         fitted.code_scale, fitted.keypoint_names.index("handle"),
         None if handle is None else handle.p_O, room_masks)
-    calibration = fitted.confidence
+    return calibrated(fitted.confidence, features, per_view)
+
+
+def calibrated(calibration: ConfidenceModel | None, features: dict, per_view: list[dict]) -> dict:
+    """A result's `confidence` of a fit's features: {p_handle_within_2cm, threshold, weakest (all
+    three None without a calibration), features, per_view}."""
     return {"p_handle_within_2cm": None if calibration is None else calibration.probability(features),
             "threshold": None if calibration is None else calibration.threshold,
             "weakest": None if calibration is None else calibration.weakest(features),
             "features": features, "per_view": per_view}
+
+
+def parts_confidence(fitted: FittedModel, fit: FurnitureFit, capture: CaptureSet,
+                     images: list[np.ndarray]) -> tuple[list[dict], list[dict]]:
+    """Per slot of a model with several parts (furniture), the `confidence` of its part
+    ({p_handle_within_2cm, threshold, weakest, features}, `calibrated`): P(the part's handle
+    within 2 cm) from the fit's features (`fit_features`; no handle detector) and the part's
+    (`confidence.part_features`); and the per-view figures, shared by the parts."""
+    views = render_views(fitted.model, fit.z, capture.frames, images)
+    features, per_view = fit_features(
+        fitted.model, fit.z, capture.frames, images, fit.start_losses, fitted.codes,
+        fitted.code_scale, 0, None, views=views)
+    parts = [calibrated(fitted.confidence, {**features, **part_features(
+        fitted.model, fit.z, fit.start_z, k, capture.frames, views)}, [])
+        for k in range(fitted.num_slots)]
+    return [{k: v for k, v in c.items() if k != "per_view"} for c in parts], per_view
 
 
 def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedHandle | None

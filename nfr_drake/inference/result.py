@@ -60,11 +60,15 @@ class FitResult:
 
     def with_part(self, part: dict) -> FitResult:
         """This result with its single-part fields those of `part` (an entry of `parts`, or one
-        alike of a slot the field does not find), keypoints renamed by `PART_KEYPOINTS`."""
+        alike of a slot the field does not find), keypoints renamed by `PART_KEYPOINTS`, and its
+        `confidence` the part's (`part["confidence"]`, the per-view figures kept) when it has one."""
         names = PART_KEYPOINTS[part["type"]]
         path = part["trajectory"]
+        confidence = self.confidence
+        if part.get("confidence") is not None:
+            confidence = {**(self.confidence or {}), **part["confidence"]}
         return replace(
-            self, q=float(part["q"]),
+            self, q=float(part["q"]), confidence=confidence,
             keypoints={to: np.asarray(part["keypoints"][n], float) for n, to in names.items()},
             trajectory_q=np.asarray(path["q"], float),
             trajectory={to: np.asarray(path["keypoints"][n], float) for n, to in names.items()},

@@ -94,7 +94,8 @@ class NfrPerceptionSystem(LeafSystem):
     q_estimate: BasicVector of size 1, the fitted articulation in [0, 1].
     fit_result: abstract `FitResult` (positions in O).
     confidence: abstract dict, the result's `confidence` ({p_handle_within_2cm, threshold,
-    features, per_view}; p None when the model folder has no calibration), or None.
+    features, per_view}; p None when the model folder has no calibration; furniture: of the part
+    asked for), or None.
     X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities, and
@@ -269,7 +270,7 @@ class NfrPerceptionSystem(LeafSystem):
         output.set_value(self._selected(context)[0])
 
     def _CalcConfidence(self, context, output) -> None:
-        output.set_value(self._stored(context)[0].confidence)
+        output.set_value(self._selected(context)[0].confidence)
 
     def _CalcX_WO(self, context, output) -> None:
         output.set_value(self._stored(context)[1])

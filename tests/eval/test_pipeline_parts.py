@@ -41,7 +41,7 @@ def test_pipeline_rows_name_the_part_and_nothing_is_refused(furniture_model_fold
     assert len(rows) == 1 and rows[0]["part"] == str(part)
     assert rows[0]["part_type"] == obj.front(part).kind and rows[0]["refused"] == "False"
     assert rows[0]["unit"] == ("deg" if rows[0]["part_type"] == "door" else "cm")
-    assert "no fit confidence for furniture (not calibrated): no fit refused" in capsys.readouterr().out
+    assert "refused for low fit confidence: " in capsys.readouterr().out  # no calibration: none
 
 
 def test_a_door_the_field_takes_for_a_drawer_is_a_row_with_the_hinge_on_no_side(furniture_model_folder):

@@ -55,7 +55,13 @@ def test_a_furniture_result_gives_the_planner_its_part(furniture_model_folder, c
     fitted = FittedModel(furniture_model_folder)
     grid = np.linspace(0, 1, 4)
     result, fit = infer_parts(fitted, read_capture_set(capture_dir), QUICK, grid)
-    assert result.part["index"] == 0 and result.confidence is None
+    assert result.part["index"] == 0
+    # The tiny model has no calibration: the features of each part, no probability.
+    assert result.confidence["p_handle_within_2cm"] is None
+    assert len(result.confidence["per_view"]) == 3
+    assert result.confidence["features"] == result.parts[0]["confidence"]["features"]
+    assert result.part_of(1).confidence["features"] == result.parts[1]["confidence"]["features"]
+    assert result.confidence["features"]["part_exists_logit"] == pytest.approx(5.0, abs=1e-4)
     X_WO = RigidTransform([1.0, 0.0, 0.0])
     door = KeypointTrajectory.from_fit_result(result.to_json(), X_WO)
     drawer = KeypointTrajectory.from_fit_result(result.part_of(1).to_json(), X_WO)
