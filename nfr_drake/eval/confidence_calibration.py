@@ -60,6 +60,9 @@ part's own features (`inference.confidence.part_features`)."""
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
 
+MIN_EACH = 5
+"""The calibration fits its terms only with at least this many successes and failures."""
+
 
 def pick_threshold(p: np.ndarray, success: np.ndarray, clean: np.ndarray) -> float:
     """The refusal threshold from the calibration split: the highest t <= `MAX_THRESHOLD` that
@@ -113,13 +116,22 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     `pick_threshold`. Monotone: every term is oriented so that more is worse, and a term whose
     coefficient comes out > 0 (more of it, more confidence: the sample's quirk, e.g. occluded
     fits that are right in spite of a high image loss) is dropped (coefficient 0), the most
-    positive first, until none is."""
+    positive first, until none is.
+
+    With fewer than `MIN_EACH` successes (or failures) the terms cannot be fitted: the
+    calibration is the split's success rate alone, (k + 1/2) / (n + 1) for k successes in n
+    (Jeffreys), every coefficient 0, and the threshold `MAX_THRESHOLD` (while that rate is below
+    it, every fit is refused)."""
     raw = ConfidenceModel(terms, [0.0] * len(terms), [1.0] * len(terms), [0.0] * len(terms), 0.0,
                           0.0, source)
     X = np.array([raw.design(r) for r in rows])
     mean, std = X.mean(0), X.std(0) + 1e-9
     X = (X - mean) / std
     y = np.array([r["handle_error_m"] <= SUCCESS_M for r in rows], float)
+    if min(y.sum(), len(y) - y.sum()) < MIN_EACH:
+        rate = (y.sum() + 0.5) / (len(y) + 1.0)
+        return ConfidenceModel(terms, mean.tolist(), std.tolist(), [0.0] * len(terms),
+                               float(np.log(rate / (1.0 - rate))), MAX_THRESHOLD, source)
     active = np.ones(len(terms), bool)
     while True:
         coef = np.zeros(len(terms))

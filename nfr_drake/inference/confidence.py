@@ -276,9 +276,12 @@ class ConfidenceModel:
         x = np.array([TRANSFORMS[t](float(features[name])) for name, t in self.terms])
         return (x - np.array(self.mean)) / np.array(self.std)
 
-    def weakest(self, features: dict) -> str:
+    def weakest(self, features: dict) -> str | None:
         """The feature whose term lowers this fit's probability most (its coefficient times its
-        standardised value, most negative): what a refusal names first."""
+        standardised value, most negative): what a refusal names first; None when every
+        coefficient is 0 (a calibration that is the success rate alone)."""
+        if not any(self.coef):
+            return None
         contributions = self.design(features) * np.array(self.coef)
         return self.terms[int(np.argmin(contributions))][0]
 

@@ -1,6 +1,7 @@
 """The fit-confidence calibration: monotone in every term, threshold from the calibration split."""
 
 import numpy as np
+import pytest
 
 from nfr_drake.eval.confidence_calibration import calibrate, pick_threshold, refusal_table
 
@@ -35,3 +36,16 @@ def test_the_threshold_refuses_no_clean_success_of_the_calibration_split():
     success = np.array([True, True, False, True])
     assert pick_threshold(p, success, np.ones(4, bool)) == 0.36
     assert pick_threshold(p, success, np.array([True, False, True, True])) == 0.5  # at most 0.5
+
+
+def test_without_enough_successes_the_calibration_is_the_success_rate_and_refuses_every_fit():
+    rows = _rows()
+    for r in rows:  # one success in 300 (as furniture fits of a weak model)
+        r["handle_error_m"] = 0.3
+    rows[0]["handle_error_m"] = 0.01
+    model = calibrate(rows, TERMS, {})
+    assert model.coef == [0.0, 0.0] and model.threshold == 0.5
+    p = model.probability(rows[1])
+    assert p == pytest.approx(1.5 / 301) and p == model.probability(rows[0])
+    assert all(model.probability(r) < model.threshold for r in rows)
+    assert model.weakest(rows[1]) is None  # no term to blame: the refusal gives the general advice
