@@ -89,6 +89,31 @@ def test_eval_of_a_furniture_model_writes_its_tables_and_plots(furniture_model_f
         assert (out / name).is_file(), name
 
 
+def test_eval_of_a_calibrated_furniture_model_writes_each_parts_confidence(
+        furniture_model_folder, captures, tmp_path):
+    import csv
+    import shutil
+
+    from nfr_drake.inference.confidence import ConfidenceModel
+
+    model = tmp_path / "furniture"
+    shutil.copytree(furniture_model_folder, model)
+    # P = sigmoid(-1.5 * (-logit) / 5 - 0.5): a part the head finds (logit 5) 0.73, else 0.12.
+    ConfidenceModel([("part_exists_logit", "negative")], [0.0], [5.0], [-1.5], -0.5, 0.5, {}).write(model)
+    quick = FurnitureFitConfig(starts=2, keep=1, steps=2, rays_per_step=32, lookup_rays=32)
+    out = tmp_path / "eval"
+    eval_command([captures], out, model=model, category="furniture", limit=1, furniture_fit=quick,
+                 example_plots=0, threads=1)
+    rows = list(csv.DictReader(open(out / "results.csv")))
+    for r in rows:
+        found = int(r["part"]) < 3  # the tiny model finds slots 0-2 whatever the code
+        assert float(r["confidence"]) == pytest.approx(0.73 if found else 0.12, abs=0.01)
+        assert r["refused"] == ("0.0" if found else "1.0")
+    summary = (out / "summary.md").read_text()
+    refused = sum(int(r["part"]) >= 3 for r in rows)
+    assert "good fits refused" in summary and f"| {refused} of {len(rows)} |" in summary
+
+
 def test_a_baseline_or_another_category_is_refused_for_furniture(furniture_model_folder, captures,
                                                                  tmp_path):
     with pytest.raises(NfrDrakeError, match="no encoder baseline for furniture"):
