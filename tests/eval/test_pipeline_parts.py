@@ -54,3 +54,23 @@ def test_a_door_the_field_takes_for_a_drawer_is_a_row_with_the_hinge_on_no_side(
     assert scenario.part == 1 and scenario.sample_piece()[0].front(1).kind == "door"
     row = _row(scenario)
     assert row.part_type == "door" and row.hinge_side_correct is False and row.unit == "deg"
+
+
+def test_a_furniture_fit_below_the_threshold_is_refused_not_planned(furniture_model_folder, tmp_path, capsys):
+    import shutil
+
+    from nfr_drake.inference.confidence import ConfidenceModel
+
+    model = tmp_path / "furniture"
+    shutil.copytree(furniture_model_folder, model)
+    # The success rate alone (as a calibration with too few good fits): P 0.12 for every part.
+    ConfidenceModel([("part_exists_logit", "negative")], [0.0], [5.0], [0.0], -2.0, 0.5, {}).write(model)
+    csv_path = tmp_path / "pipeline.csv"
+    eval_pipeline_command("furniture", model, csv_path, n=1, seed=200, image_size=16, threads=1)
+    row = next(csv.DictReader(open(csv_path)))
+    assert row["refused"] == "True" and row["planned"] == "False"
+    assert float(row["p_handle_within_2cm"]) == pytest.approx(0.119, abs=1e-3)
+    assert row["failure"].startswith("refused: P(handle within 2 cm) = 0.12 < 0.50")
+    out = capsys.readouterr().out
+    assert f"refused for low fit confidence: {row['part_type']}s 1" in out
+    assert out.strip().endswith("1 refused for low fit confidence, 0 failed")
