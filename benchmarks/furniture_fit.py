@@ -7,8 +7,14 @@ Per capture: whether the part count is right (the slots the head says exist agai
 fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
 keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
 handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time.
+Handles (`--handles`): "detector", those triangulated from the 2D handle detector in `--detector`
+(default MODEL/handle_detector) join the fit (part count, starts, handle term:
+`nfr_drake.inference.furniture_fit`); "none", the fit without them; "true", gt.json's handles
+(the ceiling of what sightings can give, for diagnosis only). The handle count and the time to
+sight them are in each row.
 
     python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json]
+        [--handles detector|none|true] [--detector DIR]
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +35,24 @@ from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture,
 from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
 from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
+from nfr_drake.perception.handle_detector.model import load_detector
+from nfr_drake.perception.handle_triangulation import locate_handles
 
 
-def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig) -> dict:
+def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handles: str = "none",
+             detector=None) -> dict:
     gt = json.loads((capture_dir / "gt.json").read_text())
-    fit = fit_furniture(model, observed_rays(read_capture_set(capture_dir)), codes, config)
+    capture = read_capture_set(capture_dir)
+    started = time.perf_counter()
+    if handles == "detector":
+        handles_O = np.array([h.p_O for h in locate_handles(detector.detect(capture.load_images()),
+                                                            capture.frames)]).reshape(-1, 3)
+    elif handles == "true":
+        handles_O = np.array([p["keypoints"]["handle"] for p in gt["parts"]])
+    else:
+        handles_O = None
+    sight_seconds = time.perf_counter() - started
+    fit = fit_furniture(model, observed_rays(capture), codes, config, handles_O)
     parts = []
     for part in gt["parts"]:
         k, names = part["index"], PART_KEYPOINTS[part["type"]]
@@ -50,7 +70,8 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig) -> dic
                 path, np.asarray(part["trajectory"]["keypoints"]["handle"]))})
     return {"capture": capture_dir.name, "fronts": len(gt["parts"]),
             "found": int(fit.exists.sum()), "count_right": int(fit.exists.sum()) == len(gt["parts"]),
-            "seconds": fit.seconds, "image_loss": fit.image_loss, "parts": parts}
+            "handles": len(fit.handles), "sight_seconds": sight_seconds, "seconds": fit.seconds,
+            "image_loss": fit.image_loss, "parts": parts}
 
 
 def summary(rows: list[dict]) -> dict:
@@ -66,7 +87,9 @@ def summary(rows: list[dict]) -> dict:
                                        if p["type"] == "drawer"]),
         "keypoint_rmse_cm_median": med([p["keypoint_rmse_cm"] for p in parts]),
         "trajectory_rmse_cm_median": med([p["trajectory_rmse_cm"] for p in parts]),
-        "fit_seconds_median": med([r["seconds"] for r in rows])}
+        "fit_seconds_median": med([r["seconds"] for r in rows]),
+        "handle_count_right": float(np.mean([r["handles"] == r["fronts"] for r in rows])),
+        "sight_seconds_median": med([r["sight_seconds"] for r in rows])}
 
 
 def main() -> None:
@@ -77,7 +100,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=FurnitureFitConfig.steps)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--handles", choices=("detector", "none", "true"), default="detector")
+    parser.add_argument("--detector", type=Path, help="default: MODEL/handle_detector")
     args = parser.parse_args()
+    detector = None
+    if args.handles == "detector":
+        detector = load_detector(args.detector or args.model / "handle_detector")[0]
     set_torch_threads(args.threads)
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
@@ -86,9 +114,9 @@ def main() -> None:
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:
-        rows.append(evaluate(model, codes, d, config))
+        rows.append(evaluate(model, codes, d, config, args.handles, detector))
         r = rows[-1]
-        print(f"{r['capture']}: fronts {r['fronts']}, found {r['found']}, "
+        print(f"{r['capture']}: fronts {r['fronts']}, found {r['found']}, handles {r['handles']}, "
               f"{r['seconds']:.1f} s, " + ", ".join(
                   f"{p['type']}{p['index']} q {p['q']:.2f}/{p['q_true']:.2f}" for p in r["parts"]),
               flush=True)

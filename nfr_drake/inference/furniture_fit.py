@@ -7,15 +7,25 @@ code table) with every slot shut and with every slot half open are scored by one
 of the result has its q (its own z_art), the keypoint head's existence and type logits and its four
 keypoints; forward simulation sweeps one slot's q with the others held (`part_trajectory`).
 docs/NEURAL_FIELD.md, "Furniture: several parts".
+
+Handles seen by the 2D handle detector (`handles`, M points in O triangulated across the views,
+`nfr_drake.perception.handle_triangulation.locate_handles`) join the fit three ways: the piece
+has M fronts, so slots 0..M-1 exist (slot k is front k; `count_from_handles`); the starts are the
+training codes whose keypoint head lays its handles out as the sightings (`HandleTerm` on every
+training code shut and half open, then the image loss on the best `starts`); and the same term
+joins the loss of every step and the choice of the winner. The term matches the M sightings one
+to one with slots 0..M-1 (the assignment of least summed squared distance, redone at each step)
+and adds w log(1 + d^2 / s^2) per pair, averaged: robust as the closets' sighting term.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from scipy.optimize import linear_sum_assignment
 
 from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
 from nfr_drake.errors import ConfigError
@@ -47,6 +57,15 @@ class FurnitureFitConfig:
     """SRN's prior on z_obj (mean of squares), as in training."""
     seed: int = 0
     """Seed of the ray draws."""
+    handle_weight: float = 2e-3
+    """Weight w of the handle term (module docstring; 0: the sighted handles are not in the loss
+    nor in the choice of starts)."""
+    handle_scale_m: float = 0.015
+    """s of the handle term, m: about the sightings' accuracy."""
+    count_from_handles: bool = True
+    """With M >= 1 sighted handles, slots 0..M-1 exist and no others (else the head's logits)."""
+    handle_detector: bool = True
+    """Sight the handles with the model's 2D handle detector when it ships one (`infer_parts`)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -55,15 +74,16 @@ class FurnitureFitConfig:
         if not 0.0 <= self.detail_fraction <= 1.0 or self.lr <= 0 or self.latent_weight < 0:
             raise ConfigError("FurnitureFitConfig: detail_fraction in [0, 1], lr > 0, "
                               "latent_weight >= 0")
+        if self.handle_weight < 0 or self.handle_scale_m <= 0:
+            raise ConfigError("FurnitureFitConfig: handle_weight >= 0, handle_scale_m > 0")
 
 
 @dataclass
 class FurnitureFit:
     """The fitted code z (2 S + k,); per slot q (S,), exists bool (S,) (existence logit > 0),
     types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`); image_loss
-    (MSE on the last step's rays), steps, seconds of wall time; the starts fitted together
-    (`keep` of them): their final codes start_z (keep, 2 S + k) and image losses on the last
-    step's rays start_losses (keep,); z is the one of the lowest loss."""
+    (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
+    in O the fit used (M = 0: none)."""
 
     z: torch.Tensor
     q: np.ndarray
@@ -73,8 +93,30 @@ class FurnitureFit:
     image_loss: float
     steps: int
     seconds: float
-    start_z: torch.Tensor | None = None
-    start_losses: np.ndarray | None = None
+    handles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+class HandleTerm:
+    """The handle term (module docstring) of codes against sighted handles p_O (M, 3) in O:
+    slots 0..M-1 of the keypoint head matched one to one with the sightings."""
+
+    def __init__(self, model: NFRModel, handles_O, weight: float, scale_m: float):
+        self.model, self.weight, self.scale = model, weight, scale_m
+        self.handles = torch.as_tensor(np.asarray(handles_O, np.float32).reshape(-1, 3))
+        self.handle_index = SLOT_KEYPOINTS.index("handle")
+
+    def __call__(self, z: torch.Tensor) -> torch.Tensor:
+        """The term (B,) of codes z (B, D); zeros without sightings or weight."""
+        M = len(self.handles)
+        if M == 0 or self.weight == 0:
+            return z.new_zeros(len(z))
+        S = self.model.config.num_slots
+        slots = self.model.keypoints(z).view(len(z), S, len(SLOT_KEYPOINTS), 3)[:, :M, self.handle_index]
+        d2 = ((slots[:, :, None] - self.handles.to(z)[None, None]) ** 2).sum(-1)  # (B, slot, sighting)
+        cost = d2.detach().cpu().numpy()
+        pairs = torch.tensor(np.array([linear_sum_assignment(c) for c in cost]), dtype=torch.long)
+        matched = d2[torch.arange(len(z))[:, None], pairs[:, 0], pairs[:, 1]]
+        return self.weight * torch.log1p(matched / self.scale ** 2).mean(-1)
 
 
 def _mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tensor) -> torch.Tensor:
@@ -83,41 +125,58 @@ def _mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tens
     return ((model.render(z, r).rgb - rgb) ** 2).mean(dim=(1, 2))
 
 
+def _start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:
+    """Codes (2 N, D) of z_obj (N, k) with every slot shut, then every slot half open."""
+    return torch.cat([torch.cat([slots_q_to_z_art(torch.full((len(z_obj), S), q), S).to(z_obj),
+                                 z_obj], -1) for q in (0.0, 0.5)])
+
+
 def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
-                  config: FurnitureFitConfig = FurnitureFitConfig()) -> FurnitureFit:
+                  config: FurnitureFitConfig = FurnitureFitConfig(),
+                  handles_O: np.ndarray | None = None) -> FurnitureFit:
     """Fit z of a model with several slots to the observed rays of a capture; codes (N, k) are
-    the training codes the starts come from."""
+    the training codes the starts come from; handles_O (M, 3) in O, m: handles sighted by the
+    handle detector (module docstring), or None."""
     S = model.config.num_slots
     if S < 2:
         raise ConfigError("fit_furniture needs a model with several articulation slots")
     t0 = time.perf_counter()
     generator = torch.Generator().manual_seed(config.seed)
-    pick = torch.linspace(0, len(codes) - 1, min(config.starts, len(codes))).round().long()
-    z_obj = codes[pick].to(rays.rgb)
-    cands = torch.cat([torch.cat([slots_q_to_z_art(torch.full((len(z_obj), S), q), S).to(z_obj),
-                                  z_obj], -1) for q in (0.0, 0.5)])
+    handles = np.zeros((0, 3)) if handles_O is None else np.asarray(handles_O, float).reshape(-1, 3)[:S]
+    term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m)
+    if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
+        with torch.no_grad():
+            every = _start_codes(codes.to(rays.rgb), S)
+            cands = every[term(every).argsort()[:2 * config.starts]]
+    else:
+        pick = torch.linspace(0, len(codes) - 1, min(config.starts, len(codes))).round().long()
+        cands = _start_codes(codes[pick].to(rays.rgb), S)
     with torch.no_grad():
         index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
-        loss = _mse(model, cands, rays, index)
+        loss = _mse(model, cands, rays, index) + term(cands)
     z = cands[loss.argsort()[:config.keep]].clone().requires_grad_(True)
     optimiser = torch.optim.Adam([z], lr=config.lr)
     for _ in range(config.steps):
         index = rays.sample(config.rays_per_step, config.detail_fraction, generator)
         per_code = _mse(model, z, rays, index)
-        total = per_code.sum() + config.latent_weight * latent_loss(split_z(z, S)[1]) * len(z)
+        total = (per_code.sum() + term(z).sum()
+                 + config.latent_weight * latent_loss(split_z(z, S)[1]) * len(z))
         optimiser.zero_grad(set_to_none=True)
         total.backward()
         optimiser.step()
     with torch.no_grad():
-        best = int(per_code.argmin())
+        best = int((per_code + term(z)).argmin())
         z_best = z[best].detach()
         logits = model.slot_logits(z_best[None])[0]
         keypoints = model.keypoints(z_best[None])[0].view(S, len(SLOT_KEYPOINTS), 3)
         q = z_art_to_q(split_z(z_best, S)[0].view(S, 2))
-    return FurnitureFit(z_best, q.double().cpu().numpy(), (logits[:, 0] > 0).cpu().numpy(),
+    exists = (logits[:, 0] > 0).cpu().numpy()
+    if len(handles) and config.count_from_handles:
+        exists = np.arange(S) < len(handles)
+    return FurnitureFit(z_best, q.double().cpu().numpy(), exists,
                         logits[:, 1:].argmax(-1).cpu().numpy(), keypoints.double().cpu().numpy(),
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
-                        start_z=z.detach().clone(), start_losses=per_code.detach().double().cpu().numpy())
+                        handles)
 
 
 @torch.no_grad()

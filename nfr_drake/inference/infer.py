@@ -56,6 +56,7 @@ from nfr_drake.perception.handle_triangulation import (
     MIN_VIEWS,
     TriangulatedHandle,
     locate_handle,
+    locate_handles,
     project,
 )
 from nfr_drake.perception.object_pose import background_mask, estimate_object_pose
@@ -244,7 +245,8 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitConfig,
                 q_grid: np.ndarray, images: list[np.ndarray] | None = None, part: int | None = None,
                 masks: list[np.ndarray] | None = None) -> tuple[FitResult, FurnitureFit]:
-    """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`);
+    """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`, with
+    the handles the model's detector sights, `sighted_handles`, reported in `extra["handles"]`);
     the result lists the parts the field finds (`parts`, each swept over q_grid (N,) with the
     others held, each with its `confidence`, `parts_confidence`) and its single-part fields and
     `confidence` are those of `part` (default: the first part found, slot 0 when none is; a part
@@ -259,7 +261,9 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
         warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
                         f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
-    fit = fit_furniture(fitted.model, observed_rays(capture, images, masks=masks), fitted.codes, config)
+    handles = sighted_handles(fitted, capture, images, config)
+    fit = fit_furniture(fitted.model, observed_rays(capture, images, masks=masks), fitted.codes, config,
+                        None if handles is None else np.array([h.p_O for h in handles]).reshape(-1, 3))
     found = [int(k) for k in np.flatnonzero(fit.exists)]
     chosen = part if part is not None else (found[0] if found else 0)
     if chosen not in found:
@@ -273,11 +277,32 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
         category=fitted.category, q=0.0, keypoints={}, trajectory_q=np.asarray(q_grid, float),
         trajectory={}, image_loss=fit.image_loss, seconds=0.0, z=fit.z.double().cpu().numpy(),
         confidence={"per_view": per_view}, parts=parts,
-        extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings})
+        extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings,
+               "handles": _handles_json(fitted, config, handles)})
     result = result.with_part({**part_json(fitted.model, fit, chosen, q_grid),
                                "confidence": confidence[chosen]})
     result.seconds = time.perf_counter() - started
     return result, fit
+
+
+def sighted_handles(fitted: FittedModel, capture: CaptureSet, images: list[np.ndarray],
+                    config: FurnitureFitConfig) -> list[TriangulatedHandle] | None:
+    """The handles of a piece of furniture triangulated from the model's handle detector in the
+    capture's views (`locate_handles`); None when the model ships no detector or the fit is told
+    not to use it (`FurnitureFitConfig.handle_detector`)."""
+    if fitted.handle_detector is None or not config.handle_detector:
+        return None
+    return locate_handles(fitted.handle_detector.detect(images), capture.frames)
+
+
+def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,
+                  handles: list[TriangulatedHandle] | None) -> dict:
+    """What the handle detector gave a furniture fit, for the result's `extra`."""
+    if handles is None:
+        return {"used": False, "why": ("the model ships no handle detector"
+                                       if fitted.handle_detector is None else "turned off")}
+    return {"used": bool(handles), "count": len(handles), "p_O": [h.p_O.tolist() for h in handles],
+            "views": [list(h.views) for h in handles]}
 
 
 def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.ndarray]:

@@ -1,5 +1,5 @@
-"""The furniture fit: z of a model with several slots from a capture set, and forward simulation
-of one part with the others held."""
+"""The furniture fit: z of a model with several slots from a capture set, with and without sighted
+handles, and forward simulation of one part with the others held."""
 
 from dataclasses import replace
 
@@ -14,6 +14,7 @@ from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import observed_rays
 from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
+    HandleTerm,
     fit_furniture,
     part_trajectory,
     parts_json,
@@ -72,3 +73,37 @@ def test_fit_refuses_a_one_slot_model(capture):
     model = NFRModel(replace(TINY, num_slots=1, num_keypoints=4))
     with pytest.raises(ConfigError, match="several articulation slots"):
         fit_furniture(model, observed_rays(capture), torch.zeros(2, 4))
+
+
+def test_handle_term_matches_sightings_to_slots_in_any_order():
+    """The handle term is 0 when the sightings are the head's first M slot handles in any order,
+    grows as they move away, and is 0 without sightings or weight."""
+    torch.manual_seed(2)
+    model = NFRModel(TINY).eval().requires_grad_(False)
+    z = torch.randn(3, TINY.latent_dim)
+    slots = model.keypoints(z).view(3, S, 4, 3)[:, :, SLOT_KEYPOINTS.index("handle")]
+    sighted = slots[1, [2, 0, 1]].numpy()  # code 1's slots 0-2, shuffled
+    term = HandleTerm(model, sighted, 2e-3, 0.015)
+    values = term(z)
+    assert values.shape == (3,) and float(values[1]) < 1e-9 and (values[[0, 2]] > 0).all()
+    assert float(HandleTerm(model, sighted + 0.1, 2e-3, 0.015)(z[1:2])[0]) > 0
+    assert (HandleTerm(model, np.zeros((0, 3)), 2e-3, 0.015)(z) == 0).all()
+    assert (HandleTerm(model, sighted, 0.0, 0.015)(z) == 0).all()
+
+
+def test_sighted_handles_give_the_part_count(capture):
+    """With M sighted handles the fit says slots 0..M-1 exist (slot k is front k), whatever the
+    head's logits; without, or with `count_from_handles` off, the head's logits decide."""
+    torch.manual_seed(0)
+    model = NFRModel(TINY).eval().requires_grad_(False)
+    codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
+    config = FurnitureFitConfig(starts=3, keep=2, steps=3, rays_per_step=64, lookup_rays=64)
+    handles = np.array([[0.6, -0.3, 0.9], [0.6, 0.3, 0.9], [0.6, 0.0, 0.4]])
+    fit = fit_furniture(model, observed_rays(capture), codes, config, handles)
+    assert fit.exists.tolist() == [True] * 3 + [False] * (S - 3)
+    np.testing.assert_allclose(fit.handles, handles)
+    plain = fit_furniture(model, observed_rays(capture), codes, config)
+    off = fit_furniture(model, observed_rays(capture), codes, replace(config, count_from_handles=False),
+                        handles)
+    logits = model.slot_logits(off.z[None])[0, :, 0] > 0
+    assert off.exists.tolist() == logits.tolist() and len(plain.handles) == 0
