@@ -66,3 +66,21 @@ def test_eval_pipeline_counts_refusals_apart_from_failures(calibrated_model, tmp
     out = capsys.readouterr().out
     assert "| closet | 2 | 2 | 0 | 0 | **0%** | 0 |" in out
     assert out.strip().endswith("2 refused for low fit confidence, 0 failed")
+
+
+def test_the_scenario_script_exits_2_on_a_refused_fit(calibrated_model, tmp_path):
+    # Before, a refused fit (no task) stopped the script on outcome.task.success.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = tmp_path / "refuse.yaml"
+    path.write_text(f"category: closet\nmodel: {calibrated_model}\nviews: 3\nimage_size: 24\n"
+                    "min_confidence: 1.0\nfit:\n  restarts: 1\n  explore_steps: 0\n  max_steps: 2\n"
+                    "  focus_steps: 0\n  eval_rays: 64\n  lookup_rays: 64\n")
+    script = Path(__file__).resolve().parents[2] / "systems" / "run_scenario.py"
+    result = subprocess.run([sys.executable, str(script), str(path), "--replay",
+                             str(tmp_path / "r.html")], capture_output=True, text=True, timeout=600)
+    refused = [line for line in result.stdout.splitlines() if line.startswith("refused:")]
+    assert result.returncode == 2 and len(refused) == 1, result.stdout + result.stderr
+    assert not (tmp_path / "r.html").exists()
