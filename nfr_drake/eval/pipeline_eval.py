@@ -190,7 +190,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           perceive: Literal["alone", "room"] = "alone",
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
-                          threads: int | None = None) -> None:
+                          mask_crop: bool = True, threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
     own random stream, the others held shut; its fit's confidence is P(that part's handle within
@@ -222,6 +222,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         segmenter: the segmenter's model folder (with `--perceive room`).
         room_loss: with `--perceive room`, the photos' pixels off the object's mask are painted in
             the training background ("background") or left out of the fit's loss ("masked").
+        mask_crop: with `--perceive room`, the segmenter's second, close look at the crop around
+            the object's box estimated from its first masks (`Scenario.mask_crop`).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -229,7 +231,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     q_target=1.0 if q_target is None else q_target, keypoints=keypoints, fit=fit,
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
-                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss)
+                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop)
     rows = evaluate_pipeline(base, n, csv_path, part_target=q_target is None)
     print(SUMMARY_HEADER)
     print(summary_row(rows))

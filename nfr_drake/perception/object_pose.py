@@ -292,6 +292,19 @@ def box_corners_W(box: np.ndarray) -> np.ndarray:
                             local[:, 2]])
 
 
+def box_image_rect(box: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera, shape: tuple[int, int]
+                   ) -> tuple[float, float, float, float] | None:
+    """The bounding rectangle (x0, y0, x1, y1), pixels of an image of `shape` (H, W) taken by
+    `camera` (scaled) at X_WC, of the floor box's corners (x, y, yaw, depth, width, height); it may
+    reach beyond the image. None when a corner lies behind the camera."""
+    h, w = shape
+    uv, front = project_points(box_corners_W(box), X_WC, camera)
+    if not front.all():
+        return None
+    uv = uv * [w / camera.width, h / camera.height]
+    return float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()), float(uv[:, 1].max())
+
+
 def box_silhouette(box: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera, shape: tuple[int, int]
                    ) -> np.ndarray:
     """The floor box's silhouette (shape) float32 in [0, 1], anti-aliased, in an image of `shape`

@@ -12,9 +12,11 @@ the perception render engine sees the object alone (the robot, the floor and any
 lose their perception role), against the background colour and lighting of the training renders:
 a stand-in for segmenting the object out of a real photo. Perceiving the "room", it sees every
 geometry of the plant (floor, walls, other furniture, clutter, the robot) under the lights given,
-a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo, and the
-fit sees the photos with everything off the object's mask painted in the training background
-(`paint_background`; or, `room_loss` "masked", only the pixels on the mask count in its loss).
+a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo (with
+`mask_crop`, a second look at the crop around the object's box estimated from the first masks,
+`segmentation.crop.posed_close_look`), and the fit sees the photos with everything off the
+object's mask painted in the training background (`paint_background`; or, `room_loss` "masked",
+only the pixels on the mask count in its loss).
 Frame O of the model is the object's frame. Its pose X_WO in the world is estimated from the views
 (W's floor at z = 0, z up): the object's masks give a visual hull and a floor box
 (`perception.object_pose`), and the fit runs in that O. The paper's setting passes a known X_WO
@@ -60,6 +62,7 @@ from nfr_drake.inference.infer import (
 )
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
+from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.keypoints import KeypointTrajectory
 
@@ -98,7 +101,9 @@ class NfrPerceptionSystem(LeafSystem):
     asked for), or None.
     X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
 
-    Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities, and
+    Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
+    `mask_crop`, those of its second look at the crop around the object's box in each view,
+    `posed_close_look`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
     only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
     object alone), every pixel counting in the loss.
@@ -123,7 +128,7 @@ class NfrPerceptionSystem(LeafSystem):
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
                  segmenter: Segmenter | None = None, part: int | None = None,
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
-                 room_loss: RoomLoss = "background"):
+                 room_loss: RoomLoss = "background", mask_crop: bool = True):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -137,7 +142,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WCs = list(X_WCs)
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
-        self._segmenter, self._room_loss = segmenter, room_loss
+        self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self.fit_count = 0
         self._image_ports = [
@@ -195,6 +200,16 @@ class NfrPerceptionSystem(LeafSystem):
         part = int(context.get_numeric_parameter(self._part_index).GetAtIndex(0))
         return None if part < 0 else part
 
+    @property
+    def camera_poses(self) -> list[RigidTransform]:
+        """The cameras' poses X_WC in W (OpenCV axes), in port order."""
+        return list(self._X_WCs)
+
+    @property
+    def cameras(self) -> list[PinholeCamera]:
+        """The cameras' intrinsics, in port order."""
+        return list(self._cameras)
+
     def refit(self, context) -> FitResult:
         """Fit again to the current camera images (this system's context); returns the result."""
         fitted = self._run_fit(context)
@@ -203,6 +218,9 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _masks(self, images: list[np.ndarray]) -> list[np.ndarray]:
         """The object's mask (H, W) in [0, 1] per image: the segmenter's, or off the background."""
+        if self._segmenter is not None and self._mask_crop:
+            return posed_close_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
+                                    self._cameras, self._model.category, self._hull_config)
         if self._segmenter is not None:
             return [self._segmenter.object_mask(image) for image in images]
         return [background_mask(image, self._background_rgb) for image in images]
@@ -299,14 +317,15 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      keypoint_source: KeypointSource = "head", scene: PerceptionScene = "alone",
                      segmenter: Path = SEGMENTER_DIR, part: int | None = None,
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
-                     room_loss: RoomLoss = "background") -> NfrPerceptionSystem:
+                     room_loss: RoomLoss = "background", mask_crop: bool = True) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
     then see the object alone (`render_only`) under `lighting` (default the training renders'
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
-    `RoomLighting.moved`), the `segmenter` model folder finds the object and `room_loss` says how the
-    fit treats the pixels off its mask (`NfrPerceptionSystem`). X_WO: the object's
+    `RoomLighting.moved`), the `segmenter` model folder finds the object (`mask_crop`: with a second,
+    close look) and `room_loss` says how the fit treats the pixels off its mask
+    (`NfrPerceptionSystem`). X_WO: the object's
     known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
     parts (furniture): `part` and `furniture_config` as in `NfrPerceptionSystem`. Returns the
     system; its RgbdSensors are named `nfr_camera_{i}`.
@@ -324,7 +343,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
         keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
-        room_loss=room_loss))
+        room_loss=room_loss, mask_crop=mask_crop))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

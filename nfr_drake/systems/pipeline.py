@@ -151,7 +151,7 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
                                   X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
                                   scenario.perceive, Path(scenario.segmenter), part,
-                                  room_loss=scenario.room_loss)
+                                  room_loss=scenario.room_loss, mask_crop=scenario.mask_crop)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),

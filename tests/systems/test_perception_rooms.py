@@ -119,9 +119,18 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
         return real_infer(*args, **kwargs)
 
     monkeypatch.setattr(perception_module, "infer", spy)
+    looks = []
+    real_look = perception_module.posed_close_look
+
+    def look_spy(net, images, X_WCs, cameras, category, hull):
+        looks.append((len(images), len(X_WCs), category))
+        return real_look(net, images, X_WCs, cameras, category, hull)
+
+    monkeypatch.setattr(perception_module, "posed_close_look", look_spy)
     diagram, system = _perception_scene(model_dir, "room", X_WO)
     Simulator(diagram).Initialize()
     assert system.fit_count == 1 and len(calls) == 1
+    assert looks == [(3, 3, "closet")]  # the crop stage over the three posed views (mask_crop)
     images, kwargs = calls[0]
     masks = kwargs["masks"]
     assert kwargs["masked_loss"] is False

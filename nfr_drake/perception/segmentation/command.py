@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+from nfr_drake.perception.segmentation.evaluation import Crop
 from nfr_drake.perception.segmentation.model import SegmenterConfig
 from nfr_drake.perception.segmentation.training import SegmenterTrainConfig
 
@@ -45,7 +46,7 @@ def train_segmenter_command(data: list[Path], out: Path,
 
 def eval_segmenter_command(model: Path, data: list[Path], out: Path | None = None,
                            figure: Path | None = None, figure_images: int = 2,
-                           threads: int | None = None) -> None:
+                           threads: int | None = None, crop: Crop = "none") -> None:
     """Mask IoU of a segmenter on room datasets (per dataset: mean, median, pooled, on images
     where the image edge cuts the object and where it does not, false-positive area).
 
@@ -56,6 +57,9 @@ def eval_segmenter_command(model: Path, data: list[Path], out: Path | None = Non
         figure: PNG of photos with true (green) and predicted (magenta) masks.
         figure_images: images per dataset in the figure.
         threads: torch CPU threads (default: the free cores).
+        crop: the masks measured: the first look ("none"), the second look at the crop around
+            each photo's first mask ("mask"), or the crop stage over the views of one articulation,
+            the crop around the box of the pose from their first masks ("posed"; docs/ROOMS.md).
     """
     from nfr_drake.cpu import set_torch_threads
     from nfr_drake.perception.segmentation.evaluation import evaluate_dataset, mask_figure
@@ -65,10 +69,11 @@ def eval_segmenter_command(model: Path, data: list[Path], out: Path | None = Non
     net, _ = load_segmenter(model)
     results = []
     for root in data:
-        r = evaluate_dataset(net, root)
+        r = evaluate_dataset(net, root, crop)
         results.append(r)
         cut = "-" if r["iou_mean_cut"] is None else f"{r['iou_mean_cut']:.3f}"
-        print(f"{root}: {r['category']} {r['style']}, {r['images']} images: IoU mean {r['iou_mean']:.3f} "
+        print(f"{root}: {r['category']} {r['style']}, crop {crop}, {r['images']} images: "
+              f"IoU mean {r['iou_mean']:.3f} "
               f"median {r['iou_median']:.3f} pooled {r['iou_pooled']:.3f}; cut by the edge "
               f"({r['cut_images']}) {cut}; false-positive area {r['false_positive_area']:.3f}; centre box "
               f"{r['iou_mean_centre_box']:.3f}")
@@ -76,4 +81,4 @@ def eval_segmenter_command(model: Path, data: list[Path], out: Path | None = Non
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         Path(out).write_text(json.dumps({"model": str(model), "results": results}, indent=2) + "\n")
     if figure is not None:
-        mask_figure(net, list(data), figure_images, figure)
+        mask_figure(net, list(data), figure_images, figure, crop=crop)

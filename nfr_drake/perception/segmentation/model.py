@@ -32,6 +32,11 @@ SEGMENT_PX = 96
 (`generate-rooms --size`), so that an object framed by the photo has the pixel scale that the
 network's receptive field learnt. 128 px photos of closets in held-out rooms score a mean IoU of
 0.39 segmented as they are and 0.56-0.61 at 96 px (docs/ROOMS.md, "The pipeline in a room")."""
+CROP_MARGIN = 0.3
+"""The crop stage's free border on each side of the object's box, as a fraction of the box's
+longer side: the training photos frame the object with a border of 5-50 % of the half-image."""
+Box = tuple[int, int, int, int]
+"""A pixel rectangle (x0, y0, x1, y1): columns x0..x1-1 and rows y0..y1-1 of an image."""
 
 
 @dataclass(frozen=True)
@@ -108,12 +113,22 @@ class Segmenter(nn.Module):
         x = torch.from_numpy(np.ascontiguousarray(image, np.float32) / 255.0).permute(2, 0, 1)[None]
         return torch.softmax(self(x), dim=1)[0].permute(1, 2, 0).numpy()
 
-    def object_mask(self, image: np.ndarray, size: int | None = SEGMENT_PX) -> np.ndarray:
+    def object_mask(self, image: np.ndarray, size: int | None = SEGMENT_PX, box: Box | None = None
+                    ) -> np.ndarray:
         """Probability that each pixel shows the target object, (H, W) float32 in [0, 1], of a
         uint8 RGB image (H, W, 3) of any size: segmented at about `size` x `size` pixels (the
-        image scaled, its aspect kept, and the mask scaled back; None: as it is)."""
+        image scaled, its aspect kept, and the mask scaled back; None: as it is). With `box`
+        (the crop stage, `close_look`): only that rectangle of the image (clipped to it) is
+        segmented, scaled to about `size`, and the mask is 0 outside it."""
         image = np.asarray(image)
         h, w = image.shape[:2]
+        if box is not None:
+            x0, y0 = max(int(box[0]), 0), max(int(box[1]), 0)
+            x1, y1 = min(int(box[2]), w), min(int(box[3]), h)
+            mask = np.zeros((h, w), np.float32)
+            if x1 - x0 >= 2 and y1 - y0 >= 2:
+                mask[y0:y1, x0:x1] = self.object_mask(image[y0:y1, x0:x1], size)
+            return mask
         usable = size is not None and image.ndim == 3 and image.dtype == np.uint8 and min(h, w) >= 2
         scale = size / np.sqrt(h * w) if usable else 1.0
         if abs(scale - 1.0) < 0.02:
@@ -122,6 +137,38 @@ class Segmenter(nn.Module):
                            interpolation=cv2.INTER_AREA if scale < 1.0 else cv2.INTER_LINEAR)
         mask = 1.0 - self.class_probabilities(small)[..., 0]
         return cv2.resize(mask, (w, h), interpolation=cv2.INTER_LINEAR)
+
+    def close_look(self, image: np.ndarray, box: Box | None = None, size: int | None = SEGMENT_PX,
+                   margin: float = CROP_MARGIN) -> np.ndarray:
+        """The crop stage: the object's mask (H, W) float32 in [0, 1] from a second look at the
+        crop around it, so that a small object fills the network's input as in its training
+        photos. The crop is `box`, or (None) the square around the first look's mask
+        (`object_mask`, `square_box` with `margin`); the first mask when that is empty."""
+        if box is None:
+            first = self.object_mask(image, size)
+            box = square_box(first > 0.5, margin)
+            if box is None:
+                return first
+        return self.object_mask(image, size, box)
+
+
+def square_box(mask: np.ndarray, margin: float = CROP_MARGIN) -> Box | None:
+    """The square pixel rectangle centred on the bounding box of a boolean mask (H, W), its side
+    the box's longer side plus `margin` of it on each side (it may reach beyond the image); None
+    for an empty mask."""
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return None
+    return square_around(cols.min(), rows.min(), cols.max() + 1, rows.max() + 1, margin)
+
+
+def square_around(x0: float, y0: float, x1: float, y1: float, margin: float = CROP_MARGIN) -> Box:
+    """The square pixel rectangle centred on the rectangle (x0, y0)-(x1, y1) (pixels, ends
+    exclusive), its side the longer side plus `margin` of it on each side, at least 4 px."""
+    half = max(max(x1 - x0, y1 - y0) * (0.5 + margin), 2.0)
+    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    return (int(np.floor(cx - half)), int(np.floor(cy - half)), int(np.ceil(cx + half)),
+            int(np.ceil(cy + half)))
 
 
 def save_segmenter(folder: Path, net: Segmenter, record: dict) -> None:

@@ -1,0 +1,102 @@
+"""The segmenter's crop stage: a crop segmented at the network's input size and pasted back, the
+square around a mask, the crop of each posed view around the object's floor box."""
+
+import math
+
+import numpy as np
+import pytest
+
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
+from nfr_drake.perception.object_pose import box_corners_W, project_points
+from nfr_drake.perception.segmentation import crop
+from nfr_drake.perception.segmentation.model import (
+    SEGMENT_PX,
+    Segmenter,
+    SegmenterConfig,
+    square_around,
+    square_box,
+)
+
+SMALL = SegmenterConfig(channels=4, levels=2, bottleneck_dilations=(2,))
+CAMERA = PinholeCamera.from_fov(128, 128, math.radians(50.0))
+
+
+class Bright(Segmenter):
+    """A stand-in network: the object is where the image is bright; records the sizes it is fed."""
+
+    def __init__(self):
+        super().__init__(SMALL)
+        self.seen: list[tuple[int, int]] = []
+
+    def class_probabilities(self, image: np.ndarray) -> np.ndarray:
+        self.seen.append(image.shape[:2])
+        p = (image.mean(-1) > 128).astype(np.float32)
+        return np.stack([1.0 - p, p, 0 * p, 0 * p], -1)
+
+
+def _square_image(size: int, x0: int, y0: int, side: int) -> np.ndarray:
+    image = np.full((size, size, 3), 30, np.uint8)
+    image[y0:y0 + side, x0:x0 + side] = 220
+    return image
+
+
+def test_a_crop_is_segmented_at_the_input_size_and_pasted_back():
+    net = Bright()
+    image = _square_image(256, 100, 120, 20)
+    mask = net.object_mask(image, box=(90, 110, 130, 150))
+    assert mask.shape == (256, 256) and mask.dtype == np.float32
+    assert net.seen[-1] == (SEGMENT_PX, SEGMENT_PX)  # the 40 px crop enlarged to the input size
+    assert mask[:110].max() == 0 and mask[150:].max() == 0 and mask[:, :90].max() == 0
+    inside = mask[125:135, 105:115]
+    assert inside.min() > 0.9
+    truth = np.zeros((256, 256), bool)
+    truth[120:140, 100:120] = True
+    assert np.count_nonzero((mask > 0.5) ^ truth) <= 2 * 20 * 2  # at most a pixel off along the outline
+
+
+def test_a_box_beyond_the_image_is_clipped_and_an_empty_one_gives_nothing():
+    net = Bright()
+    image = _square_image(64, 0, 0, 20)
+    mask = net.object_mask(image, box=(-30, -30, 30, 30))
+    assert mask.shape == (64, 64) and mask[:15, :15].min() > 0.9 and mask[:, 30:].max() == 0
+    assert net.object_mask(image, box=(70, 70, 90, 90)).max() == 0.0
+
+
+def test_square_around_a_mask():
+    mask = np.zeros((100, 100), bool)
+    mask[20:30, 40:80] = True  # 40 wide, 10 high
+    box = square_box(mask, margin=0.25)
+    assert box == square_around(40, 20, 80, 30, 0.25)
+    x0, y0, x1, y1 = box
+    assert x1 - x0 == pytest.approx(60, abs=1) and y1 - y0 == pytest.approx(60, abs=1)
+    assert (x0 + x1) / 2 == pytest.approx(60, abs=0.5) and (y0 + y1) / 2 == pytest.approx(25, abs=0.5)
+    assert square_box(np.zeros((10, 10), bool)) is None
+
+
+def test_close_look_zooms_in_on_a_small_object():
+    """The first look sees the 256 px photo at 96 px, the second the crop around its mask."""
+    net = Bright()
+    image = _square_image(256, 200, 30, 16)
+    mask = net.close_look(image, margin=0.5)
+    assert net.seen == [(SEGMENT_PX, SEGMENT_PX), (SEGMENT_PX, SEGMENT_PX)]
+    assert mask[30:46, 200:216].min() > 0.9 and mask[:, :180].max() == 0
+    assert np.array_equal(net.close_look(np.zeros((64, 64, 3), np.uint8)), np.zeros((64, 64), np.float32))
+
+
+def test_each_view_crops_around_the_boxs_projection():
+    box = np.array([0.3, -0.2, 0.4, 0.45, 0.6, 0.8])  # x, y, yaw, depth, width, height
+    centre = np.array([0.3, -0.2, 0.4])
+    X_WCs = [look_at(centre + [2.0 * math.cos(a), 2.0 * math.sin(a), 0.8], centre) for a in (0.0, 0.6, -0.7)]
+    boxes = crop.view_boxes(box, X_WCs, [CAMERA] * 3, [(128, 128)] * 3, margin=0.2, reach=0.0)
+    for X_WC, (x0, y0, x1, y1) in zip(X_WCs, boxes, strict=True):
+        uv, _ = project_points(box_corners_W(box), X_WC, CAMERA)
+        assert np.all((uv[:, 0] > x0) & (uv[:, 0] < x1) & (uv[:, 1] > y0) & (uv[:, 1] < y1))
+        side = max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1]))
+        assert x1 - x0 == pytest.approx(1.4 * side, abs=2) and abs((y1 - y0) - (x1 - x0)) <= 1
+    reached = crop.view_boxes(box, X_WCs, [CAMERA] * 3, [(128, 128)] * 3, margin=0.2, reach=0.5)
+    # the fronts' sweep widens the crop
+    assert all((b[2] - b[0]) > (a[2] - a[0]) for a, b in zip(boxes, reached, strict=True))
+    behind = crop.view_boxes(box, [look_at(centre + [0.1, 0.0, 0.1], centre + [1.0, 0.0, 0.1])], [CAMERA],
+                             [(128, 128)], reach=0.0)
+    assert behind == [None]
