@@ -55,14 +55,22 @@ _IK_ITERATIONS = 80
 _KNOT_SLACK = 0.003  # knots clear obstacles by this much more than the trajectories between them, m
 GRASP_OF = {"closet": "side", "drawer": "top"}
 """The grasp of the item by the category it is placed in (module docstring)."""
-PLACE_REACH = {"closet": (0.6, 0.7, 0.85), "drawer": (0.5, 0.55, 0.7)}
+PLACE_REACH = {"closet": (0.7, 0.8, 0.9), "drawer": (0.5, 0.55, 0.7)}
 """`PlannerConfig.place_reach` values for an opening a place follows, tried in turn (the nearer
-base first), by category, m: a closet's goal is reached by a level hand through its front, a
-drawer's from above, over the front (a forearm that comes down steeply: the base nearer)."""
-_BASE_LATERAL = (0.0, 0.15, -0.15, 0.3, -0.3)
-"""A re-placed base's offsets across the compartment's front from in front of its goal, m."""
+base first), by category, m: a closet's goal is reached by a level hand through its front (the
+line in, 0.3-0.4 m long, starts that much nearer the base), a drawer's from above, over the
+front (a forearm that comes down steeply: the base nearer)."""
+_BASE_BEARINGS_DEG = (0.0, 15.0, -15.0, 25.0, -25.0, 40.0, -40.0, 55.0, -55.0)
+"""A re-placed base's bearings from the goal, from the front's outward normal, degrees: straight
+in front and turned across the front to either side (beside an open door's free edge)."""
 _BASE_CLEARANCE = 0.25
 """A re-placed base's axis clears the compartment and the open door by this much, m."""
+_SIGHT_HEIGHT = 0.2
+"""The sight line to the pre-place point starts this far above it on the base axis, m."""
+_SIGHT_CLEARANCE = 0.06
+"""The sight line clears the compartment and the open door by this much, m (the forearm's radius)."""
+_SIGHT_FRACTION = 0.85
+"""How much of the sight line (from the base) must clear them: its end lies at the front."""
 _EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
@@ -133,19 +141,21 @@ class PlaceProblem:
 
 def place_problem(kt: KeypointTrajectory, q_target: float, item: Item, X_WI: RigidTransform,
                   table: ObstacleBox, obstacles: tuple[list[ObstacleBox], list[ObstacleBox]] | None = None,
-                  config: PlaceConfig | None = None) -> PlaceProblem:
+                  config: PlaceConfig | None = None, toward: np.ndarray | None = None) -> PlaceProblem:
     """The problem of placing `item` (at X_WI on `table`) at the goal of `kt` opened to q_target:
     a side grasp into a closet, a top grasp into a drawer. obstacles: (fixed, moving) boxes, e.g.
-    of a true model; None: from the keypoints (`compartment_obstacles`)."""
-    entry, depth = _entry(kt, q_target, item, config or PlaceConfig())
+    of a true model; None: from the keypoints (`compartment_obstacles`). toward: the base's
+    position (m, (3,) in W) a closet's way in turns toward (`compartment_entry`); None: straight in."""
+    entry, depth = _entry(kt, q_target, item, config or PlaceConfig(), toward)
     fixed, moving = obstacles if obstacles is not None else compartment_obstacles(kt, q_target)
     return PlaceProblem(GRASP_OF[kt.category], kt.point("goal", q_target), entry,
                         depth, list(fixed), list(moving), table, item, X_WI)
 
 
-def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig) -> tuple[np.ndarray, float]:
+def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig,
+           toward: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """The way in (unit, (3,)) and the pre-place point's distance from the place along it, m."""
-    entry, opening = compartment_entry(kt, q_target)
+    entry, opening = compartment_entry(kt, q_target, toward)
     along = item.half_extents[0] if kt.category == "closet" else 0.0
     return entry, opening + along + cfg.entry_margin
 
@@ -153,21 +163,30 @@ def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig
 def place_bases(kt: KeypointTrajectory, q_target: float, obstacles: list[ObstacleBox],
                 heights: tuple[float, ...] = (0.0,)) -> list[RigidTransform]:
     """Poses of a base re-placed after the opening to place in the compartment opened to q_target
-    (a mobile manipulator's base driven to a second spot): in front of it (`front_normal`), its
-    goal `PLACE_REACH` away (nearest first) and up to 0.3 m to either side (`_BASE_LATERAL`), at
-    each of `heights` above the floor (m), facing the goal, the base's axis `_BASE_CLEARANCE`
-    clear of `obstacles` (boxes in W: the compartment and its open front)."""
+    (a mobile manipulator's base driven to a second spot): its goal `PLACE_REACH` away (nearest
+    first), at the bearings `_BASE_BEARINGS_DEG` from the front's outward normal (`front_normal`),
+    at each of `heights` above the floor (m), facing the goal. Kept when the base's axis clears
+    `obstacles` (boxes in W: the compartment and its open front) by `_BASE_CLEARANCE` and the
+    straight line from `_SIGHT_HEIGHT` above the pre-place point on that axis to the pre-place
+    point (10 cm out of the front along the way in, `compartment_entry` turned toward the base)
+    clears them by `_SIGHT_CLEARANCE` (all but its last part, `_SIGHT_FRACTION`): an open door
+    between the base and the front turns a base away."""
     goal = kt.point("goal", q_target)
     n = front_normal(kt, q_target)
-    lateral = np.cross(_Z, n)
+    f = np.linspace(0.0, _SIGHT_FRACTION, 12)[:, None]
     bases = []
     for height in heights:
         for reach in PLACE_REACH[kt.category]:
-            for offset in _BASE_LATERAL:
-                p_WB = goal + reach * n + offset * lateral
+            for bearing in np.radians(_BASE_BEARINGS_DEG):
+                direction = RotationMatrix.MakeZRotation(bearing) @ n
+                p_WB = goal + reach * direction
                 p_WB[2] = height
+                entry, opening = compartment_entry(kt, q_target, p_WB)
+                p_pre = goal - (opening + 0.1) * entry
                 column = p_WB + np.outer(np.linspace(0.0, 0.6, 7), _Z)
-                if all(distance_to_box(box, column).min() >= _BASE_CLEARANCE for box in obstacles):
+                sight = (1 - f) * (p_WB * [1, 1, 0] + [0, 0, p_pre[2] + _SIGHT_HEIGHT]) + f * p_pre
+                if all(distance_to_box(box, column).min() >= _BASE_CLEARANCE
+                       and distance_to_box(box, sight).min() >= _SIGHT_CLEARANCE for box in obstacles):
                     yaw = np.arctan2(*(goal - p_WB)[1::-1])
                     bases.append(RigidTransform(RollPitchYaw(0.0, 0.0, yaw), p_WB))
     return bases
@@ -248,10 +267,12 @@ def grasp_in_item(item: Item, grasp: str, cfg: PlaceConfig, flip: bool = False) 
 
 class _Stage:
     """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
-    aims at (for its timing)."""
+    aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W)."""
 
-    def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints):
+    def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints,
+                 approach: np.ndarray | None = None):
         self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
+        self.approach = approach
 
 
 def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
@@ -297,13 +318,57 @@ def _item_at(p_WI: np.ndarray, X_GI: RigidTransform, entry: np.ndarray, side: bo
     return make
 
 
-def _seeds(sc: PlanningScene, p_W: np.ndarray, q_prev: np.ndarray):
-    """IK seeds: q_prev, then the home posture turned about the base axis to face p_W, then that
+_PLANAR: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+
+def _planar_postures() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Postures of the arm in its base's x-z plane (joints 1, 3 and 5 at zero, joint 7 at pi/4) on a
+    grid of joints 2, 4 and 6: postures (N, 7), their tool points (N, 3) and approaches (N, 3) in
+    the base frame. Computed once per process."""
+    if not _PLANAR:
+        sc = build_planning_scene(RigidTransform(), [])
+        lower, upper = sc.plant.GetPositionLowerLimits(), sc.plant.GetPositionUpperLimits()
+        postures, points, approaches = [], [], []
+        for q2 in np.linspace(lower[1] + 0.05, upper[1] - 0.05, 15):
+            for q4 in np.linspace(lower[3] + 0.05, upper[3] - 0.05, 13):
+                for q6 in np.linspace(lower[5] + 0.05, upper[5] - 0.05, 15):
+                    q = np.array([0.0, q2, 0.0, q4, 0.0, q6, np.pi / 4])
+                    sc.plant.SetPositions(sc.plant_context, np.r_[q, FINGER_OPEN, FINGER_OPEN])
+                    X = sc.tool_frame.CalcPoseInWorld(sc.plant_context)
+                    postures.append(q)
+                    points.append(X.translation())
+                    approaches.append(X.rotation().col(2))
+        _PLANAR.append((np.array(postures), np.array(points), np.array(approaches)))
+    return _PLANAR[0]
+
+
+def _planar_seeds(sc: PlanningScene, p_W: np.ndarray, approach_W: np.ndarray | None, count: int = 2
+                  ) -> list[np.ndarray]:
+    """Arm postures (7,) turned about the base axis to face p_W whose tool point lies nearest it
+    (in range and height) with the approach nearest `approach_W` (unit, W; None: any)."""
+    postures, points, approaches = _planar_postures()
+    p_B = sc.X_WB.inverse() @ p_W
+    yaw = float(np.arctan2(p_B[1], p_B[0]))
+    cost = np.hypot(points[:, 0] - np.hypot(p_B[0], p_B[1]), points[:, 2] - p_B[2])
+    if approach_W is not None:
+        a = RotationMatrix.MakeZRotation(-yaw) @ (sc.X_WB.rotation().inverse() @ approach_W)
+        cost = cost + 0.1 * np.arccos(np.clip(approaches @ a, -1.0, 1.0))
+    return [postures[i] + np.r_[yaw, np.zeros(6)] for i in np.argsort(cost)[:count]]
+
+
+def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray):
+    """IK seeds: q_prev, then the home posture turned about the base axis to face the stage's
+    point, postures of the arm in that vertical plane nearest the point and the stage's approach
+    (`_planar_seeds`, joint 7 also turned a quarter turn either way), then the home posture
     perturbed (a fixed random stream: plans are repeatable); fingers of q_prev."""
     yield q_prev
-    p_B = sc.X_WB.inverse() @ p_W
-    facing = np.r_[np.arctan2(p_B[1], p_B[0]), Q_HOME[1:], q_prev[NUM_ARM_JOINTS:]]
+    fingers = q_prev[NUM_ARM_JOINTS:]
+    p_B = sc.X_WB.inverse() @ stage.p_W
+    facing = np.r_[np.arctan2(p_B[1], p_B[0]), Q_HOME[1:], fingers]
     yield facing
+    for q in _planar_seeds(sc, stage.p_W, stage.approach):
+        for turn in (0.0, np.pi / 2, -np.pi / 2):
+            yield np.r_[q[:6], q[6] + turn, fingers]
     rng = np.random.default_rng(0)
     for _ in range(_EXTRA_SEEDS):
         yield facing + np.r_[rng.normal(0.0, 0.5, NUM_ARM_JOINTS), np.zeros(len(q_prev) - NUM_ARM_JOINTS)]
@@ -324,7 +389,7 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
         ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
         ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
-        for seed in _seeds(sc, stage.p_W, q_prev):
+        for seed in _seeds(sc, stage, q_prev):
             result = SnoptSolver().Solve(ik.prog(), seed, options)
             if result.is_success():
                 break
@@ -410,7 +475,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
     p_start = _tool_pose_at(base_scenes["free"], q0).translation() if handle is None else handle.p_WH
     off_handle = [] if handle is None else [
         _Stage("backing off the handle", "off handle", handle.p_WH - cfg.retreat_distance * handle.approach_W,
-               _tool_at(handle.p_WH - cfg.retreat_distance * handle.approach_W, 0.01))]
+               _tool_at(handle.p_WH - cfg.retreat_distance * handle.approach_W, 0.01), handle.approach_W)]
     p_place = pb.goal + cfg.drop_height * _Z
     failures = []
     for flip in (False, True):
@@ -424,8 +489,9 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                   "held off table": build_planning_scene(X_WB, [*pb.fixed, *pb.moving], (pb.item, X_GI)),
                   "held": build_planning_scene(X_WB, everything, (pb.item, X_GI))}
         to_pick = [*off_handle,
-                   _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg)),
-                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg))]
+                   _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg),
+                          approach),
+                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg), approach)]
         sols_a, failed = _solve_chain(scenes, to_pick, q0, cfg)
         if sols_a is None:
             failures.append(f"IK of {failed}")
@@ -438,9 +504,10 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         points = [*high, *line]
         keep = [k for k in range(len(points))  # a carry point on the lift or pre-place is left out
                 if k >= 2 or min(np.linalg.norm(points[k] - p) for p in (p_lift, line[0])) > 1e-2]
-        carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg))]
-        carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg))
-                  for k in keep]
+        carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg),
+                        approach)]
+        carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg),
+                         pb.entry if side else -_Z) for k in keep]
         sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
         if sols_b is None:
             failures.append(f"IK of {failed}")
@@ -451,8 +518,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                              X_WIplace @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
         scenes["retreat"] = build_planning_scene(X_WB, everything, touching=[placed])
         outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
-        retreat = [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg))
-                   for k, p in enumerate(outs, start=1)]
+        retreat = [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg),
+                          X_WGplace.rotation().col(2)) for k, p in enumerate(outs, start=1)]
         sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
         if sols_c is None:
             failures.append(f"IK of {failed}")

@@ -87,13 +87,16 @@ _TABLE_BEARINGS_DEG = (90.0, 70.0, 110.0, 50.0, 130.0)
 ITEM_REACH = {"side": 0.6, "top": 0.5}
 """The item's horizontal distance from the base axis, by grasp, m: a horizontal hand needs room."""
 _TABLE_CLEARANCE = 0.08
+_TABLE_SIGHT_CLEARANCE = 0.06
 
 
 def table_beside(X_WB: RigidTransform, obstacles: list[ObstacleBox], reach: float
                  ) -> tuple[ObstacleBox, RigidTransform]:
     """A table at the robot's side clear of `obstacles` by `_TABLE_CLEARANCE`, its centre `reach`
-    from the base axis, and the pose X_WI of an item at its centre, its x axis pointing away from
-    the base. Raises PlanningError when no spot is clear."""
+    from the base axis, the straight line from 0.2 m above the table top on the base axis to the
+    item clear of them by `_TABLE_SIGHT_CLEARANCE` (no open door between the arm and the item),
+    and the pose X_WI of an item at its centre, its x axis pointing away from the base. Raises
+    PlanningError when no spot is clear."""
     z_top = X_WB.translation()[2] + TABLE_ABOVE_BASE
     size = np.array([*TABLE_TOP, z_top])
     yaw = RollPitchYaw(X_WB.rotation()).yaw_angle()
@@ -106,7 +109,11 @@ def table_beside(X_WB: RigidTransform, obstacles: list[ObstacleBox], reach: floa
             grid = np.linspace(-1.0, 1.0, 5)
             pts = np.array([[a, b, c] for a in grid for b in grid for c in (-1, 1)]) * size / 2
             pts = (table.X_WB.rotation().matrix() @ pts.T).T + table.X_WB.translation()
-            if all(distance_to_box(box, pts).min() >= _TABLE_CLEARANCE for box in obstacles):
+            f = np.linspace(0.0, 1.0, 10)[:, None]
+            start = X_WB.translation() * [1, 1, 0] + [0, 0, z_top + 0.2]
+            sight = (1 - f) * start + f * (p_WT + [0, 0, z_top])
+            if all(distance_to_box(box, pts).min() >= _TABLE_CLEARANCE
+                   and distance_to_box(box, sight).min() >= _TABLE_SIGHT_CLEARANCE for box in obstacles):
                 radial = p_WT - X_WB.translation() * [1, 1, 0]
                 X_WI = RigidTransform(RollPitchYaw(0, 0, np.arctan2(radial[1], radial[0])),
                                       [p_WT[0], p_WT[1], z_top])
@@ -484,19 +491,40 @@ def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, co
     raise PlanningError("; ".join(errors))
 
 
-def _moved_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
-                place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
-    """The opening from the base the opening alone chooses, then the place from a base re-placed in
-    front of the open compartment (`place_bases`, first that plans)."""
-    plan = plan_articulation(kt, q_target, config=config)
+DOOR_MARGIN = 0.03
+"""Where the base moved, the place avoids the moving part at its measured articulation and this
+much (a fraction of its range) to either side: the hand's nudge and the measure's error."""
+
+
+def measured_articulation(kt: KeypointTrajectory, opening: SimulationResult) -> float:
+    """The moving part's articulation (kt's) where the opening let go of it: the articulation at
+    which kt's handle passes nearest the held point of the handle at the end of the opening (the
+    hand's pose and its hold, `SimulationResult.p_W_handle`)."""
+    return kt.nearest_q("handle", opening.p_W_handle[-1])
+
+
+def door_band(obstacles_at, q: float, margin: float = DOOR_MARGIN
+              ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
+    """`obstacles_at(q)`'s (fixed, moving) boxes, the moving ones also at q - margin and q + margin
+    (within [0, 1]; renamed `*_less`, `*_more`): the part where it was measured and either side."""
+    fixed, moving = obstacles_at(q)
+    band = list(moving)
+    for suffix, q_side in (("less", max(q - margin, 0.0)), ("more", min(q + margin, 1.0))):
+        band += [ObstacleBox(f"{b.name}_{suffix}", b.size, b.X_WB) for b in obstacles_at(q_side)[1]]
+    return list(fixed), band
+
+
+def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig
+                    ) -> tuple[PlacePlan, ObstacleBox]:
+    """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
+    the first that plans), and its table."""
     boxes = [*obstacles[0], *obstacles[1]]
     errors = []
-    for X_WB in place_bases(kt, q_target, boxes):
+    for X_WB in place_bases(kt, q, boxes):
         try:
             table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
-            problem = place_problem(kt, q_target, item, X_WI, table, obstacles, place_config)
-            place = plan_place(X_WB, ready_posture(X_WB, kt.point("goal", q_target)), problem, place_config)
-            return plan, place, table
+            problem = place_problem(kt, q, item, X_WI, table, obstacles, place_config, X_WB.translation())
+            return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, place_config), table
         except PlanningError as err:
             errors.append(str(err))
     raise PlanningError("no base in front of the open compartment plans the place: "
@@ -511,33 +539,56 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     """Open front 0 of `obj` (a closet or a drawer at X_WO, at q_start) to q_target and place
     `item` (standing on a table beside the robot) at the goal keypoint, planned with `keypoints`
     (default: the object's own, with its true geometry as obstacles; given keypoints are planned
-    with keypoint-derived boxes only), then simulated on the true object. A closet's place is
-    planned from a base re-placed after the opening (`MOVE_BASE`, `_moved_base`); a drawer's from
-    the opening's base (`_one_base`), or a re-placed one when that fails. `replay`: an HTML replay
-    of the run (with a moved base, of the place; the opening's beside it, `*_opening.html`), with
-    the keypoint paths used (and `reference`'s under "keypoints_true")."""
+    with keypoint-derived boxes only), then simulated on the true object. A drawer's place is
+    planned from the opening's base (`_one_base`). A closet's (or a drawer's where no one base
+    serves both) from a base re-placed after the opening (`MOVE_BASE`): the opening is planned
+    and simulated first, then the place planned around the front where the opening left it
+    (`measured_articulation`, `door_band`) and simulated from there. `replay`: an HTML replay of
+    the run (with a moved base, of the place; the opening's beside it, `*_opening.html`), with the
+    keypoint paths used (and `reference`'s under "keypoints_true")."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
         kt = KeypointTrajectory.from_articulated_object(obj, X_WO, q_start)
-        obstacles = true_compartment(obj, X_WO, q_target)
+        obstacles_at = lambda q: true_compartment(obj, X_WO, q)  # noqa: E731
     else:
-        kt, obstacles = keypoints, compartment_obstacles(keypoints, q_target)
+        kt, obstacles_at = keypoints, lambda q: compartment_obstacles(keypoints, q)  # noqa: E731
+    obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
-    errors = []
-    for planner in ([] if MOVE_BASE[kt.category] else [_one_base]) + [_moved_base]:
+    failed = lambda why, seconds=float("nan"): PlaceTaskOutcome(  # noqa: E731
+        q_target, kt, None, None, why, seconds, None, None)
+    errors, plan, opening = [], None, None
+    if not MOVE_BASE[kt.category]:
         try:
-            plan, place, table = planner(kt, q_target, item, obstacles, config, place_config)
-            break
+            plan, place, table = _one_base(kt, q_target, item, obstacles, config, place_config)
         except PlanningError as err:
-            errors.append(("base moved after the opening: " if planner is _moved_base else "") + str(err))
-    else:
-        return PlaceTaskOutcome(q_target, kt, None, None, "; ".join(errors), float("nan"), None, None)
-    seconds = time.perf_counter() - started
-    moved = planner is _moved_base
+            errors.append(str(err))
+            plan = None
+    moved = plan is None
     meshcats = [Meshcat() if replay is not None else None for _ in range(1 + moved)]
-    for meshcat in meshcats if replay is not None else []:
+    if moved:
+        try:
+            plan = plan_articulation(kt, q_target, config=config)
+        except PlanningError as err:
+            return failed("; ".join([*errors, f"base moved after the opening: {err}"]))
+        seconds = time.perf_counter() - started
+        scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
+        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening)
+        if replay is not None:
+            write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+        q_door = measured_articulation(kt, opening)
+        obstacles = door_band(obstacles_at, q_door)
+        planned = time.perf_counter()
+        try:
+            place, table = _place_in_front(kt, q_door, item, obstacles, place_config)
+        except PlanningError as err:
+            return failed("; ".join([*errors, f"base moved after the opening (front measured at "
+                                     f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned)
+        seconds += time.perf_counter() - planned
+    else:
+        seconds = time.perf_counter() - started
+    for meshcat in meshcats[:1] if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
         if reference is not None:
             draw_keypoint_trajectory(meshcat, reference, "keypoints_true", (reference.q_current, q_target),
@@ -550,12 +601,6 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         away[2] = 0.0
         side = np.cross([0.0, 0.0, 1.0], away / np.linalg.norm(away))
         frame_camera(meshcat, centre, centre + 0.6 * away + 1.2 * side + [0.0, 0.0, 0.9])
-    opening = None
-    if moved:
-        scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
-        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening)
-        if replay is not None:
-            write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
     simulation = simulate_open_and_place(obj, X_WO, opening.q_final if moved else q_start, q_target,
                                          None if moved else plan, place, item, table, meshcats[0],
                                          simulation_config, opening)

@@ -81,6 +81,12 @@ class KeypointTrajectory:
         """One keypoint at articulation(s) q, in W: (3,) or (M, 3)."""
         return self.at(q)[..., self.names.index(name), :]
 
+    def nearest_q(self, name: str, p_W: np.ndarray, samples: int = 401) -> float:
+        """The articulation in [q_grid[0], q_grid[-1]] at which keypoint `name` passes nearest p_W
+        (m, (3,) in W), e.g. where a held handle was let go: the part's measured articulation."""
+        qs = np.linspace(self.q_grid[0], self.q_grid[-1], samples)
+        return float(qs[np.argmin(np.linalg.norm(self.point(name, qs) - np.asarray(p_W), axis=1))])
+
     def with_current(self, q_current: float) -> KeypointTrajectory:
         """The same trajectory with another present articulation."""
         return KeypointTrajectory(self.category, self.q_grid, self.names, self.p_WK, q_current)

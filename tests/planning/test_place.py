@@ -6,10 +6,11 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.compartment import compartment_obstacles
+from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
 from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
+    place_bases,
     place_problem,
     place_reach_points,
     plan_place,
@@ -19,17 +20,20 @@ from nfr_drake.planning.scene import build_planning_scene
 from nfr_drake.systems.place_task import ITEM_REACH, table_beside
 from nfr_drake.world.items import Item, sample_item
 from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.obstacles import distance_to_box
+from nfr_drake.world.plan import ObstacleBox
 
 
-@pytest.mark.parametrize("category,seed,q_target", [("closet", 0, 0.6), ("drawer", 3, 1.0)])
-def test_place_plan_ends_at_the_goal(category, seed, q_target):
+@pytest.mark.parametrize("category,seed,q_target,reach", [("closet", 0, 0.6, 0.7),
+                                                           ("drawer", 3, 1.0, PLACE_REACH["drawer"][1])])
+def test_place_plan_ends_at_the_goal(category, seed, q_target, reach):
     """The planned item, where the hand lets go, stands upright within 3 cm of the goal keypoint
     (kinematically: the tool's pose at the end of the carry times the grasp), and every segment
-    starts where the last one ended."""
+    starts where the last one ended; from the opening's base (a closet's too, within 0.7 m)."""
     obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, 0))
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
     item = sample_item(np.random.default_rng(seed))
-    opening = plan_articulation(kt, q_target, config=PlannerConfig(place_reach=PLACE_REACH[category][1]),
+    opening = plan_articulation(kt, q_target, config=PlannerConfig(place_reach=reach),
                                 must_reach=place_reach_points(kt, q_target, item))
     fixed, moving = compartment_obstacles(kt, q_target)
     grasp = "side" if category == "closet" else "top"
@@ -70,3 +74,69 @@ def test_a_trajectory_without_a_goal_cannot_be_placed_in():
                             np.array([[[0.5, 0.0, 0.2]], [[0.8, 0.0, 0.2]]]), 0.0)
     with pytest.raises(NfrDrakeError, match="no goal keypoint"):
         compartment_obstacles(kt, 1.0)
+
+
+def _open_closet(q_target=0.6):
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    return KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+
+
+def _crosses(box, a, b, clearance=0.0):
+    """Whether the segment a-b (m, in W) passes within `clearance` of `box`."""
+    points = a + np.linspace(0.0, 1.0, 200)[:, None] * (b - a)
+    return distance_to_box(box, points).min() < clearance + 1e-9
+
+
+def test_bases_in_front_of_an_open_closet_see_past_its_door():
+    """Every re-placed base clears the closet and its open door, faces the goal, and its sight
+    line to the front does not cross the door; a base straight out of the front on the door's side
+    (behind the open door) is never offered, one turned to the door's free edge is."""
+    kt = _open_closet()
+    fixed, moving = compartment_obstacles(kt, 0.6)
+    boxes = [*fixed, *moving]
+    bases = place_bases(kt, 0.6, boxes)
+    assert bases
+    goal = kt.point("goal", 0.6)
+    n = front_normal(kt, 0.6)
+    hinge_side = np.sign((kt.point("hinge_bottom", 0.0) - goal) @ np.cross([0, 0, 1], n))
+    for X_WB in bases:
+        p = X_WB.translation()
+        assert min(distance_to_box(b, p[None]).min() for b in boxes) >= 0.25
+        facing = X_WB.rotation().col(0)
+        assert facing @ (goal - p) / np.linalg.norm((goal - p)[:2]) > 0.99
+        entry, opening = compartment_entry(kt, 0.6, p)
+        pre = goal - (opening + 0.1) * entry
+        start = p * [1, 1, 0] + [0, 0, pre[2] + 0.2]
+        assert not any(_crosses(b, start, start + 0.8 * (pre - start)) for b in moving)
+    lateral = [(X.translation() - goal) @ np.cross([0, 0, 1], n) for X in bases]
+    assert max(np.sign(lat) == -hinge_side and abs(lat) > 0.2 for lat in lateral)
+
+
+def test_a_closets_way_in_turns_toward_the_base_within_its_sides():
+    """Straight in without a base; toward a base turned 40 degrees, the way in turns toward it but
+    the line stays 13 cm inside the sides at the front plane; its depth grows as 1 / cos."""
+    kt = _open_closet()
+    straight, opening = compartment_entry(kt, 0.6)
+    n = front_normal(kt, 0.6)
+    np.testing.assert_allclose(straight, -n, atol=1e-9)
+    goal = kt.point("goal", 0.6)
+    lat = np.cross([0, 0, 1], n)
+    half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
+    for degrees in (10.0, 40.0, 80.0):
+        a = np.radians(degrees)
+        entry, depth = compartment_entry(kt, 0.6, goal + 0.8 * (np.cos(a) * n + np.sin(a) * lat))
+        turned = np.arctan2(-entry @ lat, -entry @ n)
+        assert 0.0 < turned <= a + 1e-9
+        assert depth * np.sin(turned) <= half - 0.13 + 1e-9
+        np.testing.assert_allclose(depth, opening / np.cos(turned), rtol=1e-9)
+    assert np.degrees(turned) < 80.0  # the widest turn is held
+
+
+def test_the_table_is_not_set_behind_an_obstacle():
+    """A wall on the robot's left, between it and the first bearing tried: the table goes where
+    the arm sees it, and the line from above the base to the item clears the wall."""
+    X_WB = RigidTransform()
+    wall = ObstacleBox("wall", np.array([0.6, 0.02, 1.0]), RigidTransform([0.05, 0.25, 0.5]))
+    table, X_WI = table_beside(X_WB, [wall], ITEM_REACH["side"])
+    assert not _crosses(wall, np.array([0.0, 0.0, 0.55]), X_WI.translation(), 0.06)
+    assert X_WI.translation()[1] < 0.0

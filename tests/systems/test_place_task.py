@@ -1,5 +1,7 @@
 """Open-and-place simulated on the true object, and grasps by contact."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from pydrake.geometry import Box
@@ -13,11 +15,19 @@ from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.planning.planner import PlannerConfig, grasp_planner
 from nfr_drake.systems.articulation import SimulationConfig, add_joint_friction, rigid_hydroelastic
-from nfr_drake.systems.place_task import PlaceSimulationConfig, run_place_task
+from nfr_drake.systems.place_task import (
+    DOOR_MARGIN,
+    PlaceSimulationConfig,
+    door_band,
+    measured_articulation,
+    run_place_task,
+    true_compartment,
+)
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.scene_objects import SceneObject, sampled_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 from nfr_drake.world.items import Item, sample_item
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @pytest.mark.parametrize("grasp", ["constraint", "contact"])
@@ -148,3 +158,24 @@ def test_a_can_set_down_comes_to_rest():
     for t in (2.0, 2.25, 2.5, 2.75, 3.0):
         simulator.AdvanceTo(t)
         assert np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(context, body).translational()) < 1e-3
+
+
+def test_the_place_avoids_the_door_where_it_was_measured_and_either_side():
+    """`door_band`: the fixed boxes at the measured articulation, the door's boxes there and at
+    q -/+ DOOR_MARGIN (clipped to [0, 1]); `measured_articulation` reads q off the held handle."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    at = lambda q: true_compartment(obj, RigidTransform(), q)  # noqa: E731
+    fixed, band = door_band(at, 0.57)
+    assert [b.name for b in fixed] == [b.name for b in at(0.57)[0]]
+    door = at(0.57)[1]
+    assert len(band) == 3 * len(door)
+    for suffix, q in (("", 0.57), ("_less", 0.57 - DOOR_MARGIN), ("_more", 0.57 + DOOR_MARGIN)):
+        for box in at(q)[1]:
+            (same,) = [b for b in band if b.name == box.name + suffix]
+            np.testing.assert_allclose(same.X_WB.translation(), box.X_WB.translation(), atol=1e-12)
+    _, band = door_band(at, 1.0)
+    more = [b for b in band if b.name.endswith("_more")]
+    np.testing.assert_allclose(more[0].X_WB.translation(), at(1.0)[1][0].X_WB.translation(), atol=1e-12)
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    opening = SimpleNamespace(p_W_handle=np.stack([kt.point("handle", 0.0), kt.point("handle", 0.57)]))
+    assert measured_articulation(kt, opening) == pytest.approx(0.57, abs=0.005)

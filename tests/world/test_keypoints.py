@@ -45,3 +45,18 @@ def test_rejects_bad_input():
         KeypointTrajectory("drawer", np.linspace(0, 1, 3), ("handle",), np.zeros((4, 1, 3)), 0.0)
     with pytest.raises(NfrDrakeError, match="lacks keypoints"):
         KeypointTrajectory("closet", np.linspace(0, 1, 3), ("handle",), np.zeros((3, 1, 3)), 0.0)
+
+
+@pytest.mark.parametrize("category", ["closet", "drawer"])
+def test_nearest_q_reads_the_articulation_off_a_handle_point(category):
+    """The handle at a known articulation, moved 1.5 cm along the grip's depth (off the path),
+    reads back within 0.01 of it; a point far off the path gives the nearest end."""
+    obj = sample_object(category, np.random.default_rng(4))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    for q in (0.0, 0.37, 0.6, 1.0):
+        p = kt.point("handle", q)
+        off = np.cross(kt.point("handle", min(q + 0.01, 1.0)) - kt.point("handle", max(q - 0.01, 0.0)),
+                       [0.0, 0.0, 1.0])
+        assert abs(kt.nearest_q("handle", p + 0.015 * off / np.linalg.norm(off)) - q) <= 0.01
+    start = kt.point("handle", 0.0)
+    assert kt.nearest_q("handle", start + 5.0 * (start - kt.point("handle", 1.0))) == 0.0
