@@ -114,7 +114,7 @@ def run_furniture_case(case: Case, fitted: FittedModel, config: FurnitureFitConf
             "model_category": fitted.category, "z": result.z.tolist(),
             "start_z": fit.start_z.double().tolist(), "start_losses": fit.start_losses.tolist(),
             "exists": fit.exists.tolist(), "image_loss": result.image_loss,
-            "part_errors": errors,
+            "handles": np.asarray(fit.handles).tolist(), "part_errors": errors,
             "handle_error_m": min(errors.values()) if errors else None,
             "failure": "" if errors else "no part with a handle in gt.json",
             "seconds": result.seconds}

@@ -83,7 +83,9 @@ class FurnitureFit:
     """The fitted code z (2 S + k,); per slot q (S,), exists bool (S,) (existence logit > 0),
     types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`); image_loss
     (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
-    in O the fit used (M = 0: none)."""
+    in O the fit used (M = 0: none); the starts fitted together (`keep` of them): their final
+    codes start_z (keep, 2 S + k) and image losses on the last step's rays start_losses (keep,);
+    z is the one of the lowest loss."""
 
     z: torch.Tensor
     q: np.ndarray
@@ -94,6 +96,8 @@ class FurnitureFit:
     steps: int
     seconds: float
     handles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    start_z: torch.Tensor | None = None
+    start_losses: np.ndarray | None = None
 
 
 class HandleTerm:
@@ -176,7 +180,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     return FurnitureFit(z_best, q.double().cpu().numpy(), exists,
                         logits[:, 1:].argmax(-1).cpu().numpy(), keypoints.double().cpu().numpy(),
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
-                        handles)
+                        handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
 @torch.no_grad()

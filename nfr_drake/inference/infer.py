@@ -347,14 +347,15 @@ def parts_confidence(fitted: FittedModel, fit: FurnitureFit, capture: CaptureSet
                      images: list[np.ndarray]) -> tuple[list[dict], list[dict]]:
     """Per slot of a model with several parts (furniture), the `confidence` of its part
     ({p_handle_within_2cm, threshold, weakest, features}, `calibrated`): P(the part's handle
-    within 2 cm) from the fit's features (`fit_features`; no handle detector) and the part's
-    (`confidence.part_features`); and the per-view figures, shared by the parts."""
+    within 2 cm) from the fit's features (`fit_features`) and the part's
+    (`confidence.part_features`, with the handles the detector sighted, `fit.handles`); and the
+    per-view figures, shared by the parts."""
     views = render_views(fitted.model, fit.z, capture.frames, images)
     features, per_view = fit_features(
         fitted.model, fit.z, capture.frames, images, fit.start_losses, fitted.codes,
         fitted.code_scale, 0, None, views=views)
     parts = [calibrated(fitted.confidence, {**features, **part_features(
-        fitted.model, fit.z, fit.start_z, k, capture.frames, views)}, [])
+        fitted.model, fit.z, fit.start_z, k, capture.frames, views, fit.handles)}, [])
         for k in range(fitted.num_slots)]
     return [{k: v for k, v in c.items() if k != "per_view"} for c in parts], per_view
 
