@@ -51,11 +51,13 @@ TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_
 oriented so that more means a worse fit: its coefficient is held <= 0 (`calibrate`)."""
 
 FURNITURE_TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
-                   ("edge_contact", "identity"), ("code_distance", "identity"), ("views", "inverse"),
+                   ("edge_contact", "identity"), ("sighting_missing", "identity"),
+                   ("sighting_gap_m", "log10_cm"), ("code_distance", "identity"), ("views", "inverse"),
                    ("part_exists_logit", "negative"), ("start_spread_m", "log10_cm"),
                    ("part_image_loss", "log10")]
-"""The terms of a model with several parts (furniture), per part: no handle detector, and the
-part's own features (`inference.confidence.part_features`)."""
+"""The terms of a model with several parts (furniture), per part: the fit's and the part's own
+(`inference.confidence.part_features`; the sighting terms compare the slot's handle with the
+handle detector's, constant while the model ships none)."""
 
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
@@ -125,7 +127,8 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     raw = ConfidenceModel(terms, [0.0] * len(terms), [1.0] * len(terms), [0.0] * len(terms), 0.0,
                           0.0, source)
     X = np.array([raw.design(r) for r in rows])
-    mean, std = X.mean(0), X.std(0) + 1e-9
+    mean, std = X.mean(0), X.std(0)
+    std[std < 1e-9] = 1.0  # a term constant on the split (no detector, say): 0 here, no weight
     X = (X - mean) / std
     y = np.array([r["handle_error_m"] <= SUCCESS_M for r in rows], float)
     if min(y.sum(), len(y) - y.sum()) < MIN_EACH:
