@@ -7,10 +7,12 @@ Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `see
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
 W by a random X_WO (yaw in [-pi, pi], x and y in [-2, 2] m) and `estimate_object_pose` runs on the
 views' masks: the target's labels (true masks), or, with `--segmenter DIR`, the segmenter's
-probabilities. With `--setting alone` the object of `nfr-drake captures` (seed `seed`, index i)
-stands alone before the training renders' background, photographed by `views` cameras of the
-paper's distribution (`CameraDistribution`) at a q drawn as the rooms' (shut with probability
-0.4, else uniform), its labels as masks. Prints one line per room and the median position (cm)
+probabilities (with `--crop`, those of the crop stage: `segmentation.crop.posed_close_look`, a
+second look at the crop around the box of the pose from the first masks). With `--setting alone`
+the object of `nfr-drake captures` (seed `seed`, index i) stands alone before the training
+renders' background, photographed by `views` cameras of the paper's distribution
+(`CameraDistribution`) at a q drawn as the rooms' (shut with probability 0.4, else uniform), its
+labels as masks. Prints one line per room and the median position (cm)
 and yaw (degrees) errors, over all rooms and over those whose fronts are all shut.
 """
 
@@ -49,7 +51,7 @@ def _alone(category: str, seed: int, index: int, views: int, size: int):
 
 
 def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 128, seed: int = 900,
-         setting: str = "room", segmenter: Path | None = None) -> None:
+         setting: str = "room", segmenter: Path | None = None, crop: bool = False) -> None:
     net = None
     if segmenter is not None:
         from nfr_drake.perception.segmentation.model import load_segmenter
@@ -67,6 +69,10 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             X_OC = np.array(meta["X_OC"])[0]
             if net is None:
                 masks = [(label > 0).astype(np.float32) for label in arrays["label"][0]]
+            elif crop:
+                from nfr_drake.perception.segmentation.crop import posed_close_look
+
+                masks = posed_close_look(net, list(arrays["rgb"][0]), list(X_OC), [camera] * views, category)
             else:
                 masks = [net.object_mask(rgb) for rgb in arrays["rgb"][0]]
         rng = np.random.default_rng([seed, i])
@@ -98,7 +104,7 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             print(f"{category} {name} ({sel.sum()} rooms): median {cm:.2f} cm, {deg:.2f} deg; "
                   f"within 2 cm and 2 deg: {100 * within:.0f} %")
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, {setting}, masks: "
-          f"{'segmenter ' + str(segmenter) if segmenter else 'true labels'}")
+          f"{'segmenter ' + str(segmenter) if segmenter else 'true labels'}{', crop stage' if crop else ''}")
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ square around a mask, the crop of each posed view around the object's floor box.
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -100,3 +101,40 @@ def test_each_view_crops_around_the_boxs_projection():
     behind = crop.view_boxes(box, [look_at(centre + [0.1, 0.0, 0.1], centre + [1.0, 0.0, 0.1])], [CAMERA],
                              [(128, 128)], reach=0.0)
     assert behind == [None]
+
+
+def _box_photos(rng, box: np.ndarray, n: int = 8):
+    """Photos (128, 128, 3) of a bright floor box (x, y, yaw, depth, width, height) on a dark
+    ground from n cameras in front of it, a bright blob in a far corner of each (spill that is not
+    the object), its true masks and the camera poses."""
+    photos, trues, X_WCs = [], [], []
+    centre = np.array([box[0], box[1], box[5] / 2])
+    for _ in range(n):
+        az, el, dist = box[2] + rng.uniform(-1.0, 1.0), rng.uniform(0.2, 0.7), rng.uniform(2.5, 3.5)
+        direction = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        eye = centre + dist * direction
+        X_WC = look_at(eye, centre)
+        uv, _ = project_points(box_corners_W(box), X_WC, CAMERA)
+        true = np.zeros((128, 128), np.uint8)
+        cv2.fillConvexPoly(true, cv2.convexHull(np.round((uv - 0.5) * 16).astype(np.int32)), 1, shift=4)
+        photo = np.full((128, 128, 3), 30, np.uint8)
+        photo[true > 0] = 220
+        corner = rng.integers(0, 2, 2) * 112
+        photo[corner[0]:corner[0] + 16, corner[1]:corner[1] + 16] = 220
+        photos.append(photo)
+        trues.append(true > 0)
+        X_WCs.append(X_WC)
+    return photos, trues, X_WCs
+
+
+def test_the_posed_crop_stage_keeps_the_object_and_drops_spill_beyond_its_box():
+    rng = np.random.default_rng(3)
+    box = np.array([0.5, -0.3, 0.3, 0.45, 0.55, 0.5])
+    photos, trues, X_WCs = _box_photos(rng, box)
+    net = Bright()
+    first = [net.object_mask(photo) > 0.5 for photo in photos]
+    masks = crop.posed_close_look(net, photos, X_WCs, [CAMERA] * len(photos), reach=0.0)
+    iou = lambda a, b: np.count_nonzero(a & b) / np.count_nonzero(a | b)  # noqa: E731
+    assert all(iou(f, t) < 0.85 for f, t in zip(first, trues, strict=True))  # the blob is in the first look
+    assert all(iou(m > 0.5, t) > 0.9 for m, t in zip(masks, trues, strict=True))
+    assert len(net.seen) == 3 * len(photos)  # the first looks (this test's and the stage's), the crops
