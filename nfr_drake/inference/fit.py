@@ -141,6 +141,15 @@ class FitConfig:
     for `valley_steps` shared steps, and goes on from the best of them on `valley_held_rays`
     fixed rays or, when its loss there is lower, the code at the minimum of a parabola through their
     losses (z_obj interpolated between its neighbours)."""
+    valley_lr: float = 0.0
+    """Adam learning rate, in q per step, of the refinement's valley coordinate (0: none), when
+    the focus part slides (see `valley_codes`): the refined code gets one more coordinate t, the
+    rendered code being z + t dz/dq along the keypoint head's valley (the focus part kept in
+    place, to first order; `_valley_tangent`), so that a step moves q and z_obj together along
+    the valley instead of creeping along it by small moves of each."""
+    valley_first: bool = False
+    """Run the valley scan before the refinement (from the exploration's winner, so that the
+    refinement starts in the valley's minimum and settles z_obj there) rather than after it."""
     valley_span: float = 0.2
     """Width of the valley scan's grid of q (shifted to lie in [0, 1])."""
     valley_steps: int = 15
@@ -217,6 +226,8 @@ class FitConfig:
                 or not 0 < self.valley_span <= 1:
             raise ConfigError("FitConfig: valley_codes must be 0 or >= 2, valley_steps >= 0, "
                               "valley_span in (0, 1]")
+        if self.valley_lr < 0:
+            raise ConfigError("FitConfig.valley_lr must be >= 0")
         if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
@@ -408,7 +419,8 @@ def _sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | No
 def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfig,
           generator: torch.Generator, steps: int, rays_per_step: int, stop_early: bool,
           sighting: PartSighting | None = None,
-          held_loss: Callable[[torch.Tensor], float] | None = None, hold_q: bool = False) -> int:
+          held_loss: Callable[[torch.Tensor], float] | None = None, hold_q: bool = False,
+          valley: Callable[[torch.Tensor], torch.Tensor] | None = None) -> int:
     """Up to `steps` Adam steps on the codes z (S, D), in place, `rays_per_step` random rays
     each; returns the steps run.
 
@@ -421,25 +433,39 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
     `patience` steps: the summed per-step image loss, smoothed, or with `held_loss` (codes (S, D)
     -> their summed image loss on fixed rays) that loss, measured every `stop_every` steps.
     With `hold_q` only z_obj moves (Adam leaves a coordinate without gradient in place).
+    With `valley` (codes (S, D) -> their valley tangents (S, D), `_valley_tangent`) each code has
+    one more coordinate t, per unit of q, moved by its own Adam at `config.valley_lr`: the code
+    rendered is z + t tangent, folded into z after every step (tangents renewed every
+    `_VALLEY_RENEW` steps).
     """
     z.requires_grad_(True)
     optimiser = torch.optim.Adam([z], lr=config.lr)
     S = z.shape[0]
+    t = None
+    if valley is not None and config.valley_lr > 0:
+        t = torch.zeros(S, 1, dtype=z.dtype, device=z.device, requires_grad=True)
+        optimiser.add_param_group({"params": [t], "lr": config.valley_lr})
     best, since_best = math.inf, 0
     current = held_loss(z.detach()) if stop_early and held_loss is not None else None
     for step in range(1, steps + 1):
+        if t is not None and (step - 1) % _VALLEY_RENEW == 0:
+            tangent = valley(z.detach())
+        code = z if t is None else z + t * tangent
         index = rays.sample(rays_per_step, config.detail_fraction, generator)
         batch_rays, target = rays.take(index, S)
-        rgb = model.render(z, batch_rays).rgb
+        rgb = model.render(code, batch_rays).rgb
         image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
-        loss = (image + config.latent_weight * S * latent_loss(z[:, 2:])
-                + _sighting_loss(model, z, sighting, config).sum())
+        loss = (image + config.latent_weight * S * latent_loss(code[:, 2:])
+                + _sighting_loss(model, code, sighting, config).sum())
         optimiser.zero_grad()
         loss.backward()
         if hold_q:
             z.grad[:, :2] = 0.0
         optimiser.step()
         with torch.no_grad():  # keep z_art on the upper half circle, where q lies (docstring)
+            if t is not None:
+                z += t * tangent
+                t.zero_()
             z[:, 1].abs_()
         if not stop_early:
             continue
@@ -520,6 +546,18 @@ def _valley_direction(model: NFRModel, z: torch.Tensor, keypoint: int) -> torch.
     q = z_art_to_q(z[:2]).detach()
     dp_dq, J_obj = torch.autograd.functional.jacobian(part, (q, z[2:].detach()))
     return -torch.linalg.pinv(J_obj) @ dp_dq
+
+
+_VALLEY_RENEW = 10
+"""Steps between renewals of the valley tangents in the refinement (`FitConfig.valley_lr`)."""
+
+
+def _valley_tangent(model: NFRModel, z: torch.Tensor, keypoint: int) -> torch.Tensor:
+    """The valley tangents (S, D) of codes z (S, D): d z / d q along which the keypoint head's
+    part `keypoint` stays in place, to first order: z_art along its circle (pi (-z_1, z_0), its
+    radius kept), z_obj along `_valley_direction`."""
+    return torch.stack([torch.cat([math.pi * torch.stack([-c[1], c[0]]),
+                                   _valley_direction(model, c, keypoint)]) for c in z])
 
 
 def _valley_scan(model: NFRModel, rays: ObservedRays, config: FitConfig,
@@ -655,22 +693,37 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
                                                codes, second,
                                                lambda c: eval_losses(c, select_index))
         steps += second
-    held_loss = None
-    if config.stop_every:
-        held_index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
-        held_loss = lambda c: float(eval_losses(c, held_index).sum())  # noqa: E731
-    steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
-                   config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss)
-    z_best = z_best.detach()[0]
-    if focus is not None and config.valley_codes and _slides(model, z_best, focus.keypoint):
+
+    def scan(z: torch.Tensor) -> tuple[torch.Tensor, int]:
+        """The valley scan from code z (D,) where the focus part slides, else z and 0 steps."""
+        if focus is None or not config.valley_codes or not _slides(model, z, focus.keypoint):
+            return z, 0
         valley_index = rays.sample(config.valley_held_rays, config.detail_fraction, generator)
 
         def valley_losses(c: torch.Tensor) -> torch.Tensor:
             return eval_losses(c, valley_index) + _sighting_loss(model, c, sighting, config).cpu()
 
-        z_best, valley_steps = _valley_scan(model, rays, config, generator, z_best,
-                                            focus.keypoint, sighting, valley_losses)
-        steps += valley_steps
+        return _valley_scan(model, rays, config, generator, z, focus.keypoint, sighting,
+                            valley_losses)
+
+    if config.valley_first:
+        z_scanned, scan_steps = scan(z_best[0])
+        z_best, steps = z_scanned[None].clone(), steps + scan_steps
+    held_loss = None
+    if config.stop_every:
+        held_index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
+        held_loss = lambda c: float(eval_losses(c, held_index).sum())  # noqa: E731
+    valley = None
+    if focus is not None and config.valley_lr > 0 and _slides(model, z_best[0].detach(),
+                                                              focus.keypoint):
+        valley = lambda c: _valley_tangent(model, c, focus.keypoint)  # noqa: E731
+    steps += _adam(model, z_best, rays, config, generator, max(0, config.max_steps - steps),
+                   config.rays_per_step, stop_early=True, sighting=sighting, held_loss=held_loss,
+                   valley=valley)
+    z_best = z_best.detach()[0]
+    if not config.valley_first:
+        z_best, scan_steps = scan(z_best)
+        steps += scan_steps
     look = "off"
     if focus is not None and config.focus_steps > 0:
         z_best, look, look_steps = _close_look(model, rays, config, focus, generator, z_best,

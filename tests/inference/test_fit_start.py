@@ -1,5 +1,6 @@
 """The fast fit's mechanics on a small untrained model: the looked-up starts, the codes nearest a
-sighting, early stopping on fixed rays, the valley scan, and the presets."""
+sighting, early stopping on fixed rays, the refinement's valley coordinate, the valley scan and
+where it runs, and the presets."""
 
 from dataclasses import replace
 
@@ -19,6 +20,7 @@ from nfr_drake.inference.fit import (
     _slides,
     _valley_direction,
     _valley_scan,
+    _valley_tangent,
     fit_latent,
     observed_rays,
 )
@@ -221,3 +223,78 @@ def test_a_part_slides_on_a_line_not_on_an_arc():
     z = torch.cat([q_to_z_art(torch.tensor(0.3)), torch.zeros(4)])
     assert _slides(_PartOnPath("line"), z, 0)
     assert not _slides(_PartOnPath("arc"), z, 0)
+
+
+@pytest.mark.parametrize("first", [False, True])
+def test_the_valley_scan_runs_before_or_after_the_refinement(model_folder, capture, monkeypatch,
+                                                             first):
+    """`valley_first`: the scan starts from the exploration's winner and the refinement from the
+    scan's code; otherwise the scan starts from the refined code. The valley coordinate joins
+    the refinement only (not the exploration)."""
+    from nfr_drake.inference import fit
+
+    fitted = FittedModel(model_folder)
+    events = []
+    adam, scan = fit._adam, fit._valley_scan
+
+    def logged_adam(*args, **kwargs):
+        name = ("refine" if kwargs["stop_early"] else "scan steps" if kwargs.get("hold_q")
+                else "explore")
+        events.append((name, kwargs.get("valley") is not None, args[1].detach().clone()))
+        steps = adam(*args, **kwargs)
+        events.append(("after", None, args[1].detach().clone()))
+        return steps
+
+    def logged_scan(model, rays, config, generator, z, *rest):
+        events.append(("scan", None, z.clone()))
+        out, steps = scan(model, rays, config, generator, z, *rest)
+        events.append(("scanned", None, out.clone()))
+        return out, steps
+
+    monkeypatch.setattr(fit, "_adam", logged_adam)
+    monkeypatch.setattr(fit, "_valley_scan", logged_scan)
+    monkeypatch.setattr(fit, "_slides", lambda *args: True)  # as a drawer's front
+    config = replace(SMALL, valley_codes=3, valley_steps=2, valley_first=first, valley_lr=0.01,
+                     stop_every=1)
+    outcome = fit_latent(fitted.model, observed_rays(capture), config, fitted.z_obj_mean,
+                         focus=fitted.focus)
+    names = [name for name, _, _ in events if name != "after"]
+    scan_stages = ["scan", "scan steps", "scanned"]
+    assert names == (["explore"] + scan_stages + ["refine"] if first
+                     else ["explore", "refine"] + scan_stages)
+    assert [v for n, v, _ in events if n in ("explore", "refine")] == [False, True]
+    at = {name: i for i, (name, _, _) in enumerate(events)}
+    if first:  # the refinement goes on from the scan's code
+        torch.testing.assert_close(events[at["refine"]][2][0], events[at["scanned"]][2])
+    else:  # the scan starts from the refined code
+        torch.testing.assert_close(events[at["scan"]][2], events[at["refine"] + 1][2][0])
+    assert outcome.steps <= config.max_steps + config.valley_steps
+
+def test_the_valley_coordinate_moves_q_and_z_obj_along_the_valley(model_folder, capture):
+    """With the code's own steps negligible, the steps move z along the valley tangent only: q
+    changes, and the keypoint head's part moves far less than q's change alone would move it."""
+    fitted = FittedModel(model_folder)
+    model = fitted.model.double()
+    rays = observed_rays(capture, dtype=torch.float64)
+    config = replace(SMALL, lr=1e-12, valley_lr=0.02)
+    z0 = torch.cat([q_to_z_art(torch.tensor([0.4])), fitted.codes[1:2]], -1).double()
+    z = z0.clone()
+    tangent = _valley_tangent(model, z0, 0)
+    assert tangent.shape == z0.shape
+    _adam(model, z, rays, config, torch.Generator().manual_seed(0), 3, 32, stop_early=False,
+          valley=lambda c: _valley_tangent(model, c, 0))
+    step = (z.detach() - z0)[0]
+    cosine = float(step @ tangent[0] / (step.norm() * tangent[0].norm()))
+    assert abs(cosine) > 0.999  # along the tangent (renewed at step 1 only: _VALLEY_RENEW > 3)
+    dq = float(z_art_to_q(z.detach()[:, :2]) - 0.4)
+    assert 1e-3 < abs(dq) <= 3 * 0.02 * 1.01  # at most valley_lr per Adam step
+    with torch.no_grad():
+        q_alone = torch.cat([q_to_z_art(torch.tensor([0.4 + dq], dtype=z.dtype)), z0[:, 2:]], -1)
+        part = lambda c: model.keypoints(c)[0, 0]  # noqa: E731
+        assert (part(z.detach()) - part(z0)).norm() < 0.1 * (part(q_alone) - part(z0)).norm()
+    unmoved = z0.clone()
+    _adam(model, unmoved, rays, replace(config, valley_lr=0.0), torch.Generator().manual_seed(0),
+          3, 32, stop_early=False, valley=lambda c: _valley_tangent(model, c, 0))
+    torch.testing.assert_close(unmoved, z0)  # valley_lr 0: no valley coordinate
+    with pytest.raises(ConfigError, match="valley_lr"):
+        FitConfig(valley_lr=-0.1)
