@@ -167,15 +167,15 @@ def refusal_table(rows: list[dict], model: ConfidenceModel) -> str:
 
 
 def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> None:
-    """Reliability diagram (predicted P against the observed share within 2 cm, per split) and
-    refusal curves (share of good in-distribution fits and of far-off OOD fits refused against
-    the threshold)."""
+    """Reliability diagram (predicted P against the observed share within 2 cm, per split),
+    refusal curves (share of good in-distribution fits and of far-off fits refused against the
+    threshold) and the handle errors (share of each split's fits within a distance)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
+    fig, (ax, bx, cx) = plt.subplots(1, 3, figsize=(15, 4.2))
     bins = np.linspace(0, 1, 6)
     for split, marker in (("calibration", "o"), ("evaluation", "s"), ("ood", "^")):
         group = [r for r in rows if r["split"] == split]
@@ -200,7 +200,8 @@ def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> No
     t = np.linspace(0, 1, 101)
     curves = (("evaluation", lambda e: e <= SUCCESS_M, "good fits refused, evaluation captures"),
               ("calibration", lambda e: e <= SUCCESS_M, "good fits refused, calibration captures"),
-              ("ood", lambda e: e > FAR_M, "fits > 5 cm off refused, OOD captures"))
+              ("ood", lambda e: e > FAR_M, "fits > 5 cm off refused, OOD captures"),
+              ("evaluation", lambda e: e > FAR_M, "fits > 5 cm off refused, evaluation captures"))
     for split, chosen, label in curves:
         p = np.array([model.probability(r) for r in rows
                       if r["split"] == split and chosen(r["handle_error_m"])])
@@ -210,6 +211,17 @@ def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> No
     bx.set(xlabel="threshold on P(handle within 2 cm)", ylabel="share refused",
            title="refusals against the threshold", xlim=(0, 1), ylim=(-0.02, 1.02))
     bx.legend(fontsize=8, loc="center right")
+    for split in ("calibration", "evaluation", "ood"):
+        error = np.sort([100.0 * r["handle_error_m"] for r in rows if r["split"] == split])
+        if len(error):
+            cx.step(error, np.arange(1, len(error) + 1) / len(error), where="post",
+                    label=f"{split} ({len(error)} fits)")
+    for cm, text in ((100 * SUCCESS_M, "2 cm"), (100 * FAR_M, "5 cm")):
+        cx.axvline(cm, color="k", ls=":", lw=1)
+        cx.annotate(text, (cm, 0.95), textcoords="offset points", xytext=(3, 0), fontsize=8)
+    cx.set(xscale="log", xlabel="handle error (cm)", ylabel="share of fits within it",
+           title="handle errors", ylim=(-0.02, 1.02))
+    cx.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
