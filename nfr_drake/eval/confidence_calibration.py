@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import math
 import os
 import platform
 import sys
@@ -38,6 +39,7 @@ from nfr_drake.inference.confidence import (
     CONFIDENCE_FILE,
     FAR_M,
     SUCCESS_M,
+    TRANSFORMS,
     ConfidenceModel,
     fit_logistic,
 )
@@ -146,6 +148,20 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     p = np.array([model.probability(r) for r in rows])
     model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] == "clean" for r in rows]))
     return model
+
+
+def rank_correlations(rows: list[dict], terms: list[tuple[str, str]]) -> list[float]:
+    """Spearman's rank correlation of each term (feature, transform) with the handle error over
+    `rows` (nan for a term constant on them): a term that is meant to grow with a worse fit
+    should come out > 0."""
+    from scipy.stats import spearmanr
+
+    error = np.array([r["handle_error_m"] for r in rows])
+    out = []
+    for name, transform in terms:
+        x = np.array([TRANSFORMS[transform](float(r[name])) for r in rows])
+        out.append(float(spearmanr(x, error)[0]) if np.ptp(x) > 0 and np.ptp(error) > 0 else math.nan)
+    return out
 
 
 def refusal_table(rows: list[dict], model: ConfidenceModel) -> str:
@@ -312,8 +328,12 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
             print(f"calibration -> {model.write(Path(folder))}")
     table = refusal_table(rows, model)
     terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))
+    ranks = ", ".join(f"{t}({n}) {rho:+.2f}" for (n, t), rho in zip(
+        model.terms, rank_correlations(rows, model.terms), strict=True))
     report = (f"threshold {model.threshold:.2f}; standardised coefficients: {terms}; intercept "
-              f"{model.intercept:+.2f}\n\n{table}\n")
+              f"{model.intercept:+.2f}\n\nrank correlation of each term with the handle error "
+              f"over all {len(rows)} rows (more of a term is meant to be worse: > 0): {ranks}\n\n"
+              f"{table}\n")
     if failed:
         report += (f"\nno fit ({len(failed)}): "
                    + "; ".join(f"{Path(f['capture']).parent.name}/{Path(f['capture']).name} "

@@ -16,7 +16,8 @@ def _rows(n=300, seed=0):
     error = np.where(rng.uniform(size=n) < (iou - 0.5) * 2, 0.01, 0.10)
     loss = np.where(error > 0.02, 10 ** rng.uniform(-3.5, -3, n), 10 ** rng.uniform(-3, -2, n))
     return [{"image_loss_worst_view": float(a), "silhouette_iou_worst_view": float(b),
-             "handle_error_m": float(e), "variant": "clean", "split": "calibration", "kind": "clean"}
+             "handle_error_m": float(e), "variant": "clean", "split": "calibration", "kind": "clean",
+             "views": 10.0}
             for a, b, e in zip(loss, iou, error, strict=True)]
 
 
@@ -49,3 +50,13 @@ def test_without_enough_successes_the_calibration_is_the_success_rate_and_refuse
     assert p == pytest.approx(1.5 / 301) and p == model.probability(rows[0])
     assert all(model.probability(r) < model.threshold for r in rows)
     assert model.weakest(rows[1]) is None  # no term to blame: the refusal gives the general advice
+
+
+def test_rank_correlations_say_which_terms_grow_with_the_error():
+    from nfr_drake.eval.confidence_calibration import rank_correlations
+
+    rows = _rows()
+    rho = rank_correlations(rows, TERMS + [("views", "inverse")])
+    # 1 - IoU grows with the error; the image loss shrinks with it (the sample's quirk); a term
+    # constant on the rows has no rank correlation.
+    assert rho[1] > 0.3 and rho[0] < -0.3 and np.isnan(rho[2])
