@@ -44,10 +44,15 @@ def test_outputs_the_part_asked_for_without_fitting_again(furniture_model_folder
     assert system.get_q_estimate_output_port().Eval(context)[0] == pytest.approx(result.q)
     handle_W = [X_WO.multiply(p) for p in result.trajectory["handle"]]
     np.testing.assert_allclose(kt.point("handle", kt.q_grid), handle_W, atol=1e-9)
-    assert system.get_confidence_output_port().Eval(context) is None
+    # The confidence of the part asked for (no calibration in the tiny model: features, no p).
+    confidence = system.get_confidence_output_port().Eval(context)
+    assert confidence["features"] == result.parts[1]["confidence"]["features"]
+    assert confidence["p_handle_within_2cm"] is None and len(confidence["per_view"]) == 3
     system.set_part(context, 0)
     door = system.get_keypoint_trajectory_output_port().Eval(context)
     assert door.category == "closet" and system.fit_count == 1
+    assert (system.get_confidence_output_port().Eval(context)["features"]
+            == result.parts[0]["confidence"]["features"])
     assert system.get_fit_result_output_port().Eval(context).part["index"] == 0
     hinge_O = result.parts[0]["trajectory"]["keypoints"]["axis_0"][2]
     np.testing.assert_allclose(door.point("hinge_top", door.q_grid[2]), X_WO.multiply(hinge_O), atol=1e-9)
