@@ -14,7 +14,9 @@ the photo's own first mask) and the posed crop stage (`segmentation.crop.posed_c
 crop around the box of the pose from the first masks); for each, the mean IoU (p > 0.5) over the
 photos and the pose error of `estimate_object_pose` from those masks, as the pipeline runs it
 (the true masks' row for scale). Prints one line per object and the medians; `--csv` writes the
-rows.
+rows. `--extent-only` only measures how large the object is in the photos: the longer side of its true
+mask's bounding box over the image side, and its area over the image's, per photo (median and
+10th-90th percentiles).
 """
 
 from __future__ import annotations
@@ -65,8 +67,26 @@ def pose_error(masks, X_WCs, cameras, category: str, X_WO: np.ndarray) -> tuple[
     return 100.0 * float(np.linalg.norm(d[:2, 3])), abs(math.degrees(math.atan2(d[1, 0], d[0, 0])))
 
 
+def extent(category: str, n: int, seed: int) -> None:
+    """Print the object's size in the photos alone (module docstring, `--extent`)."""
+    sides, areas = [], []
+    for index in range(n):
+        scenario = Scenario(category=category, model=f"models/{category}", seed=seed, index=index,
+                            object_pose="estimated", perceive="alone")
+        for image in photos(scenario)[0]:
+            rows, cols = np.nonzero(background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5)
+            sides.append(max(np.ptp(rows), np.ptp(cols)) / max(image.shape[:2]))
+            areas.append(rows.size / (image.shape[0] * image.shape[1]))
+    p = lambda x: " ".join(f"{v:.2f}" for v in np.percentile(x, [50, 10, 90]))  # noqa: E731
+    print(f"{category}, {n} objects of seed {seed}, {len(sides)} photos: bounding box's longer side / image "
+          f"side, median p10 p90: {p(sides)}; area / image: {p(areas)}")
+
+
 def main(category: str = "closet", n: int = 20, seed: int = 200, segmenter: Path = Path(Scenario.segmenter),
-         csv_path: Path | None = None) -> None:
+         csv_path: Path | None = None, extent_only: bool = False) -> None:
+    if extent_only:
+        extent(category, n, seed)
+        return
     net, _ = load_segmenter(segmenter)
     rows = []
     for index in range(n):
