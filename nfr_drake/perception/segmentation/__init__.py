@@ -11,6 +11,8 @@ Modules, one role each:
 - `model`: the network, its configuration, saving and loading a model folder.
 - `data`: images of room datasets and augmented training batches.
 - `training`: the loss and the resumable training loop.
+- `crop`: the crop stage over posed views: a second, close look at the crop around the box of
+  the object's pose from the first masks (`Segmenter.close_look` looks at one photo's crop).
 - `evaluation`: mask IoU per dataset and the figure of predicted and true masks.
 - `command`: `nfr-drake train-segmenter` and `nfr-drake eval-segmenter`.
 """
