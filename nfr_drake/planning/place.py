@@ -71,6 +71,9 @@ _SIGHT_CLEARANCE = 0.06
 """The sight line clears the compartment and the open door by this much, m (the forearm's radius)."""
 _SIGHT_FRACTION = 0.85
 """How much of the sight line (from the base) must clear them: its end lies at the front."""
+_OVER_REACH = 0.12  # a box within this of the carry's line (horizontally) is carried over, m
+_OVER_CLEARANCE = 0.05  # a carried item's bottom over the boxes it passes over, m
+_OVER_LIMIT = 0.75  # the highest a carried item's bottom is lifted over boxes, above the base, m
 _EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
@@ -450,6 +453,23 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
     return None, failed
 
 
+def _over(boxes: list[ObstacleBox], a: np.ndarray, b: np.ndarray, X_WB: RigidTransform) -> float:
+    """How high a held item's bottom must pass over the boxes (in W) that the horizontal line
+    from a to b (m, (3,)) crosses within `_OVER_REACH`: their highest top plus `_OVER_CLEARANCE`,
+    m; -inf when none is crossed or when that lies more than `_OVER_LIMIT` above the base (a tall
+    carcass is gone round, not over). Between collision samples a carried item grazed a low
+    closet's top edge and was knocked out of the fingers."""
+    pts = a + np.linspace(0.0, 1.0, 25)[:, None] * (b - a)
+    need = -np.inf
+    for box in boxes:
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * box.size / 2
+        top = float((box.X_WB.rotation().matrix() @ corners.T)[2].max() + box.X_WB.translation()[2])
+        level = pts * [1, 1, 0] + [0, 0, top - 1e-3]
+        if distance_to_box(box, level).min() <= _OVER_REACH:
+            need = max(need, top + _OVER_CLEARANCE)
+    return need if need <= X_WB.translation()[2] + _OVER_LIMIT else -np.inf
+
+
 def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
     sc.plant.SetPositions(sc.plant_context, q)
     return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
@@ -499,6 +519,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         line = [p_place - f * pb.entry_depth * pb.entry for f in (1.0, 2 / 3, 1 / 3, 0.0)]
         p_lift = pb.X_WI.translation() + cfg.lift_height * _Z
         z_high = max(p_lift[2], line[0][2]) + (cfg.carry_clearance if side else 0.0)
+        z_high = max(z_high, _over([*pb.fixed, *pb.moving], p_lift, line[0], X_WB))  # the item's bottom
         high = [p_lift * [1, 1, 0] + [0, 0, z_high], line[0] * [1, 1, 0] + [0, 0, z_high]]
         names = ("carry up", "carry over", "pre-place", "entering 1", "entering 2", "place")
         points = [*high, *line]

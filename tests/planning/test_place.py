@@ -140,3 +140,17 @@ def test_the_table_is_not_set_behind_an_obstacle():
     table, X_WI = table_beside(X_WB, [wall], ITEM_REACH["side"])
     assert not _crosses(wall, np.array([0.0, 0.0, 0.55]), X_WI.translation(), 0.06)
     assert X_WI.translation()[1] < 0.0
+
+
+def test_a_carried_item_goes_over_a_low_carcass_on_its_way_not_a_tall_one():
+    """`_over`: a line from the table to the front that crosses a low closet's top is lifted 5 cm
+    over it; one that passes 0.3 m beside it, or crosses a carcass taller than the lift allows,
+    is not (the trajectory goes round)."""
+    from nfr_drake.planning.place import _OVER_CLEARANCE, _over
+
+    low = ObstacleBox("top", np.array([0.5, 0.6, 0.02]), RigidTransform([0.0, 0.0, 0.52]))
+    a, b = np.array([-0.1, -0.9, 0.43]), np.array([0.1, 0.5, 0.04])
+    assert _over([low], a, b, RigidTransform()) == pytest.approx(0.53 + _OVER_CLEARANCE)
+    assert _over([low], a + [0.6, 0, 0], b + [0.6, 0, 0], RigidTransform()) == -np.inf
+    tall = ObstacleBox("side", np.array([0.5, 0.02, 0.9]), RigidTransform([0.0, 0.0, 0.45]))
+    assert _over([tall], a, b, RigidTransform()) == -np.inf
