@@ -2,7 +2,7 @@
 them (`sightings`, `triangulate_handles`), against the gt.json of furniture capture sets.
 
 Usage: python benchmarks/furniture_handles.py --detector models/furniture/handle_detector
-       --sets data/eval/furniture_cams128 [--true-maps] [--px 3] [--cm 3] [--threads 1]
+       --sets data/eval/furniture_cams128 [--true-maps] [--px 3] [--cm 3] [--min-share 0.5]
 Per set, in 2D: the visible handles of each view (a front whose handle label has a pixel there)
 against the view's sightings, matched one to one by distance, a match within `--px` px (scaled
 to a 128 px high image): recall, precision, median distance of the matches. In 3D: the
@@ -27,7 +27,13 @@ import torch
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector.model import load_detector
-from nfr_drake.perception.handle_triangulation import HandleMap, project, sightings, triangulate_handles
+from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_MIN_SHARE,
+    HandleMap,
+    project,
+    sightings,
+    triangulate_handles,
+)
 
 
 def _read(capture, key: str, i: int) -> np.ndarray:
@@ -78,6 +84,8 @@ def main() -> None:
     parser.add_argument("--true-maps", action="store_true")
     parser.add_argument("--px", type=float, default=3.0)
     parser.add_argument("--cm", type=float, default=3.0)
+    parser.add_argument("--min-share", type=float, default=FURNITURE_MIN_SHARE,
+                        help="triangulate_handles' min_share (the share of views a handle must agree with)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path, help="per-piece rows as JSON")
     args = parser.parse_args()
@@ -111,7 +119,7 @@ def main() -> None:
                 sighted += len(s)
                 true_visible += len(visible)
                 d2 += [x / scale for x in dist]
-            points = triangulate_handles(capture.frames, found)
+            points = triangulate_handles(capture.frames, found, min_share=args.min_share)
             dist3 = match(handles, np.array([h.p_O for h in points]).reshape(-1, 3), args.cm / 100)
             d3 += dist3
             n_true += len(handles)

@@ -181,3 +181,17 @@ def test_several_handles_are_triangulated_each_once():
         assert min(np.linalg.norm(h.p_O - p) for h in points) < 0.005
     assert all(len(h.views) >= 7 for h in points)
     assert triangulate_handles(frames, found[:2]) == []
+
+
+def test_a_point_seen_in_few_of_the_views_it_is_in_is_dropped_with_min_share():
+    """A 'handle' sighted in 3 of the 10 views it projects into is a point with min_share 0 and
+    none with min_share 0.5; the real handle, sighted in all 10, stays."""
+    frames = _frames(10, 128)
+    decoy = P_TRUE + [0.0, 0.2, 0.1]
+    found = []
+    for i, f in enumerate(frames):
+        seen = [_project(f, P_TRUE)] + ([_project(f, decoy)] if i in (0, 4, 8) else [])
+        found += sightings(_votes_map(128, seen), i)
+    assert len(triangulate_handles(frames, found)) == 2
+    (kept,) = triangulate_handles(frames, found, min_share=0.5)
+    assert np.linalg.norm(kept.p_O - P_TRUE) < 0.005
