@@ -74,7 +74,8 @@ class FittedModel:
         self.category: str = self.config["category"]
         self.keypoint_names: tuple[str, ...] = tuple(self.config["keypoint_names"])
         self.handle_detector: HandleDetector | None = None
-        if (self.folder / DETECTOR_DIR).is_dir() and "handle" in self.keypoint_names:
+        if (self.folder / DETECTOR_DIR).is_dir() and ("handle" in self.keypoint_names
+                                                      or self.num_slots > 1):
             self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
         self.confidence: ConfidenceModel | None = ConfidenceModel.read(self.folder)
         self._code_scale: float | None = None

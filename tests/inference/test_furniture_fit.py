@@ -107,3 +107,37 @@ def test_sighted_handles_give_the_part_count(capture):
                         handles)
     logits = model.slot_logits(off.z[None])[0, :, 0] > 0
     assert off.exists.tolist() == logits.tolist() and len(plain.handles) == 0
+
+
+def test_a_furniture_model_folder_loads_and_uses_its_handle_detector(furniture_model_folder, capture,
+                                                                       tmp_path):
+    """A furniture model folder with `handle_detector/` gets its detector (the slot keypoints
+    are named front{k}/handle), and infer_parts says what it sighted; without one, or turned
+    off, `extra["handles"]` says why."""
+    import shutil
+
+    from nfr_drake.inference.infer import FittedModel, infer_parts
+    from nfr_drake.perception.handle_detector.model import (
+        DETECTOR_DIR,
+        HandleDetector,
+        HandleDetectorConfig,
+        save_detector,
+    )
+
+    folder = tmp_path / "furniture"
+    shutil.copytree(furniture_model_folder, folder)
+    small = HandleDetectorConfig(channels=4, dilations=(1, 2))
+    save_detector(folder / DETECTOR_DIR, HandleDetector(small),
+                  {"model": {"channels": 4, "dilations": [1, 2]}})
+    assert FittedModel(furniture_model_folder).handle_detector is None
+    fitted = FittedModel(folder)
+    assert fitted.handle_detector is not None
+    config = FurnitureFitConfig(starts=2, keep=1, steps=2, rays_per_step=32, lookup_rays=32)
+    grid = np.linspace(0, 1, 3)
+    result, fit = infer_parts(fitted, capture, config, grid)
+    handles = result.extra["handles"]
+    assert handles["count"] == len(fit.handles) == len(handles["p_O"])  # 2 views: none agree
+    off, _ = infer_parts(fitted, capture, replace(config, handle_detector=False), grid)
+    assert off.extra["handles"] == {"used": False, "why": "turned off"}
+    none, _ = infer_parts(FittedModel(furniture_model_folder), capture, config, grid)
+    assert none.extra["handles"]["why"] == "the model ships no handle detector"
