@@ -18,15 +18,16 @@ thorough, fit spreads its starts evenly over q and runs longer stages.
 
 A drawer's pull and depth trade along a shallow valley of the image loss (a deeper drawer pulled
 out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
-the loss rises steeply on either side of the refined q, yet without the scan the fast fit ended
-1.4 cm from the true pull (median of 20 drawers; docs/BENCHMARKS.md). The valley scan
-(`FitConfig.valley_codes`), between the refinement and the close look when the focus part
-slides with q (a drawer's front; a door swings, and its angle shows in its plane), holds a few
-articulations around the refined one, starts each z_obj along the direction in which the
-keypoint head keeps the focus part in place, fits the z_obj of all of them together and goes on
-from the minimum of their losses' profile over q. It is on in the fast preset: on 40 drawers it
-brought the pull from 1.4 to 0.8 cm and the handle trajectory from 1.5 to 1.2 cm, the thorough
-fit's being 0.5 and 0.95 cm (docs/BENCHMARKS.md).
+the loss rises steeply on either side of the refined q, yet without help the fast fit ended
+1.4 cm from the true pull (median of 20 drawers; docs/BENCHMARKS.md). Two things help where the
+focus part slides with q (a drawer's front; a door swings, and its angle shows in its plane).
+The valley scan (`FitConfig.valley_codes`) holds a few articulations around the code's, starts
+each z_obj along the direction in which the keypoint head keeps the focus part in place, fits
+the z_obj of all of them together and goes on from the minimum of their losses' profile over q;
+it runs after the refinement, or (`valley_first`) before it, from the exploration's winner.
+The valley coordinate (`valley_lr`) gives the refinement one more coordinate along that
+direction, so that one Adam step moves q and z_obj together along the valley. The fast preset
+uses both, the scan first (docs/BENCHMARKS.md).
 
 A last stage takes a closer look at one part (`FocusTarget`, the handle): for `focus_steps` more
 steps, a `detail_fraction` share of the rays (half by default) is drawn among those passing within
@@ -77,11 +78,12 @@ class FitConfig:
 
     preset: Literal["thorough", "fast"] = "thorough"
     """"thorough", the defaults below, or "fast" (`FAST`): starts looked up, explored 30 steps at
-    lr 0.03 with 64 rays each, at most 120 steps of 128 rays with early stopping on fixed rays,
-    a valley scan of 5 codes for 15 steps (where the handle slides: a drawer), a close look of 20
-    steps; about a third of the CPU time, as accurate on closets, a drawer's handle trajectory
-    about a quarter less accurate (docs/BENCHMARKS.md). Fields left at their default take the
-    preset's value."""
+    lr 0.03 with 64 rays each; where the handle slides (a drawer) a valley scan of 3 codes for 15
+    steps and a valley coordinate in the refinement; at most 120 steps in all, the refinement's
+    of 128 rays with early stopping on fixed rays; a close look of 20 steps. About 0.3 of the
+    CPU time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md). Fields left
+    at their default take the preset's value (so a field cannot be set back to its default
+    on top of the preset: start from "thorough" and set the preset's fields instead)."""
     start: Literal["lookup", "spread"] = "spread"
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
@@ -184,7 +186,7 @@ class FitConfig:
 
     FAST: ClassVar[dict] = dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
                                 rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
-                                valley_codes=5, focus_steps=20)
+                                valley_codes=3, valley_first=True, valley_lr=5e-3, focus_steps=20)
     """The "fast" preset's values."""
 
     @classmethod
