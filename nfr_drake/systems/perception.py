@@ -61,7 +61,12 @@ from nfr_drake.inference.infer import (
     paint_background,
 )
 from nfr_drake.inference.result import FitResult
-from nfr_drake.perception.object_pose import HullConfig, background_mask, estimate_object_pose
+from nfr_drake.perception.object_pose import (
+    HullConfig,
+    ObjectPoseError,
+    background_mask,
+    estimate_object_pose,
+)
 from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -103,7 +108,7 @@ class NfrPerceptionSystem(LeafSystem):
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
     `mask_crop`, those of its second look at the crop around the object's box in each view,
-    `posed_close_look`), and
+    `posed_close_look`; when its masks give no pose, the first look's), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
     only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
     object alone), every pixel counting in the loss.
@@ -240,7 +245,15 @@ class NfrPerceptionSystem(LeafSystem):
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
         masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
-        X_WO, pose, warnings = self._object_pose(masks)
+        try:
+            X_WO, pose, warnings = self._object_pose(masks)
+        except ObjectPoseError:
+            if self._segmenter is None or not self._mask_crop:
+                raise
+            masks = [self._segmenter.object_mask(image) for image in images]  # the first look
+            X_WO, pose, warnings = self._object_pose(masks)
+            warnings.append("the crop stage's masks agree on no object; the segmenter's first look "
+                            "gave the pose and the masks")
         X_OW = X_WO.inverse()
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]

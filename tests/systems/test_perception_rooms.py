@@ -18,7 +18,7 @@ from nfr_drake.data.rooms import RoomDistribution, sample_room
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
-from nfr_drake.perception.object_pose import ObjectPoseError
+from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
 from nfr_drake.systems import perception as perception_module
 from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
 from nfr_drake.systems.pipeline import perception_room, run_scenario
@@ -139,6 +139,32 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
     for image, mask in zip(images, masks, strict=True):
         off = mask < 0.01
         assert off.any() and np.abs(image[off].astype(float) - background).max() <= 3
+
+
+def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, monkeypatch):
+    """The crop stage's masks agree on no object (here: empty): the pose and the fit's masks come
+    from the segmenter's first look, and the result says so."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    monkeypatch.setattr(perception_module, "posed_close_look",
+                        lambda net, images, *args: [np.zeros(i.shape[:2], np.float32) for i in images])
+    real_estimate = perception_module.estimate_object_pose
+    poses_from = []
+
+    def estimate(masks, *args):
+        poses_from.append(max(float(m.max()) for m in masks))
+        if poses_from[-1] == 0.0:
+            return real_estimate(masks, *args)  # raises ObjectPoseError: nothing on the masks
+        return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.02, 1, np.zeros(6))
+
+    monkeypatch.setattr(perception_module, "estimate_object_pose", estimate)
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False)
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    assert system.fit_count == 1 and len(poses_from) == 2 and poses_from[0] == 0.0 and poses_from[1] > 0.5
+    result = system.get_fit_result_output_port().Eval(system.GetMyContextFromRoot(simulator.get_context()))
+    assert any("first look" in w for w in result.extra["warnings"])
+    assert result.extra["object_pose"]["estimated"] is True
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):
