@@ -138,3 +138,33 @@ def test_the_posed_crop_stage_keeps_the_object_and_drops_spill_beyond_its_box():
     assert all(iou(f, t) < 0.85 for f, t in zip(first, trues, strict=True))  # the blob is in the first look
     assert all(iou(m > 0.5, t) > 0.9 for m, t in zip(masks, trues, strict=True))
     assert len(net.seen) == 3 * len(photos)  # the first looks (this test's and the stage's), the crops
+
+
+def test_eval_segmenter_crops_each_articulation_with_its_own_cameras(tmp_path, monkeypatch):
+    """`--crop posed`: the crop stage runs once per (room, articulation) on its views, with their
+    camera poses in the room's frame, and each mask lands on its own image."""
+    from nfr_drake.data.room_dataset import RoomDatasetSpec, generate_rooms
+    from nfr_drake.data.rooms import RoomDistribution
+    from nfr_drake.perception.segmentation import evaluation
+    from nfr_drake.perception.segmentation.data import RoomImages
+
+    root = tmp_path / "rooms"
+    spec = RoomDatasetSpec("drawer", 2, articulations=2, views=3, size=32,
+                           room=RoomDistribution(clutter=(0, 1), neighbours=(0, 0)))
+    generate_rooms(spec, root, progress=False)
+    data = RoomImages([root])
+    calls = []
+
+    def stage(net, images, X_WCs, cameras, category):
+        calls.append((images, X_WCs, category))
+        return [np.full(image.shape[:2], len(calls), np.float32) for image in images]
+
+    monkeypatch.setattr(evaluation, "posed_close_look", stage)
+    masks = evaluation.predicted_masks(Bright(), data, "posed")
+    assert len(calls) == 4 and all(len(images) == 3 and category == "drawer" for images, _, category in calls)
+    for i, (rec, a, v) in enumerate(data.index):
+        call = int(masks[i][0, 0])
+        images, X_WCs, _ = calls[call - 1]
+        assert masks[i].shape == (32, 32)
+        np.testing.assert_array_equal(images[v], data.image(i)[0])
+        np.testing.assert_allclose(X_WCs[v], rec.X_OC[a, v])
