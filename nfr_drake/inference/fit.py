@@ -133,12 +133,12 @@ class FitConfig:
     seed: int = 0
     """Seed of ray sampling."""
     valley_codes: int = 0
-    """Codes of the valley scan after the refinement (0: none), when the focus part slides (the
-    keypoint head moves it along a straight line with q, as a drawer's handle; a door's handle
-    swings, and its angle shows in the door's plane): the refined code's q and z_obj trade along
-    a shallow valley of the image loss (a deeper drawer pulled out less puts its handle at the
-    same point), along which Adam walks slowly. The scan holds `valley_codes` articulations
-    evenly over `valley_span` around the refined q, each with z_obj moved along the keypoint
+    """Codes of the valley scan after the refinement (before it with `valley_first`; 0: none),
+    when the focus part slides (the keypoint head moves it along a straight line with q, as a
+    drawer's handle; a door's handle swings, and its angle shows in the door's plane): the
+    code's q and z_obj trade along a shallow valley of the image loss (a deeper drawer pulled
+    out less puts its handle at the same point), along which Adam walks slowly. The scan holds
+    `valley_codes` articulations evenly over `valley_span` around the code's q, each with z_obj moved along the keypoint
     head's valley (the focus part kept in place, to first order), fits their z_obj with q held
     for `valley_steps` shared steps, and goes on from the best of them on `valley_held_rays`
     fixed rays or, when its loss there is lower, the code at the minimum of a parabola through their
