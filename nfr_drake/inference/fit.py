@@ -138,11 +138,12 @@ class FitConfig:
     drawer's handle; a door's handle swings, and its angle shows in the door's plane): the
     code's q and z_obj trade along a shallow valley of the image loss (a deeper drawer pulled
     out less puts its handle at the same point), along which Adam walks slowly. The scan holds
-    `valley_codes` articulations evenly over `valley_span` around the code's q, each with z_obj moved along the keypoint
-    head's valley (the focus part kept in place, to first order), fits their z_obj with q held
-    for `valley_steps` shared steps, and goes on from the best of them on `valley_held_rays`
-    fixed rays or, when its loss there is lower, the code at the minimum of a parabola through their
-    losses (z_obj interpolated between its neighbours)."""
+    `valley_codes` articulations evenly over `valley_span` around the code's q, each with
+    z_obj moved along the keypoint head's valley (the focus part kept in place, to first
+    order), fits their z_obj with q held for `valley_steps` shared steps, and goes on from the
+    best of them on `valley_held_rays` fixed rays or, when its loss there is lower, the code at
+    the minimum of a parabola through their losses (z_obj interpolated between its
+    neighbours)."""
     valley_lr: float = 0.0
     """Adam learning rate, in q per step, of the refinement's valley coordinate (0: none), when
     the focus part slides (see `valley_codes`): the refined code gets one more coordinate t, the
