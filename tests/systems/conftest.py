@@ -35,12 +35,17 @@ TINY_FIT = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, 
 """A fit of a few steps: what the perception tests check is the plumbing, not the accuracy."""
 
 
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory):
-    """A closet model folder holding the untrained `TINY_MODEL` with 2 training codes."""
+def write_tiny_closet_model(tmp_path_factory, codes: int):
+    """A closet model folder holding the untrained `TINY_MODEL` with `codes` training codes."""
     folder = tmp_path_factory.mktemp("m") / "closet"
     torch.manual_seed(0)
-    write_model_folder(folder, NFRAutoDecoder(TINY_MODEL, 2),
+    write_model_folder(folder, NFRAutoDecoder(TINY_MODEL, codes),
                        {"category": "closet",
                         "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
     return folder
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory):
+    """`write_tiny_closet_model` with 2 training codes."""
+    return write_tiny_closet_model(tmp_path_factory, 2)

@@ -4,21 +4,15 @@
 import csv
 
 import pytest
-import torch
 
 from nfr_drake.cli import main
 from nfr_drake.eval.pipeline_eval import eval_pipeline_command
 from nfr_drake.inference.confidence import ConfidenceModel
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.nfr.checkpoint import write_model_folder
-from nfr_drake.nfr.config import NFRModelConfig
-from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.systems.pipeline import perceive_with_confidence
 from nfr_drake.systems.scenario import Scenario
+from tests.systems.conftest import write_tiny_closet_model
 
-SMALL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, feature_dim=16,
-                       pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
-                       keypoint_hidden=16)
 FAST = FitConfig(restarts=1, explore_steps=0, max_steps=2, explore_rays=32, rays_per_step=32,
                  eval_rays=64, lookup_rays=64, focus_steps=0)
 FIT_FLAGS = ["--restarts", "1", "--fit.explore-steps", "0", "--max-steps", "2",
@@ -28,11 +22,7 @@ FIT_FLAGS = ["--restarts", "1", "--fit.explore-steps", "0", "--max-steps", "2",
 @pytest.fixture(scope="module")
 def calibrated_model(tmp_path_factory):
     """A tiny closet model folder (random weights) with a calibration whose threshold is 0.5."""
-    folder = tmp_path_factory.mktemp("m") / "closet"
-    torch.manual_seed(0)
-    write_model_folder(folder, NFRAutoDecoder(SMALL, 3),
-                       {"category": "closet",
-                        "keypoint_names": ["handle", "hinge_top", "hinge_bottom", "goal"]})
+    folder = write_tiny_closet_model(tmp_path_factory, 3)
     ConfidenceModel([("image_loss", "log10")], [-2.5], [0.5], [-2.0], 0.0, 0.5, {}).write(folder)
     return folder
 
