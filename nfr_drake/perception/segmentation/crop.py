@@ -1,8 +1,8 @@
 """The crop stage over posed views: a second, close look at the object in each photo.
 
-The first look segments each whole photo (`Segmenter.object_mask`); a small object (a drawer 1.5 m
-away) then covers a few pixels of the network's 96 px input, and its mask spreads over the floor
-and the furniture beside it. The masks of all views give the object's pose and floor box
+The first look segments each whole photo (`Segmenter.object_mask`); in a room its mask spreads
+over textures it has not learnt (floors, walls, the furniture beside the object; docs/ROOMS.md,
+"The crop stage"). The masks of all views give the object's pose and floor box
 (`perception.object_pose.estimate_object_pose`); that box, grown forward by what its fronts may
 sweep when open (`reach`), projected into each view and widened by `margin`, is the crop of that
 view, which the segmenter looks at again at its input size (`Segmenter.object_mask(box=...)`,
