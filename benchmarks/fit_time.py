@@ -2,8 +2,8 @@
 
 Usage: python benchmarks/fit_time.py --model models/closet --captures data/eval/closet_train_cams
        [--n 20] [--first 0] [--threads 1] [--variants thorough fast] [--variant NAME:FIELD=VALUE,...]
-       [--profile K] [--step-costs] [--csv FILE] [--halves]
-       python benchmarks/fit_time.py --captures DIR --from-csv FILE [FILE ...] [--halves]
+       [--profile K] [--step-costs] [--csv FILE] [--halves] [--bootstrap]
+       python benchmarks/fit_time.py --captures DIR --from-csv FILE [FILE ...] [--halves] [--bootstrap]
 Create the captures with `nfr-drake captures --category closet --n 20 --out DIR --size 64`.
 
 Side by side (default): every capture is fitted (`nfr_drake.inference.infer.infer`: the fit and the
@@ -129,10 +129,39 @@ def summary(rows: dict[str, list[dict]], unit: str) -> str:
     return "\n".join(lines)
 
 
-def tables(rows: dict[str, list[dict]], unit: str, halves: bool) -> str:
+ERRORS = ("articulation_error", "keypoint_rmse_cm", "handle_error_cm", "handle_trajectory_rmse_cm")
+
+
+def median_differences(rows: dict[str, list[dict]], unit: str, reps: int = 2000) -> str:
+    """Markdown table: per variant after the first, the difference of its median from the first
+    variant's for each error, with the 90 % interval of a paired bootstrap (`reps` resamplings
+    of the captures, the variants' rows of one capture drawn together; rows in capture order)."""
+    names = list(rows)
+    n = min(len(rs) for rs in rows.values())
+    values = {name: {k: np.array([r[k] for r in rows[name][:n]], float) for k in ERRORS}
+              for name in names}
+    draws = np.random.default_rng(0).integers(0, n, size=(reps, n))
+    heads = [k.replace("articulation_error", f"articulation_error ({unit})") for k in ERRORS]
+    lines = [f"paired bootstrap over {n} captures: median of the variant minus the first's "
+             "[90 % interval]", "", "| variant | " + " | ".join(heads) + " |",
+             "|---" * (len(ERRORS) + 1) + "|"]
+    for name in names[1:]:
+        cells = []
+        for key in ERRORS:
+            a, b = values[name][key], values[names[0]][key]
+            boot = np.median(a[draws], axis=1) - np.median(b[draws], axis=1)
+            low, high = np.percentile(boot, [5, 95])
+            cells.append(f"{np.median(a) - np.median(b):+.3g} [{low:+.3g}, {high:+.3g}]")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def tables(rows: dict[str, list[dict]], unit: str, halves: bool, bootstrap: bool = False) -> str:
     """`summary` of all rows, and with `halves` of the first and second half of each variant's
-    rows (captures in order) too."""
+    rows (captures in order) too; with `bootstrap`, `median_differences` of all rows."""
     text = summary(rows, unit)
+    if bootstrap:
+        text += "\n\n" + median_differences(rows, unit)
     if halves:
         n = min(len(rs) for rs in rows.values())
         for first, last in ((0, n // 2), (n // 2, n)):
@@ -259,6 +288,9 @@ def main() -> None:
                         help="CPU time of one Adam step by rays per step instead")
     parser.add_argument("--halves", action="store_true",
                         help="the tables of the first and the second half of the captures too")
+    parser.add_argument("--bootstrap", action="store_true",
+                        help="the differences of the error medians from the first variant's, "
+                             "with 90 %% paired bootstrap intervals")
     parser.add_argument("--from-csv", type=Path, nargs="+", default=None,
                         help="print the tables of the rows of --csv files (joined in this order) "
                              "instead of fitting")
@@ -267,7 +299,7 @@ def main() -> None:
     warm = read_capture_set(dirs[0])  # the first fit of a process pays for lazy set-up
     unit = "deg" if warm.gt["object"]["joint_type"] == "revolute" else "cm"
     if args.from_csv is not None:
-        print(tables(read_rows(args.from_csv), unit, args.halves))
+        print(tables(read_rows(args.from_csv), unit, args.halves, args.bootstrap))
         return
     if args.model is None:
         parser.error("--model is needed to fit")
@@ -286,7 +318,7 @@ def main() -> None:
         return
     rows = side_by_side(fitted, dirs, variants, args.csv)
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}\n")
-    print(tables(rows, unit, args.halves))
+    print(tables(rows, unit, args.halves, args.bootstrap))
 
 
 if __name__ == "__main__":
