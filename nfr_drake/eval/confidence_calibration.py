@@ -64,6 +64,9 @@ handle detector's, constant while the model ships none)."""
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
 
+CV_FOLDS = 5
+"""Folds of the cross-validation that chooses how many terms the data supports (`select_terms`)."""
+
 MIN_EACH = 5
 """The calibration fits its terms only with at least this many successes and failures."""
 
@@ -114,8 +117,72 @@ def featurize(lines: list[dict]) -> list[dict]:
     return rows
 
 
-def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: float = 1.0
-              ) -> ConfidenceModel:
+def monotone_terms(X: np.ndarray, y: np.ndarray, active: np.ndarray, l2: float) -> np.ndarray:
+    """The terms kept of `active` (T,) bool once every term whose coefficient comes out > 0 is
+    dropped, the most positive first, refitting after each (X (N, T) standardised, y (N,) 0/1)."""
+    active = active.copy()
+    while active.any():
+        coef = fit_logistic(X[:, active], y, l2)[0]
+        if coef.max() <= 0:
+            break
+        active[np.flatnonzero(active)[int(np.argmax(coef))]] = False
+    return active
+
+
+def log_loss(X: np.ndarray, y: np.ndarray, coef: np.ndarray, intercept: float) -> np.ndarray:
+    """Per-row negative log-likelihood (N,) of 0/1 labels y under the logistic model."""
+    p = np.clip(1.0 / (1.0 + np.exp(-(intercept + X @ coef))), 1e-12, 1 - 1e-12)
+    return -(y * np.log(p) + (1 - y) * np.log(1 - p))
+
+
+def cross_validated_loss(X: np.ndarray, y: np.ndarray, groups: np.ndarray, active: np.ndarray,
+                         l2: float) -> tuple[float, float]:
+    """Mean and standard error over the folds of the held-out log loss of the monotone model on
+    the terms `active`, `CV_FOLDS` folds of whole groups (groups (N,) int: the capture of each
+    row, so that the parts of one piece are never split between fitting and scoring)."""
+    fold = groups % CV_FOLDS
+    losses = []
+    for k in range(CV_FOLDS):
+        train, test = fold != k, fold == k
+        if not test.any() or len(np.unique(y[train])) < 2:
+            continue
+        kept = monotone_terms(X[train], y[train], active, l2)
+        coef = np.zeros(X.shape[1])
+        coef[kept], intercept = fit_logistic(X[train][:, kept], y[train], l2)
+        losses.append(log_loss(X[test], y[test], coef, intercept).mean())
+    losses = np.array(losses)
+    return float(losses.mean()), float(losses.std(ddof=1) / np.sqrt(len(losses)))
+
+
+def select_terms(X: np.ndarray, y: np.ndarray, groups: np.ndarray, active: np.ndarray,
+                 l2: float) -> np.ndarray:
+    """As few terms as the data supports: backward elimination from the monotone terms `active`
+    (each step drops the term whose loss costs the least in-sample likelihood), then the
+    smallest set whose cross-validated log loss (`cross_validated_loss`, folds of whole
+    captures) is within one standard error of the best set's. X (N, T) standardised, y (N,) 0/1,
+    groups (N,) int; returns the chosen terms (T,) bool (possibly none: the success rate alone)."""
+    path = [active.copy()]
+    while path[-1].any():
+        current, best = path[-1], None
+        for t in np.flatnonzero(current):
+            trial = current.copy()
+            trial[t] = False
+            trial = monotone_terms(X, y, trial, l2)
+            coef = np.zeros(X.shape[1])
+            coef[trial], intercept = fit_logistic(X[:, trial], y, l2)
+            nll = log_loss(X, y, coef, intercept).sum()
+            if best is None or nll < best[0]:
+                best = (nll, trial)
+        path.append(best[1])
+    scores = [cross_validated_loss(X, y, groups, a, l2) for a in path]
+    best = int(np.argmin([m for m, _ in scores]))
+    limit = scores[best][0] + scores[best][1]
+    return min((a for a, (m, _) in zip(path, scores, strict=True) if m <= limit),
+               key=lambda a: a.sum())
+
+
+def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: float = 1.0,
+              select: bool = False) -> ConfidenceModel:
     """The logistic regression on `rows` (features and handle_error_m) with the threshold of
     `pick_threshold`. Monotone: every term is oriented so that more is worse, and a term whose
     coefficient comes out > 0 (more of it, more confidence: the sample's quirk, e.g. occluded
@@ -125,7 +192,11 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     With fewer than `MIN_EACH` successes (or failures) the terms cannot be fitted: the
     calibration is the split's success rate alone, (k + 1/2) / (n + 1) for k successes in n
     (Jeffreys), every coefficient 0, and the threshold `MAX_THRESHOLD` (while that rate is below
-    it, every fit is refused)."""
+    it, every fit is refused).
+
+    With `select` the terms are then cut to as few as the data supports (`select_terms`: fewer
+    when there are few successes), each row's group for the cross-validation its `capture`; when
+    none is left, the calibration is the success rate alone as above."""
     raw = ConfidenceModel(terms, [0.0] * len(terms), [1.0] * len(terms), [0.0] * len(terms), 0.0,
                           0.0, source)
     X = np.array([raw.design(r) for r in rows])
@@ -133,17 +204,18 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     std[std < 1e-9] = 1.0  # a term constant on the split (no detector, say): 0 here, no weight
     X = (X - mean) / std
     y = np.array([r["handle_error_m"] <= SUCCESS_M for r in rows], float)
-    if min(y.sum(), len(y) - y.sum()) < MIN_EACH:
+    active = np.zeros(len(terms), bool)
+    if min(y.sum(), len(y) - y.sum()) >= MIN_EACH:
+        active = monotone_terms(X, y, ~active, l2)
+    if select and active.any():
+        groups = np.unique([r["capture"] for r in rows], return_inverse=True)[1]
+        active = select_terms(X, y, groups, active, l2)
+    if not active.any():
         rate = (y.sum() + 0.5) / (len(y) + 1.0)
         return ConfidenceModel(terms, mean.tolist(), std.tolist(), [0.0] * len(terms),
                                float(np.log(rate / (1.0 - rate))), MAX_THRESHOLD, source)
-    active = np.ones(len(terms), bool)
-    while True:
-        coef = np.zeros(len(terms))
-        coef[active], intercept = fit_logistic(X[:, active], y, l2)
-        if coef.max() <= 0:
-            break
-        active[int(np.argmax(coef))] = False
+    coef = np.zeros(len(terms))
+    coef[active], intercept = fit_logistic(X[:, active], y, l2)
     model = ConfidenceModel(terms, mean.tolist(), std.tolist(), coef.tolist(), intercept, 0.0, source)
     p = np.array([model.probability(r) for r in rows])
     model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] == "clean" for r in rows]))
@@ -252,11 +324,13 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  write_models: bool = False, check: Path | None = None,
                                  fit: FitConfig = FitConfig(),
                                  category: Literal["closet-drawer", "furniture"] = "closet-drawer",
+                                 calibration_captures: Path | None = None,
                                  threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
     With `--category furniture` the furniture model (models/furniture, several parts) instead:
-    `calibration` captures of DATA/furniture_calib (seed 500), `evaluation` of
+    `calibration` captures of DATA/furniture_calib (seed 500; `--calibration-captures` names
+    another folder, e.g. the same pieces at 128 px), `evaluation` of
     DATA/furniture_cams128 (seed 7) and `ood` of DATA/furniture_oodsrc (seed 600, variants
     `FURNITURE_OOD_VARIANTS`), each fitted with the furniture fit's defaults; one row per true
     part with a handle (P(that part's handle within 2 cm), `FURNITURE_TERMS`); the other counts
@@ -283,6 +357,10 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         fit: options of the fit (closets and drawers).
         category: "closet-drawer" (models/closet and models/drawer, one calibration) or
             "furniture" (models/furniture).
+        calibration_captures: with `--category furniture`, the folder of the calibration
+            split's capture sets, furniture_000... (capture seed 500; default
+            DATA/furniture_calib, 64 px): e.g. data/eval/furniture_calib128, the same pieces
+            at 128 px as the handle detector's photos (`nfr-drake captures --size 128`).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -293,11 +371,15 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     furniture_model = category == "furniture"
     if furniture_model and rooms:
         raise NfrDrakeError("--rooms: room fits are of closets and drawers, not --category furniture")
+    if calibration_captures is not None and not furniture_model:
+        raise NfrDrakeError("--calibration-captures: only with --category furniture (closets and "
+                            "drawers calibrate on DATA/C_calib)")
     room_sets = {} if rooms == 0 else {
         name: captures for c in ("closet", "drawer")
         for name, captures in room_captures(rooms_data, data / "rooms", c, rooms).items()}
     if furniture_model:
-        cases = plan_furniture_cases(data, 0 if checked else calibration, evaluation, ood)
+        cases = plan_furniture_cases(data, 0 if checked else calibration, evaluation, ood,
+                                     calibration_captures)
     else:
         cases = plan_cases(data, 0 if checked else calibration, evaluation, closed, shut128, ood,
                            furniture, room_sets)
@@ -310,7 +392,8 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         writer.writeheader()
         writer.writerows(rows)
     command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
-    data_text = ("calibration split: furniture_calib (capture seed 500), "
+    calib_folder = calibration_captures or data / "furniture_calib"
+    data_text = (f"calibration split: {calib_folder} (capture seed 500), "
                  f"{calibration} captures, variants by index: clean, clean, few_views, occluded, "
                  "edge_cut; one row per true part with a handle" if furniture_model else
                  "calibration split: closet_calib and drawer_calib (capture seed 500), "
@@ -321,7 +404,8 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
               "command": command, "date": datetime.date.today().isoformat(),
               "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
     model = checked or calibrate([r for r in rows if r["split"] == "calibration"],
-                                 FURNITURE_TERMS if furniture_model else TERMS, source)
+                                 FURNITURE_TERMS if furniture_model else TERMS, source,
+                                 select=furniture_model)
     model.write(out)
     if write_models and checked is None:
         for folder in ("models/furniture",) if furniture_model else ("models/closet", "models/drawer"):

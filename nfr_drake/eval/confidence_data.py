@@ -232,13 +232,15 @@ FURNITURE_OOD_VARIANTS = ("background", "recoloured", "occluded", "edge_cut", "f
 model, by capture index modulo 5."""
 
 
-def plan_furniture_cases(data: Path, calibration: int, evaluation: int, ood: int) -> list[Case]:
+def plan_furniture_cases(data: Path, calibration: int, evaluation: int, ood: int,
+                         calibration_captures: Path | None = None) -> list[Case]:
     """The cases of the furniture model's confidence (models/furniture): `calibration` captures
-    of furniture_calib (seed 500, 64 px as the training renders, `CALIBRATION_VARIANTS` by
-    index), `evaluation` of furniture_cams128 (seed 7, 128 px, clean) and `ood` of
-    furniture_oodsrc (seed 600, `FURNITURE_OOD_VARIANTS` by index)."""
+    of `calibration_captures` (default DATA/furniture_calib; capture seed 500,
+    `CALIBRATION_VARIANTS` by index), `evaluation` of furniture_cams128 (seed 7, 128 px, clean)
+    and `ood` of furniture_oodsrc (seed 600, `FURNITURE_OOD_VARIANTS` by index)."""
     model = "models/furniture"
-    cases = [Case(model, str(data / "furniture_calib" / f"furniture_{i:03d}"),
+    calib = data / "furniture_calib" if calibration_captures is None else calibration_captures
+    cases = [Case(model, str(calib / f"furniture_{i:03d}"),
                   CALIBRATION_VARIANTS[i % 5], 500 + i, "calibration") for i in range(calibration)]
     for i in range(max(evaluation, ood)):
         if i < evaluation:

@@ -60,3 +60,65 @@ def test_rank_correlations_say_which_terms_grow_with_the_error():
     # 1 - IoU grows with the error; the image loss shrinks with it (the sample's quirk); a term
     # constant on the rows has no rank correlation.
     assert rho[1] > 0.3 and rho[0] < -0.3 and np.isnan(rho[2])
+
+
+def _noisy_rows(n, successes_share, seed=0):
+    """Rows of 3 parts per capture whose success depends on 1 - silhouette IoU alone; the image
+    loss and the edge contact follow 1 - IoU loosely (more, worse, as terms are oriented) but
+    say nothing more about success."""
+    rng = np.random.default_rng(seed)
+    iou = rng.uniform(0.0, 1.0, n)
+    p = 1.0 / (1.0 + np.exp(-(np.log(successes_share / (1 - successes_share)) + 5.0 * (iou - 0.5))))
+    error = np.where(rng.uniform(size=n) < p, 0.01, 0.10)
+    loss = 10 ** (-2.5 + (1 - iou) + rng.normal(0, 0.7, n))
+    edge = (1 - iou) + rng.normal(0, 0.7, n)
+    return [{"image_loss_worst_view": float(a), "silhouette_iou_worst_view": float(b),
+             "edge_contact": float(c), "handle_error_m": float(e), "variant": "clean",
+             "split": "calibration", "kind": "clean", "capture": f"piece_{i // 3:03d}"}
+            for i, (a, b, c, e) in enumerate(zip(loss, iou, edge, error, strict=True))]
+
+
+NOISY_TERMS = TERMS + [("edge_contact", "identity")]
+
+
+def test_term_selection_keeps_the_informative_term_and_drops_the_rest():
+    rows = _noisy_rows(900, 0.3)
+    chosen = calibrate(rows, NOISY_TERMS, {}, select=True)
+    assert chosen.coef[1] < 0.0  # the silhouette IoU, which decides success, is kept
+    assert chosen.coef[0] == 0.0 and chosen.coef[2] == 0.0  # its loose followers add nothing
+    p = [chosen.probability({**rows[0], "silhouette_iou_worst_view": v}) for v in (0.2, 0.5, 0.9)]
+    assert p[0] < p[1] < p[2]
+
+
+def test_with_few_successes_term_selection_keeps_fewer_terms():
+    rows = _noisy_rows(150, 0.3, seed=1)
+    successes = [r for r in rows if r["handle_error_m"] <= 0.02]
+    for r in successes[6:]:  # 6 successes: too few to tell most terms from noise
+        r["handle_error_m"] = 0.10
+    full = calibrate(rows, NOISY_TERMS, {})
+    chosen = calibrate(rows, NOISY_TERMS, {}, select=True)
+    assert sum(c != 0 for c in chosen.coef) < sum(c != 0 for c in full.coef)
+    if not any(chosen.coef):  # none left: the success rate alone, every fit refused
+        assert chosen.threshold == 0.5
+        assert chosen.probability(rows[0]) == pytest.approx(6.5 / 151)
+
+
+def test_the_furniture_calibration_captures_are_an_option(tmp_path):
+    from nfr_drake.errors import NfrDrakeError
+    from nfr_drake.eval.confidence_calibration import calibrate_confidence_command
+    from nfr_drake.eval.confidence_data import CALIBRATION_VARIANTS, plan_furniture_cases
+
+    default = plan_furniture_cases(tmp_path, 2, 1, 0)
+    assert default[0].capture == str(tmp_path / "furniture_calib" / "furniture_000")
+    cases = plan_furniture_cases(tmp_path, 7, 1, 1, tmp_path / "furniture_calib128")
+    calib = [c for c in cases if c.split == "calibration"]
+    assert [c.capture for c in calib] == [str(tmp_path / "furniture_calib128" / f"furniture_{i:03d}")
+                                          for i in range(7)]
+    assert [c.variant for c in calib] == [CALIBRATION_VARIANTS[i % 5] for i in range(7)]
+    assert [c.seed for c in calib] == list(range(500, 507))
+    # the evaluation and OOD captures stay in DATA
+    assert {str(tmp_path / "furniture_cams128" / "furniture_000"),
+            str(tmp_path / "furniture_oodsrc" / "furniture_000")} <= {c.capture for c in cases}
+    with pytest.raises(NfrDrakeError, match="calibration-captures"):
+        calibrate_confidence_command(data=tmp_path, out=tmp_path / "out",
+                                     calibration_captures=tmp_path / "furniture_calib128")
