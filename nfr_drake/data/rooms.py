@@ -9,6 +9,9 @@ cameras are known (`sample_room_cameras`), so that walls, clutter and the arm st
   state of its fronts) so that nothing intersects, sometimes right beside it (gap under 2 cm);
   optionally a twin (a copy of the object) right beside it;
 - clutter: boxes, cylinders and spheres on the floor and on the tops of the furniture;
+- in training rooms (style "train") also random textures of the room family on some clutter
+  (`RETEXTURE_CLUTTER`) and on some neighbours (`RETEXTURE_NEIGHBOUR`: carcass and fronts in one
+  texture, handles kept); held-out rooms keep the object generators' own looks;
 - the Panda arm on the floor in front of the object in a random configuration;
 - lights from one set (`room_lighting`: "train" or "heldout").
 `Room.add_to` is the `add_scenery` hook of `ObjectRenderer`, which labels everything but the
@@ -17,7 +20,7 @@ target object as background, so the object's mask is its label image > 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 from urllib.parse import unquote, urlparse
@@ -27,7 +30,7 @@ import numpy as np
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import framing_distance, look_at
 from nfr_drake.data.room_lighting import RoomLighting, sample_room_lighting
-from nfr_drake.data.room_textures import FLOOR_KINDS, REPEAT_M, WALL_KINDS, room_texture_uri
+from nfr_drake.data.room_textures import FAMILY_KINDS, FLOOR_KINDS, REPEAT_M, WALL_KINDS, room_texture_uri
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import CATEGORIES, ArticulatedObject, Part, SemanticClass, sample_object
 from nfr_drake.objects.appearance import sample_rgba
@@ -35,6 +38,10 @@ from nfr_drake.objects.textures import TEXTURE_KINDS, texture_uri
 
 ROOM_TEXTURE_POOL = 200
 """Seeds per room texture kind: rooms draw their floor and walls from this many images per kind."""
+RETEXTURE_CLUTTER = 0.5
+"""Training rooms: chance that a textured piece of clutter wears a room texture of the training family."""
+RETEXTURE_NEIGHBOUR = 0.3
+"""Training rooms: chance that a neighbour (not a twin) wears one room texture of the training family."""
 _CAMERA_CLEARANCE_M = 0.4  # walls, clutter and the arm's base keep this far from every camera
 
 
@@ -92,6 +99,8 @@ class Neighbour:
     X_WO: np.ndarray
     q: np.ndarray
     twin: bool = False
+    texture: str | None = None
+    """A room texture's URI that covers the neighbour's carcass and fronts, or None (its own looks)."""
 
 
 @dataclass(frozen=True)
@@ -143,7 +152,8 @@ class Room:
             "surfaces": {p.name: Path(unquote(urlparse(p.texture).path)).name for p in self.surfaces
                          if p.texture},
             "neighbours": [{"category": nb.obj.category, "twin": nb.twin, "X_WO": nb.X_WO.tolist(),
-                            "q": np.asarray(nb.q).tolist(), "params": nb.obj.params}
+                            "q": np.asarray(nb.q).tolist(), "params": nb.obj.params,
+                            "texture": nb.texture and Path(unquote(urlparse(nb.texture).path)).name}
                            for nb in self.neighbours],
             "clutter": len(self.clutter),
             "robot": None if self.robot is None else {"X_WB": self.robot.X_WB.tolist(),
@@ -273,16 +283,38 @@ def _neighbours(rng: np.random.Generator, obj: ArticulatedObject, dist: RoomDist
         X_WO[:3, 3] = (back_x + rng.uniform(0.0, 0.05) - b_lo[0], y, 0.0)
         q = np.zeros(other.num_fronts) if twin and i == 0 and rng.uniform() < 0.5 else rng.uniform(
             0.0, 1.0, other.num_fronts) * (rng.uniform(size=other.num_fronts) < 0.4)
-        out.append(Neighbour(other, X_WO, q, twin=twin and i == 0))
+        texture = None
+        if dist.style == "train" and not (twin and i == 0) and rng.uniform() < RETEXTURE_NEIGHBOUR:
+            texture = _train_texture(rng)
+            other = _retextured(other, texture)
+        out.append(Neighbour(other, X_WO, q, twin=twin and i == 0, texture=texture))
         side = -side
     return tuple(out)
 
 
+def _train_texture(rng: np.random.Generator) -> str:
+    """The URI of a random room texture of the training family."""
+    kinds = FAMILY_KINDS["train"]
+    return room_texture_uri(kinds[rng.integers(len(kinds))], int(rng.integers(ROOM_TEXTURE_POOL)))
+
+
+def _retextured(obj: ArticulatedObject, texture: str) -> ArticulatedObject:
+    """`obj` with every part but the handles wearing `texture` (white rgba)."""
+    def part(p: Part) -> Part:
+        if p.semantic == SemanticClass.HANDLE:
+            return p
+        return replace(p, texture=texture, rgba=(1.0, 1.0, 1.0, 1.0))
+
+    return replace(obj, base_parts=tuple(map(part, obj.base_parts)),
+                   fronts=tuple(replace(f, parts=tuple(map(part, f.parts))) for f in obj.fronts))
+
+
 def _clutter(rng: np.random.Generator, count: int, tops: list[tuple[np.ndarray, np.ndarray]],
              keep_out: list[tuple[np.ndarray, np.ndarray]], floor_lo: np.ndarray, floor_hi: np.ndarray,
-             cameras_W: np.ndarray) -> tuple[Part, ...]:
+             cameras_W: np.ndarray, style: str = "heldout") -> tuple[Part, ...]:
     """`count` primitives: on one of the `tops` (xy box lo, hi and height z in lo[2]) or on the
-    floor within [floor_lo, floor_hi] (xy), outside the `keep_out` boxes and away from cameras."""
+    floor within [floor_lo, floor_hi] (xy), outside the `keep_out` boxes and away from cameras;
+    in "train" style a textured one wears a room texture with probability `RETEXTURE_CLUTTER`."""
     parts = []
     for i in range(count * 4):
         if len(parts) == count:
@@ -313,6 +345,8 @@ def _clutter(rng: np.random.Generator, count: int, tops: list[tuple[np.ndarray, 
         kind = TEXTURE_KINDS[rng.integers(len(TEXTURE_KINDS))]
         textured = rng.uniform() < 0.3
         texture = texture_uri(kind, int(rng.integers(ROOM_TEXTURE_POOL))) if textured else None
+        if style == "train" and textured and rng.uniform() < RETEXTURE_CLUTTER:
+            texture = _train_texture(rng)
         rgba = (1.0, 1.0, 1.0, 1.0) if textured else sample_rgba(rng, (0.0, 0.9), (0.15, 0.95))
         parts.append(Part(f"clutter_{i}", SemanticClass.BACKGROUND, shape, tuple(float(s) for s in size),
                           tuple(float(c) for c in p), rgba, (0.0, 0.0, float(rng.uniform(0, np.pi))),
@@ -370,7 +404,7 @@ def sample_room(rng: np.random.Generator, obj: ArticulatedObject, cameras_W: np.
         tops.append((np.array([*(b_lo[:2] + X[:2, 3]), b_hi[2]]), b_hi + X[:3, 3]))
     count = int(rng.integers(dist.clutter[0], dist.clutter[1] + 1))
     clutter = _clutter(rng, count, tops, keep_out, np.array([back_x, -half_width]),
-                       np.array([front_x - 0.5, half_width]), cameras_W)
+                       np.array([front_x - 0.5, half_width]), cameras_W, dist.style)
     centre = (lo + hi) / 2
     lighting = sample_room_lighting(rng, dist.style, centre, ceiling)
     return Room(surfaces, neighbours, clutter, robot, lighting)
