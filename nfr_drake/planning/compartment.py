@@ -6,7 +6,9 @@ drawer's inner floor centre that moves with it) and the handle; the rest comes f
 layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
 - a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
   `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
-  shelves: a third of the way up), and its open door (`grasp.door_panel_box` at the target);
+  shelves: a third of the way up) or, where the free height above the goal was measured (a look
+  into the opened closet, `nfr_drake.systems.interior`), at that height, and its open door
+  (`grasp.door_panel_box` at the target);
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
   behind the handle, its back as far behind the goal as the front is ahead, side walls at the
   narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`), as high as a front with its handle at
@@ -53,13 +55,16 @@ def _box(name: str, R: RotationMatrix, axes: tuple[np.ndarray, ...], lo: np.ndar
     return ObstacleBox(name, np.abs(np.asarray(hi) - np.asarray(lo)), RigidTransform(R, centre))
 
 
-def compartment_obstacles(kt: KeypointTrajectory, q: float) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
+def compartment_obstacles(kt: KeypointTrajectory, q: float, free_height: float | None = None
+                          ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
     """Obstacle boxes in W of the compartment opened to articulation q (module docstring): those
-    that stay put, and those of the moving part (the door, the drawer's box)."""
+    that stay put, and those of the moving part (the door, the drawer's box). free_height: a
+    closet's measured free height above the goal, m (its shelf's underside there; none when that
+    reaches the top); None: the lowest shelf the closet's height allows."""
     if "goal" not in kt.names:
         raise NfrDrakeError(f"the {kt.category}'s keypoint trajectory has no goal keypoint to place at")
     if kt.category == "closet":
-        return _closet(kt, q)
+        return _closet(kt, q, free_height)
     return _drawer(kt, q)
 
 
@@ -74,7 +79,7 @@ def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
     return np.sqrt(1.0 - sin ** 2) * (t - (t @ _Z) * _Z) + sin * r / np.linalg.norm(r)
 
 
-def _closet(kt: KeypointTrajectory, q: float) -> list[ObstacleBox]:
+def _closet(kt: KeypointTrajectory, q: float, free_height: float | None) -> list[ObstacleBox]:
     n, lat, R = _frame(_door_normal(kt))
     axes = (n, lat, _Z)
     goal = kt.point("goal", q)
@@ -83,15 +88,18 @@ def _closet(kt: KeypointTrajectory, q: float) -> list[ObstacleBox]:
     half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
     y0, floor, top = goal @ lat, goal[2], kt.point("hinge_top", 0.0)[2]
     shelf = floor + (top - 2 * floor) / 3 - floor / 2  # underside of the lowest shelf a closet can have
+    if free_height is not None:
+        shelf = floor + free_height
     boxes = [
         _box("compartment_bottom", R, axes, [back, y0 - half, 0.0], [front, y0 + half, floor]),
         _box("compartment_top", R, axes, [back, y0 - half, top - _WALL], [front, y0 + half, top]),
         _box("compartment_back", R, axes, [back - _WALL, y0 - half, 0.0], [back, y0 + half, top]),
         _box("compartment_side_a", R, axes, [back, y0 - half, 0.0], [front, y0 - half + _WALL, top]),
         _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + half, top]),
-        _box("compartment_shelf", R, axes, [back, y0 - half, shelf],
-             [front - 0.01, y0 + half, shelf + _WALL]),
     ]
+    if shelf < top - _WALL:
+        boxes.append(_box("compartment_shelf", R, axes, [back, y0 - half, shelf],
+                          [front - 0.01, y0 + half, shelf + _WALL]))
     door = door_panel_box(kt.with_current(q))
     return boxes, [door] if door is not None else []
 

@@ -74,6 +74,9 @@ _SIGHT_FRACTION = 0.85
 _OVER_REACH = 0.12  # a box within this of the carry's line (horizontally) is carried over, m
 _OVER_CLEARANCE = 0.05  # a carried item's bottom over the boxes it passes over, m
 _OVER_LIMIT = 0.75  # the highest a carried item's bottom is lifted over boxes, above the base, m
+WRIST_DIAMETER = 0.10
+"""The Panda's wrist (link 7, a 5 cm capsule about the approach, 8-21 cm behind the tool) across,
+m: a side-held item goes under a shelf over the goal only with the wrist under it too."""
 _EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
@@ -105,6 +108,11 @@ class PlaceConfig:
     approach_cone_deg: float = 40.0
     """Side grasp at the place: the approach within this of the way into the closet (the hand may
     turn about the vertical)."""
+    line_tolerance: float = 0.01
+    """The pick's last piece (pre-pick to pick): the pick point within this of the tool's axis, m."""
+    line_overshoot: float = 0.006
+    """... and the tool at most this past it along its approach, m (the open fingers would push the
+    item: 12 cm past it on one plan without this, and the item was nudged off its hold)."""
     min_distance: float = 0.01
     collision_samples: int = 12
     """Fewest collision samples per piece (knot to knot); at most four times as many."""
@@ -270,12 +278,13 @@ def grasp_in_item(item: Item, grasp: str, cfg: PlaceConfig, flip: bool = False) 
 
 class _Stage:
     """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
-    aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W)."""
+    aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W).
+    straight: the piece to it keeps p_W on the tool's axis ahead of the tool (`_straight_in`)."""
 
     def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints,
-                 approach: np.ndarray | None = None):
+                 approach: np.ndarray | None = None, straight: bool = False):
         self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
-        self.approach = approach
+        self.approach, self.straight = approach, straight
 
 
 def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
@@ -403,6 +412,19 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
     return sols, ""
 
 
+def _straight_in(sc: PlanningScene, p_from: np.ndarray, p_to: np.ndarray, cfg: PlaceConfig
+                 ) -> list[PositionConstraint]:
+    """The tool on the segment from p_from to p_to (m, (3,) in W), its axis along it: p_to on the
+    tool's axis (within `cfg.line_tolerance`) ahead of the tool, at most `cfg.line_overshoot` behind
+    it (the tool does not pass its target), and p_from on the axis behind the tool."""
+    tol, length = cfg.line_tolerance, float(np.linalg.norm(p_to - p_from))
+    W, G, ctx = sc.plant.world_frame(), sc.tool_frame, sc.plant_context
+    return [PositionConstraint(sc.plant, G, [-tol, -tol, -cfg.line_overshoot], [tol, tol, length + 0.01],
+                               W, p_to, ctx),
+            PositionConstraint(sc.plant, G, [-tol, -tol, -length - 0.01], [tol, tol, cfg.line_overshoot],
+                               W, p_from, ctx)]
+
+
 def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.ndarray, q_to: np.ndarray,
                     p_from: np.ndarray, cfg: PlaceConfig) -> tuple[BsplineTrajectory | None, list[str]]:
     """One trajectory from q_from (exactly) to the stage's constraints, warm-started from the
@@ -439,6 +461,10 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
         described += [(f"collision clearance at s={s:.2f} ({stage.scene})",
                        trajopt.AddPathPositionConstraint(check, s))
                       for s in np.linspace(0.0, 1.0, samples + 1)[1:]]
+        if stage.straight:
+            described += [(f"straight to {stage.name}", trajopt.AddPathPositionConstraint(c, s))
+                          for c in _straight_in(sc, p_from, stage.p_W, cfg)
+                          for s in np.linspace(0.0, 1.0, samples + 1)[1:-1]]
         for name, binding in described:
             binding.evaluator().set_description(name)
         trajopt.SetInitialGuess(_initial_guess(trajopt, np.array([0.0, 1.0]), np.stack([q_from, q_to]),
@@ -470,6 +496,23 @@ def _over(boxes: list[ObstacleBox], a: np.ndarray, b: np.ndarray, X_WB: RigidTra
     return need if need <= X_WB.translation()[2] + _OVER_LIMIT else -np.inf
 
 
+def free_height(boxes: list[ObstacleBox], p_W: np.ndarray, reach: float = 1.0) -> float:
+    """Height of the lowest of `boxes` (in W) over the point p_W (m, (3,)), above it, m (every
+    5 mm; `reach` when none lies within that)."""
+    z = np.arange(0.005, reach, 0.005)
+    column = np.asarray(p_W) + z[:, None] * _Z
+    blocked = np.any([distance_to_box(box, column) <= 0.0 for box in boxes], axis=0) if boxes else []
+    return float(z[np.argmax(blocked)]) if np.any(blocked) else reach
+
+
+def side_room_needed(item: Item, cfg: PlaceConfig) -> float:
+    """The free height over the goal a side-held item needs, m: the item dropped from
+    `drop_height` and the wrist (`WRIST_DIAMETER`) under what lies over it, each with the knots'
+    clearance above and below."""
+    clearance = cfg.min_distance + _KNOT_SLACK
+    return max(item.height + cfg.drop_height + clearance, WRIST_DIAMETER + 2 * clearance)
+
+
 def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
     sc.plant.SetPositions(sc.plant_context, q)
     return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
@@ -480,12 +523,17 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
     """Plan the pick and place (module docstring) for the arm at base X_WB, from its positions q0
     (9,): the end of the opening plan, the hand on `handle` (it backs off the handle first), or,
     with `handle` None, a base re-placed after the opening (`place_bases`, `ready_posture`).
-    Raises PlanningError naming the stage or the constraints that failed, for each grasp tried
+    Raises PlanningError when a side-held item has too little room over the goal
+    (`side_room_needed`), else naming the stage or the constraints that failed, for each grasp tried
     (the hand either way round about its approach)."""
     cfg = config or PlaceConfig()
     t0 = time.perf_counter()
     pb = problem
     side = pb.grasp == "side"
+    if side and (room := free_height(pb.fixed, pb.goal)) < side_room_needed(pb.item, cfg):
+        raise PlanningError(f"{100 * room:.1f} cm free over the goal: a side-held item needs "
+                            f"{100 * side_room_needed(pb.item, cfg):.1f} cm (the item, the wrist); "
+                            "no other grasp reaches in under a shelf")
     item_box = ObstacleBox("item", 2 * pb.item.half_extents,
                            pb.X_WI @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
     everything = [*pb.fixed, *pb.moving, pb.table]
@@ -511,7 +559,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         to_pick = [*off_handle,
                    _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg),
                           approach),
-                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg), approach)]
+                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg), approach, straight=True)]
         sols_a, failed = _solve_chain(scenes, to_pick, q0, cfg)
         if sols_a is None:
             failures.append(f"IK of {failed}")

@@ -33,7 +33,7 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.objects.articulated import ArticulatedObject
-from nfr_drake.planning.compartment import compartment_obstacles
+from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
 from nfr_drake.planning.place import (
     GRASP_OF,
     PLACE_REACH,
@@ -61,6 +61,7 @@ from nfr_drake.systems.articulation import (
     set_arm_gains,
     simulate_articulation,
 )
+from nfr_drake.systems.interior import free_height_above_goal
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.items import Item
@@ -514,6 +515,15 @@ def door_band(obstacles_at, q: float, margin: float = DOOR_MARGIN
     return list(fixed), band
 
 
+def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt: KeypointTrajectory,
+                q: float) -> float:
+    """The free height above kt's goal at articulation q (m), seen in `obj` opened to q_true (in
+    [0, 1]) by a camera held low in front of the front kt's keypoints give
+    (`free_height_above_goal`)."""
+    _, opening = compartment_entry(kt, q)
+    return free_height_above_goal(obj, X_WO, q_true, kt.point("goal", q), front_normal(kt, q), opening)
+
+
 def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig
                     ) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
@@ -543,7 +553,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     planned from the opening's base (`_one_base`). A closet's (or a drawer's where no one base
     serves both) from a base re-placed after the opening (`MOVE_BASE`): the opening is planned
     and simulated first, then the place planned around the front where the opening left it
-    (`measured_articulation`, `door_band`) and simulated from there. `replay`: an HTML replay of
+    (`measured_articulation`, `door_band`; with given keypoints, a closet's shelf over the goal
+    where a look inside sees it, `look_inside`) and simulated from there. `replay`: an HTML replay of
     the run (with a moved base, of the place; the opening's beside it, `*_opening.html`), with the
     keypoint paths used (and `reference`'s under "keypoints_true")."""
     started = time.perf_counter()
@@ -578,6 +589,9 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         if replay is not None:
             write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
         q_door = measured_articulation(kt, opening)
+        if keypoints is not None and kt.category == "closet":  # look in for the shelf over the goal
+            free = look_inside(obj, X_WO, opening.q_final, kt, q_door)
+            obstacles_at = lambda q: compartment_obstacles(keypoints, q, free)  # noqa: E731
         obstacles = door_band(obstacles_at, q_door)
         planned = time.perf_counter()
         try:

@@ -154,3 +154,75 @@ def test_a_carried_item_goes_over_a_low_carcass_on_its_way_not_a_tall_one():
     assert _over([low], a + [0.6, 0, 0], b + [0.6, 0, 0], RigidTransform()) == -np.inf
     tall = ObstacleBox("side", np.array([0.5, 0.02, 0.9]), RigidTransform([0.0, 0.0, 0.45]))
     assert _over([tall], a, b, RigidTransform()) == -np.inf
+
+
+def _short_closet_with_shelves(shelves: int):
+    """A 0.40 m closet (the lowest there are) with `shelves` shelves (the first such seed)."""
+    from nfr_drake.objects.closet import ClosetRanges, sample_closet
+
+    for seed in range(50):
+        obj = sample_closet(np.random.default_rng(seed), ClosetRanges(height=(0.40, 0.40)))
+        if obj.params["shelves"] == shelves:
+            return obj
+    raise AssertionError("no such closet in 50 seeds")
+
+
+def test_a_measured_free_height_replaces_the_assumed_lowest_shelf():
+    """Keypoint-derived boxes: without a measure, the lowest shelf a 0.40 m closet can have, 11-12
+    cm over its floor (a third of the way up, less half a panel); with one, the shelf's underside at
+    the measured height, and none where it reaches the top."""
+    from nfr_drake.planning.place import free_height
+
+    kt = KeypointTrajectory.from_articulated_object(_short_closet_with_shelves(0), RigidTransform(), 0.0)
+    goal = kt.point("goal", 0.6)
+    assumed = free_height(compartment_obstacles(kt, 0.6)[0], goal)
+    assert 0.10 < assumed < 0.14
+    assert free_height(compartment_obstacles(kt, 0.6, 0.25)[0], goal) == pytest.approx(0.25, abs=0.006)
+    fixed, _ = compartment_obstacles(kt, 0.6, 1.0)
+    assert not [b for b in fixed if "shelf" in b.name]
+    assert free_height(fixed, goal) > 0.35  # the top panel
+
+
+def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
+    """Two shelves in a 0.40 m closet leave about 12 cm over the floor: less than the wrist needs
+    with its clearances (12.6 cm), whatever the item; refused before any IK, naming both heights."""
+    from nfr_drake.planning.place import free_height, side_room_needed
+    from nfr_drake.planning.planner import PlanningError
+    from nfr_drake.systems.place_task import true_compartment
+
+    obj = _short_closet_with_shelves(2)
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    obstacles = true_compartment(obj, RigidTransform(), 0.6)
+    item = Item("can", 0.05, 0.05, 0.08, 0.2)
+    assert free_height(obstacles[0], kt.point("goal", 0.6)) < side_room_needed(item, PlaceConfig())
+    X_WB = place_bases(kt, 0.6, [*obstacles[0], *obstacles[1]])[0]
+    table, X_WI = table_beside(X_WB, [*obstacles[0], *obstacles[1]], ITEM_REACH["side"])
+    problem = place_problem(kt, 0.6, item, X_WI, table, obstacles, toward=X_WB.translation())
+    with pytest.raises(PlanningError, match=r"cm free over the goal: a side-held item needs 12\.6 cm"):
+        plan_place(X_WB, np.zeros(9), problem)
+
+
+@pytest.mark.slow
+def test_the_pick_comes_in_straight_and_stops_at_the_item():
+    """Closet 2 of capture seed 200, the door at 0.6, the place from the first base in front that
+    plans: the tool's path from the pre-pick to the pick stays within 1.5 cm of the line between
+    them and never passes the pick by more than 7 mm (without `_straight_in` it swung 9.5 cm off
+    the line, and on the measured door it overshot 12 cm and nudged the item off its hold)."""
+    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
+    from nfr_drake.systems.scenario import Scenario
+
+    scenario = Scenario(category="closet", seed=200, index=2, q_target=0.6)
+    obj, _ = scenario.sample_piece()
+    item = scenario.sample_item()
+    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
+    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
+    plan, _ = _place_in_front(kt, 0.6, item, obstacles, PlaceConfig())
+    X_WG = plan.X_WI_pick @ plan.X_GI.inverse()
+    a, p_pick = X_WG.rotation().col(2), X_WG.translation()
+    scene = build_planning_scene(plan.X_WB, [])
+    piece = plan.segments[0].pieces[-1]
+    for t in np.linspace(0.0, piece.end_time(), 200):
+        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+        d = scene.tool_frame.CalcPoseInWorld(scene.plant_context).translation() - p_pick
+        assert np.linalg.norm(d - (d @ a) * a) < 0.015
+        assert d @ a < 0.007

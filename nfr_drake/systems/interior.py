@@ -1,0 +1,58 @@
+"""A look into an opened compartment: the free height above the goal from one depth image.
+
+The keypoints tell where a closet's floor, front and hinge are, not whether it has shelves; a
+planner that knows only them must assume the lowest shelf a closet of that height can have
+(`nfr_drake.planning.compartment`), which leaves 12-16 cm in the lower closets: too little for a
+side-held item and the wrist even where there is no shelf. Once the door is open, a camera held
+low in front of the compartment sees the underside of whatever lies above the goal (a shelf or
+the top panel): `free_height_above_goal`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+
+from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.render import ObjectRenderer
+from nfr_drake.objects.articulated import ArticulatedObject
+
+LOOK_CAMERA = PinholeCamera.from_fov(160, 120, np.radians(90.0))
+"""The look's camera: 160 x 120 px, 90 degrees vertical field of view (106 across)."""
+LOOK_OUT = 0.12
+"""The camera stands this far in front of the front plane, m (nearer than an open door's edge)."""
+LOOK_HEIGHT = 0.04
+"""The camera's height above the goal (the compartment's floor), m: below any shelf."""
+COLUMN_RADIUS = 0.06
+"""The column above the goal whose lowest seen surface bounds the free height, m (horizontal)."""
+
+
+def free_height_above_goal(obj: ArticulatedObject, X_WO: RigidTransform, q: float, goal: np.ndarray,
+                           out: np.ndarray, front_distance: float) -> float:
+    """The free height above `goal` (m, (3,) in W) in `obj` (at X_WO, its fronts at articulation q
+    in [0, 1]) as seen from a camera `LOOK_OUT` in front of the front plane (`front_distance` m from
+    the goal along `out`, the front's outward horizontal unit normal, (3,) in W), `LOOK_HEIGHT`
+    above the goal, looking in level: the lowest surface seen in the vertical column of radius
+    `COLUMN_RADIUS` about the goal, more than 1 cm above it, less the goal's height, m; when
+    nothing is seen there, the height the view reaches at the column's near side (a shelf above
+    it may be there)."""
+    out = np.asarray(out, dtype=float) * [1.0, 1.0, 0.0]
+    out = out / np.linalg.norm(out)
+    p_WC = np.asarray(goal) + (front_distance + LOOK_OUT) * out + [0.0, 0.0, LOOK_HEIGHT]
+    forward = -out
+    down = np.array([0.0, 0.0, -1.0])
+    right = np.cross(down, forward)
+    X_WC = RigidTransform(RotationMatrix(np.column_stack([right, down, forward])), p_WC)
+    X_OC = (X_WO.inverse() @ X_WC).GetAsMatrix4()
+    depth = ObjectRenderer(obj, LOOK_CAMERA).render(q, X_OC).depth
+    cam = LOOK_CAMERA
+    v, u = np.nonzero(np.isfinite(depth) & (depth > 0.0) & (depth < 5.0))
+    d = depth[v, u]
+    p_C = np.stack([(u + 0.5 - cam.cx) / cam.fx * d, (v + 0.5 - cam.cy) / cam.fy * d, d], axis=1)
+    p_W = (X_WC.rotation().matrix() @ p_C.T).T + p_WC
+    near = np.hypot(*(p_W[:, :2] - np.asarray(goal)[:2]).T) <= COLUMN_RADIUS
+    above = p_W[near, 2] - goal[2]
+    above = above[above > 0.01]
+    if above.size:
+        return float(above.min())
+    return LOOK_HEIGHT + (front_distance + LOOK_OUT - COLUMN_RADIUS) * cam.cy / cam.fy
