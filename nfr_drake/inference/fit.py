@@ -382,7 +382,7 @@ def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Te
     R = target.shape[0]
     for s in range(0, R, chunk):
         sub = Rays(rays.origins[:, s:s + chunk], rays.directions[:, s:s + chunk])
-        rgb = model.render(z, sub).rgb
+        rgb = model.render(z, sub, logits=False).rgb
         losses.append(((rgb - target[s:s + chunk]) ** 2).sum(dim=(-1, -2)))
     return torch.stack(losses).sum(0) / (3 * R)
 
@@ -456,7 +456,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         code = z if t is None else z + t * tangent
         index = rays.sample(rays_per_step, config.detail_fraction, generator)
         batch_rays, target = rays.take(index, S)
-        rgb = model.render(code, batch_rays).rgb
+        rgb = model.render(code, batch_rays, logits=False).rgb
         image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
         loss = (image + config.latent_weight * S * latent_loss(code[:, 2:])
                 + _sighting_loss(model, code, sighting, config).sum())

@@ -126,7 +126,7 @@ class HandleTerm:
 def _mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tensor) -> torch.Tensor:
     """Image MSE (B,) of codes z (B, D) on the rays `index`."""
     r, rgb = rays.take(index, z.shape[0])
-    return ((model.render(z, r).rgb - rgb) ** 2).mean(dim=(1, 2))
+    return ((model.render(z, r, logits=False).rgb - rgb) ** 2).mean(dim=(1, 2))
 
 
 def _start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:

@@ -15,7 +15,9 @@ from torch import nn
 
 
 class LayerWeights(NamedTuple):
-    """Weights of one linear layer per code: weight (B, out, in), bias (B, out)."""
+    """Weights of one linear layer per code, laid out for `torch.baddbmm(bias, h, weight)` on
+    h (B, R, in): weight (B, in, out) (a transposed view), bias (B, 1, out). Made once per
+    render, not once per field query (the marcher queries the field `march_steps` + 1 times)."""
 
     weight: torch.Tensor
     bias: torch.Tensor
@@ -40,12 +42,12 @@ class HyperLinear(nn.Module):
         nn.init.zeros_(last.bias)
 
     def forward(self, z: torch.Tensor) -> LayerWeights:
-        """z (B, latent_dim) -> LayerWeights with weight (B, out, in), bias (B, out)."""
+        """z (B, latent_dim) -> LayerWeights with weight (B, in, out), bias (B, 1, out)."""
         flat = self.net(z)
         n_w = self.out_features * self.in_features
         weight = self.base_weight + flat[:, :n_w].view(-1, self.out_features, self.in_features)
         bias = self.base_bias + flat[:, n_w:]
-        return LayerWeights(weight, bias)
+        return LayerWeights(weight.transpose(1, 2), bias.unsqueeze(1))
 
 
 class HyperNetwork(nn.Module):

@@ -22,8 +22,8 @@ from nfr_drake.nfr.rays import Rays, sphere_interval
 
 
 class RenderOutput(NamedTuple):
-    """Per ray: rgb (B, R, 3), class logits (B, R, C), surface points (B, R, 3) in O,
-    depth (B, R) along the ray, depth_trace (B, R, T + 1) of the marcher."""
+    """Per ray: rgb (B, R, 3), class logits (B, R, C) (None when not asked for), surface points
+    (B, R, 3) in O, depth (B, R) along the ray, depth_trace (B, R, T + 1) of the marcher."""
 
     rgb: torch.Tensor
     logits: torch.Tensor
@@ -61,15 +61,17 @@ class NFRModel(nn.Module):
         """z (..., 2 S + k) with each slot of z_art projected onto its unit circle."""
         return compose_z(*split_z(z, self.config.num_slots))
 
-    def render(self, z: torch.Tensor, rays: Rays) -> RenderOutput:
+    def render(self, z: torch.Tensor, rays: Rays, logits: bool = True) -> RenderOutput:
         """Render rays (B, R, 3) of B codes z (B, 2 S + k); z_art is normalised here.
 
         z_art of z is projected onto the unit circle before use, so a free z_art can be optimised.
+        `logits`: run the segmentation head psi_2 (an image loss alone needs only rgb).
         """
         z = self.normalized(z)
         weights = self.hyper(z)
         march = self.marcher(lambda p: self.field(p, weights), rays, *self.depth_bounds(rays))
-        return RenderOutput(self.rgb_head(march.features), self.seg_head(march.features),
+        return RenderOutput(self.rgb_head(march.features),
+                            self.seg_head(march.features) if logits else None,
                             march.points, march.depth, march.depth_trace)
 
     def keypoints(self, z: torch.Tensor) -> torch.Tensor:

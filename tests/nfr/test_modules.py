@@ -115,8 +115,8 @@ def test_module_shapes(tiny_config):
     z = torch.randn(B, c.latent_dim)
     sizes = [(encoding_dim(c.pe_frequencies), c.field_width), (c.field_width, c.feature_dim)]
     weights = HyperNetwork(c.latent_dim, sizes, c.hyper_hidden, 0.1)(z)
-    assert [tuple(w.weight.shape) for w in weights] == [(B, o, i) for i, o in sizes]
-    assert [tuple(w.bias.shape) for w in weights] == [(B, o) for _, o in sizes]
+    assert [tuple(w.weight.shape) for w in weights] == [(B, i, o) for i, o in sizes]
+    assert [tuple(w.bias.shape) for w in weights] == [(B, 1, o) for _, o in sizes]
     assert positional_encoding(torch.zeros(B, R, 3), 4, math.pi).shape == (B, R, encoding_dim(4))
     v = Field(c.bound_center, c.pe_frequencies, math.pi, True)(torch.randn(B, R, 3), weights)
     assert v.shape == (B, R, c.feature_dim)
@@ -195,3 +195,28 @@ def test_config_validation():
     assert ref.latent_obj_dim == 256 and ref.field_width == 256 and ref.march_steps == 10
     cfg = TrainConfig()
     assert TrainConfig.from_json(cfg.to_json()) == cfg
+
+
+def test_render_without_logits_and_field_in_float64(tiny_config):
+    """An image-loss render skips psi_2 and gives the same colours; the field's frequencies,
+    made once per dtype, are those of `positional_encoding` (float32 and float64 alike)."""
+    torch.manual_seed(0)
+    model = NFRModel(tiny_config)
+    z, rays = torch.randn(2, tiny_config.latent_dim), _rays(2, 9)
+    full, lean = model.render(z, rays), model.render(z, rays, logits=False)
+    assert lean.logits is None and full.logits.shape == (2, 9, tiny_config.num_classes)
+    assert torch.equal(lean.rgb, full.rgb) and torch.equal(lean.depth, full.depth)
+    assert tiny_config.layer_norm  # the layers below
+    weights = model.hyper(z)
+    for dtype in (torch.float32, torch.float64):
+        p = torch.randn(2, 9, 3, dtype=dtype)
+        w = [type(x)(x.weight.to(dtype), x.bias.to(dtype)) for x in weights]
+        h = positional_encoding(p - model.field.center.to(dtype), tiny_config.pe_frequencies,
+                                tiny_config.pe_base_frequency)
+        expected = torch.relu(torch.nn.functional.layer_norm(
+            torch.baddbmm(w[0].bias, h, w[0].weight), (tiny_config.field_width,)))
+        for x in w[1:-1]:
+            expected = torch.relu(torch.nn.functional.layer_norm(
+                torch.baddbmm(x.bias, expected, x.weight), (tiny_config.field_width,)))
+        expected = torch.baddbmm(w[-1].bias, expected, w[-1].weight)
+        assert torch.equal(model.field(p, w), expected)
