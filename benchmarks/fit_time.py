@@ -55,19 +55,20 @@ METRICS = (("cpu_s", "CPU s"), ("wall_s", "wall s"), ("steps", "steps"),
            ("handle_trajectory_rmse_cm", "handle trajectory RMSE cm"))
 
 
-def parse_value(text: str, annotation) -> object:
-    """A FitConfig field's value from text, by the type of its default."""
-    if isinstance(annotation, bool):
+def parse_value(text: str, example) -> object:
+    """A FitConfig field's value from text, by the type of an example value of the field."""
+    if isinstance(example, bool):
         return text.lower() in ("1", "true", "yes")
-    return type(annotation)(text)
+    return type(example)(text)
 
 
 def variant_config(spec: str) -> tuple[str, FitConfig]:
-    """"fast" / "thorough" (a preset) or "NAME:FIELD=VALUE,..." -> (name, FitConfig)."""
+    """"fast" / "thorough" (a preset) or "NAME:FIELD=VALUE,..." -> (name, FitConfig); the fields
+    not named keep their preset's values (`FitConfig.resolved`)."""
     if ":" not in spec:
         return spec, FitConfig(preset=spec)
     name, assignments = spec.split(":", 1)
-    defaults = {f.name: f.default for f in fields(FitConfig)}
+    defaults = {f.name: getattr(FitConfig().resolved(), f.name) for f in fields(FitConfig)}
     values = {}
     for item in filter(None, assignments.split(",")):
         key, value = item.split("=", 1)
@@ -262,7 +263,7 @@ def step_costs(fitted: FittedModel, capture, counts=(64, 128, 256, 512), steps: 
         for _ in range(steps):
             z = z0.clone()
             cpu = time.process_time()
-            _adam(fitted.model, z, rays, FitConfig(), torch.Generator().manual_seed(0), 1, count,
+            _adam(fitted.model, z, rays, FitConfig().resolved(), torch.Generator().manual_seed(0), 1, count,
                   stop_early=False)
             times.append(time.process_time() - cpu)
         lines.append(f"| {count} | {1000 * np.median(times):.1f} |")

@@ -73,7 +73,7 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=None, help="first n capture sets only")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--focus-steps", type=int, default=FitConfig.focus_steps,
+    parser.add_argument("--focus-steps", type=int, default=FitConfig().resolved().focus_steps,
                         help="steps of the fit's close look at the handle (0: none)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)

@@ -54,7 +54,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Annotated, ClassVar, Literal
 
 import cv2
@@ -74,23 +74,26 @@ from nfr_drake.nfr.rays import Rays, pixel_centers, pixel_rays
 class FitConfig:
     """Options of the auto-decoding fit, shared by `infer`, `eval`, `eval-pipeline`, `demo`,
     `tune-head` and the scenario YAML (`fit:`). On the command line each option is `--fit.NAME`;
-    the five that commands took before also answer to their old flags (`--max-steps`, ...)."""
+    the five that commands took before also answer to their old flags (`--max-steps`, ...).
+
+    The fields of `PRESETS` default to None, "the preset's value"; a fit runs with `resolved()`,
+    where each of them left at None has its preset's value and one set keeps the value set."""
 
     preset: Literal["thorough", "fast"] = "thorough"
-    """"thorough", the defaults below, or "fast" (`FAST`): starts looked up, explored 30 steps at
-    lr 0.03 with 64 rays each; where the handle slides (a drawer) a valley scan of 3 codes for 15
-    steps and a valley coordinate in the refinement; at most 120 steps in all, the refinement's
-    of 128 rays with early stopping on fixed rays; a close look of 20 steps. About 0.3 of the
-    CPU time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md). Fields left
-    at their default take the preset's value (so a field cannot be set back to its default
-    on top of the preset: start from "thorough" and set the preset's fields instead)."""
-    start: Literal["lookup", "spread"] = "spread"
+    """The values of the fields left at None (`PRESETS`). "thorough": 4 starts spread over q,
+    explored 120 steps, refined with 256 rays per step until the smoothed loss stops improving
+    (at most 400 steps), a close look of 150 steps. "fast": starts looked up, explored 30 steps
+    at lr 0.03 with 64 rays each; where the handle slides (a drawer) a valley scan of 3 codes for
+    15 steps and a valley coordinate in the refinement; at most 120 steps in all, the
+    refinement's of 128 rays with early stopping on fixed rays; a close look of 20 steps. About
+    0.3 of the CPU time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md)."""
+    start: Literal["lookup", "spread"] | None = None
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
     part the keypoint head puts nearest it at that articulation, are scored by one forward pass on
     `lookup_rays` rays (no gradient); the best candidate of each of `restarts` equal bands of q
     is explored. "spread": `restarts` codes at q = (i + 0.5) / restarts, and the sighted start
-    after the exploration."""
+    after the exploration. None: the preset's (thorough 'spread', fast 'lookup')."""
     lookup_q: int = 12
     """Articulations of the lookup's candidates, q = (i + 0.5) / lookup_q."""
     lookup_rays: int = 512
@@ -99,31 +102,35 @@ class FitConfig:
     restarts: Annotated[int, tyro.conf.arg(aliases=("--restarts",))] = 4
     """Codes explored in parallel (see `start`); the lowest image loss wins. At most `lookup_q`
     with start "lookup"."""
-    explore_steps: int = 120
-    """Adam steps of the exploration phase (all starts), at most `max_steps`."""
-    max_steps: Annotated[int, tyro.conf.arg(aliases=("--max-steps",))] = 400
-    """Adam steps at most, exploration included."""
-    explore_rays: int = 128
-    """Random pixels (over all views) per exploration step and start, shared by the starts."""
-    rays_per_step: int = 256
-    """Random pixels per refinement step."""
+    explore_steps: int | None = None
+    """Adam steps of the exploration phase (all starts), at most `max_steps`.
+    None: the preset's (thorough 120, fast 30)."""
+    max_steps: Annotated[int | None, tyro.conf.arg(aliases=("--max-steps",))] = None
+    """Adam steps at most, exploration included. None: the preset's (thorough 400, fast 120)."""
+    explore_rays: int | None = None
+    """Random pixels (over all views) per exploration step and start, shared by the starts.
+    None: the preset's (thorough 128, fast 64)."""
+    rays_per_step: int | None = None
+    """Random pixels per refinement step. None: the preset's (thorough 256, fast 128)."""
     lr: float = 1e-2
     """Adam learning rate of z in the refinement."""
-    explore_lr: float = 1e-2
+    explore_lr: float | None = None
     """Adam learning rate of the exploration (all starts, and the sighted start); the fast preset's
     is larger than `lr`, so that z_obj leaves its start within a few tens of steps and the starts'
-    losses can be compared sooner."""
+    losses can be compared sooner. None: the preset's (thorough 0.01, fast 0.03)."""
     latent_weight: float = 1e-3
     """Weight of the Gaussian prior on z_obj (training's value keeps codes where the networks have
     seen them)."""
-    patience: int = 60
-    """Refinement steps without an improvement of `min_improvement` that end the fit."""
+    patience: int | None = None
+    """Refinement steps without an improvement of `min_improvement` that end the fit.
+    None: the preset's (thorough 60, fast 30)."""
     min_improvement: float = 0.01
     """Relative improvement of the refinement's loss that counts as progress."""
-    stop_every: int = 0
+    stop_every: int | None = None
     """Early stopping measures the refined code's image loss on `lookup_rays` fixed rays (drawn
     like the steps'), without gradient, every `stop_every` refinement steps; 0: it watches the
-    steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`)."""
+    steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`).
+    None: the preset's (thorough 0, fast 10)."""
     eval_rays: int = 4096
     """Fixed rays on which the starts are compared and the final loss is measured."""
     detail_fraction: Annotated[float, tyro.conf.arg(aliases=("--detail-fraction",))] = 0.5
@@ -132,7 +139,7 @@ class FitConfig:
     decide q and the hinge side weigh more in the loss."""
     seed: int = 0
     """Seed of ray sampling."""
-    valley_codes: int = 0
+    valley_codes: int | None = None
     """Codes of the valley scan after the refinement (before it with `valley_first`; 0: none),
     when the focus part slides (the keypoint head moves it along a straight line with q, as a
     drawer's handle; a door's handle swings, and its angle shows in the door's plane): the
@@ -143,16 +150,18 @@ class FitConfig:
     order), fits their z_obj with q held for `valley_steps` shared steps, and goes on from the
     best of them on `valley_held_rays` fixed rays or, when its loss there is lower, the code at
     the minimum of a parabola through their losses (z_obj interpolated between its
-    neighbours)."""
-    valley_lr: float = 0.0
+    neighbours). None: the preset's (thorough 0, fast 3)."""
+    valley_lr: float | None = None
     """Adam learning rate, in q per step, of the refinement's valley coordinate (0: none), when
     the focus part slides (see `valley_codes`): the refined code gets one more coordinate t, the
     rendered code being z + t dz/dq along the keypoint head's valley (the focus part kept in
     place, to first order; `_valley_tangent`), so that a step moves q and z_obj together along
-    the valley instead of creeping along it by small moves of each."""
-    valley_first: bool = False
+    the valley instead of creeping along it by small moves of each.
+    None: the preset's (thorough 0, fast 0.005)."""
+    valley_first: bool | None = None
     """Run the valley scan before the refinement (from the exploration's winner, so that the
-    refinement starts in the valley's minimum and settles z_obj there) rather than after it."""
+    refinement starts in the valley's minimum and settles z_obj there) rather than after it.
+    None: the preset's (thorough false, fast true)."""
     valley_span: float = 0.2
     """Width of the valley scan's grid of q (shifted to lie in [0, 1])."""
     valley_steps: int = 15
@@ -161,8 +170,9 @@ class FitConfig:
     """Random pixels per valley scan step and code, shared by the codes."""
     valley_held_rays: int = 1024
     """Fixed rays (drawn like the steps') on which the valley scan's codes are compared."""
-    focus_steps: Annotated[int, tyro.conf.arg(aliases=("--focus-steps",))] = 150
-    """Adam steps of the final close look at the focus part, the handle (0: none)."""
+    focus_steps: Annotated[int | None, tyro.conf.arg(aliases=("--focus-steps",))] = None
+    """Adam steps of the final close look at the focus part, the handle (0: none).
+    None: the preset's (thorough 150, fast 20)."""
     focus_radius_m: float = 0.12
     """Rays passing within this distance of the part take part in the close look, m."""
     focus_lr: float = 5e-3
@@ -185,24 +195,35 @@ class FitConfig:
     candidates, or (start "spread") a second start at the exploration's winner's q that the two
     explore for half of `explore_steps` (within `max_steps`)."""
 
-    FAST: ClassVar[dict] = dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
-                                rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
-                                valley_codes=3, valley_first=True, valley_lr=5e-3, focus_steps=20)
-    """The "fast" preset's values."""
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "thorough": dict(start="spread", explore_steps=120, max_steps=400, explore_rays=128,
+                         rays_per_step=256, explore_lr=1e-2, patience=60, stop_every=0,
+                         valley_codes=0, valley_first=False, valley_lr=0.0, focus_steps=150),
+        "fast": dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
+                     rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
+                     valley_codes=3, valley_first=True, valley_lr=5e-3, focus_steps=20),
+    }
+    """Each preset's values of the fields it governs (the fields that default to None)."""
 
     @classmethod
     def fast(cls, **overrides) -> FitConfig:
         """The "fast" preset, with `overrides` on top."""
         return cls(preset="fast", **overrides)
 
+    def resolved(self) -> FitConfig:
+        """The configuration a fit runs with: every field of `PRESETS` left at None set to the
+        preset's value, the fields set kept."""
+        if self.preset not in self.PRESETS:
+            raise ConfigError(f"FitConfig.preset must be one of {', '.join(self.PRESETS)}, "
+                              f"not {self.preset!r}")
+        unset = {name: value for name, value in self.PRESETS[self.preset].items()
+                 if getattr(self, name) is None}
+        return replace(self, **unset) if unset else self
+
     def __post_init__(self):
-        if self.preset not in ("fast", "thorough"):
-            raise ConfigError(f"FitConfig.preset must be 'fast' or 'thorough', not {self.preset!r}")
-        if self.preset == "fast":  # the preset's value for every field left at its default
-            defaults = {f.name: f.default for f in fields(self)}
-            for name, value in self.FAST.items():
-                if getattr(self, name) == defaults[name]:
-                    object.__setattr__(self, name, value)
+        resolved = self.resolved()
+        if resolved is not self:  # the checks below run on the values the fit will use
+            return
         if self.start not in ("lookup", "spread"):
             raise ConfigError(f"FitConfig.start must be 'lookup' or 'spread', not {self.start!r}")
         if self.start == "lookup" and self.restarts > self.lookup_q:
@@ -392,13 +413,15 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
                sighting: PartSighting | None = None, codes: torch.Tensor | None = None
                ) -> FitOutcome:
     """Fit z to the observed rays with the networks frozen (see module docstring); the close
-    look runs when `focus` names a part and `config.focus_steps` > 0.
+    look runs when `focus` names a part and `config.focus_steps` > 0. The fit runs with
+    `config.resolved()` (the preset's values where fields are None).
 
     `z_obj_init`: the starts' z_obj (k,); zeros if None.
     `sighting`: a part seen by other means; its term joins every stage's loss and the choice
     among the starts. `codes`: the training z_obj (N, k), for the start near the sighting.
     """
     started = time.perf_counter()
+    config = config.resolved()
     model.eval()
     flags = [p.requires_grad for p in model.parameters()]
     for p in model.parameters():  # frozen networks: no gradient work for their weights

@@ -208,9 +208,16 @@ class Scenario:
 def _thawed(cls: type) -> type:
     """A mutable dataclass with the fields, types and defaults of the frozen dataclass `cls`:
     `yaml_load_typed` fills a dataclass by setting its attributes one by one. It knows no
-    `Literal`: such a field is read as the type of its values (`cls` checks the value)."""
+    `Literal`: such a field is read as the type of its values (`cls` checks the value); a field
+    that may be None (`FitConfig.PRESETS`: None is the preset's value) is read as Optional."""
     def yaml_type(t):
-        return type(typing.get_args(t)[0]) if typing.get_origin(t) is typing.Literal else t
+        args = typing.get_args(t)
+        if typing.get_origin(t) is typing.Literal:
+            return type(args[0])
+        if type(None) in args:
+            (inner,) = [a for a in args if a is not type(None)]
+            return typing.Optional[yaml_type(inner)]  # noqa: UP045 (what yaml_load_typed reads)
+        return t
 
     hints = typing.get_type_hints(cls)
     return make_dataclass(cls.__name__, [(f.name, yaml_type(hints[f.name]), field(default=f.default))

@@ -126,17 +126,22 @@ def test_the_fit_stops_early_on_a_flat_loss(model_folder, capture):
 
 
 def test_presets():
-    fast = FitConfig.fast()
-    assert fast.preset == "fast" and FitConfig().preset == "thorough"  # the default
-    for name, value in FitConfig.FAST.items():
-        assert getattr(fast, name) == value != getattr(FitConfig(), name)
-    assert FitConfig.fast(max_steps=300).max_steps == 300  # a field set on top is kept
-    assert FitConfig.fast(max_steps=300).focus_steps == FitConfig.FAST["focus_steps"]
+    fast, thorough = FitConfig.fast().resolved(), FitConfig(preset="thorough").resolved()
+    assert FitConfig().preset == "thorough"  # the default
+    for name, value in FitConfig.PRESETS["fast"].items():
+        assert getattr(FitConfig(), name) is None  # left to the preset
+        assert getattr(fast, name) == value != getattr(thorough, name)
+        assert getattr(thorough, name) == FitConfig.PRESETS["thorough"][name]
+    assert FitConfig.fast(max_steps=300).resolved().max_steps == 300  # a field set is kept
+    assert FitConfig.fast(max_steps=300).resolved().focus_steps == FitConfig.PRESETS["fast"]["focus_steps"]
+    on_top = FitConfig.fast(focus_steps=150, valley_first=False).resolved()  # thorough's values
+    assert (on_top.focus_steps, on_top.valley_first, on_top.start) == (150, False, "lookup")
+    assert fast.resolved() is fast  # resolving twice changes nothing
 
     def command(fit: FitConfig = FitConfig()) -> FitConfig:
         return fit
 
-    assert tyro.cli(command, args=["--fit.preset", "fast"]) == fast
+    assert tyro.cli(command, args=["--fit.preset", "fast"]) == FitConfig.fast()
     assert tyro.cli(command, args=[]) == FitConfig()
     with pytest.raises(ConfigError, match="preset"):
         FitConfig(preset="slow")
@@ -148,9 +153,11 @@ def test_presets():
         FitConfig(stop_every=-1)
     with pytest.raises(ConfigError, match="lookup_q"):
         FitConfig.fast(restarts=5, lookup_q=4)  # a band of q without a candidate
-    assert FitConfig(restarts=5, lookup_q=4).restarts == 5  # spread starts need no lookup
+    assert FitConfig(preset="thorough", restarts=5, lookup_q=4).restarts == 5  # spread: no lookup
     with pytest.raises(ConfigError, match="explore_lr"):
         FitConfig(explore_lr=0.0)
+    with pytest.raises(ConfigError, match="explore_steps"):  # fast's 30 exploration steps
+        FitConfig.fast(max_steps=20)
 
 
 def test_the_valley_direction_keeps_the_part_in_place(model_folder):

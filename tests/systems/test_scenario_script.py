@@ -37,6 +37,10 @@ def test_fit_options_load_into_the_shared_frozen_config(tmp_path):
     path.write_text("fit:\n  explore_steps: 100\n  max_steps: 50\n")
     with pytest.raises(ConfigError, match="explore_steps"):
         Scenario.load(path)
+    path.write_text("fit:\n  preset: fast\n  focus_steps: 150\n  start: spread\n")  # thorough's
+    fit = Scenario.load(path).fit.resolved()
+    assert (fit.focus_steps, fit.start) == (150, "spread")
+    assert fit.max_steps == FitConfig.PRESETS["fast"]["max_steps"]
     path.write_text("fit:\n  max_stepz: 300\n")
     with pytest.raises(RuntimeError, match="max_stepz"):
         Scenario.load(path)
