@@ -9,9 +9,9 @@ Create the captures with `nfr-drake captures --category closet --n 20 --out DIR 
 Side by side (default): every capture is fitted (`nfr_drake.inference.infer.infer`: the fit and the
 forward simulation of gt.json's q grid) once per variant, the variants interleaved on each capture
 (their order alternating from one capture to the next) so that the machine's load hits them
-alike. A variant is a fit preset (`FitConfig(preset=...)`: "thorough", the default, or "fast")
-or one named with `--variant NAME:FIELD=VALUE,...` (FitConfig fields on top of the default,
-`preset=fast` included). Per fit: CPU seconds of
+alike. A variant is a fit preset (`FitConfig(preset=...)`: "fast", the default, or "thorough")
+or one named with `--variant NAME:FIELD=VALUE,...` (FitConfig fields on top of a preset's
+values, the default's unless `preset=...` names one; a field named keeps its value). Per fit: CPU seconds of
 the process (`time.process_time`, the measure that another job's load hardly changes with one
 torch thread), wall seconds, steps, and the errors against gt.json
 (`nfr_drake.eval.evaluate.score`: articulation, keypoint RMSE at the observed state, handle

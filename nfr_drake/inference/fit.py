@@ -6,15 +6,15 @@ codes are fitted together for `explore_steps`, and the one with the lowest image
 evaluation set of rays is then refined alone until its loss has not improved by `min_improvement`
 for `patience` steps, or `max_steps` steps in all have run.
 
-The fast preset looks its starts up (`FitConfig.start`): candidate codes at a grid of
+The fast preset, the default, looks its starts up (`FitConfig.start`): candidate codes at a grid of
 articulations, with the mean training code and with the training codes whose keypoint head puts
 the handle where the handle detector saw it, are scored by one forward pass without gradient, and
 the best candidate of each band of q is explored (at a larger learning rate, so that z_obj leaves
 its start quickly): the starts' losses say which basin of q is right only once z_obj has
 adapted, and a start at its band's best q, with codes near the sighting, adapts sooner. The
 refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
-from the noise of the steps' random rays, so the fit stops when it has converged. The default,
-thorough, fit spreads its starts evenly over q and runs longer stages.
+from the noise of the steps' random rays, so the fit stops when it has converged. The thorough
+preset spreads its starts evenly over q and runs longer stages, at several times the CPU time.
 
 A drawer's pull and depth trade along a shallow valley of the image loss (a deeper drawer pulled
 out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
@@ -79,14 +79,15 @@ class FitConfig:
     The fields of `PRESETS` default to None, "the preset's value"; a fit runs with `resolved()`,
     where each of them left at None has its preset's value and one set keeps the value set."""
 
-    preset: Literal["thorough", "fast"] = "thorough"
-    """The values of the fields left at None (`PRESETS`). "thorough": 4 starts spread over q,
-    explored 120 steps, refined with 256 rays per step until the smoothed loss stops improving
-    (at most 400 steps), a close look of 150 steps. "fast": starts looked up, explored 30 steps
-    at lr 0.03 with 64 rays each; where the handle slides (a drawer) a valley scan of 3 codes for
-    15 steps and a valley coordinate in the refinement; at most 120 steps in all, the
-    refinement's of 128 rays with early stopping on fixed rays; a close look of 20 steps. About
-    0.3 of the CPU time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md)."""
+    preset: Literal["thorough", "fast"] = "fast"
+    """The values of the fields left at None (`PRESETS`). "fast", the default: starts looked up,
+    explored 30 steps at lr 0.03 with 64 rays each and compared on 1024 fixed rays; where the
+    handle slides (a drawer) a valley scan of 3 codes for 15 steps and a valley coordinate in
+    the refinement; at most 100 steps in all, the refinement's of 128 rays with early stopping
+    on fixed rays; a close look of 20 steps. "thorough": 4 starts spread over q, explored 120
+    steps, compared on 4096 rays, refined with 256 rays per step until the smoothed loss stops
+    improving (at most 400 steps), a close look of 150 steps: several times the fast fit's CPU
+    time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md)."""
     start: Literal["lookup", "spread"] | None = None
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
@@ -106,7 +107,7 @@ class FitConfig:
     """Adam steps of the exploration phase (all starts), at most `max_steps`.
     None: the preset's (thorough 120, fast 30)."""
     max_steps: Annotated[int | None, tyro.conf.arg(aliases=("--max-steps",))] = None
-    """Adam steps at most, exploration included. None: the preset's (thorough 400, fast 120)."""
+    """Adam steps at most, exploration included. None: the preset's (thorough 400, fast 100)."""
     explore_rays: int | None = None
     """Random pixels (over all views) per exploration step and start, shared by the starts.
     None: the preset's (thorough 128, fast 64)."""
@@ -131,8 +132,9 @@ class FitConfig:
     like the steps'), without gradient, every `stop_every` refinement steps; 0: it watches the
     steps' own loss on their random rays, smoothed (noisy: it seldom stops before `max_steps`).
     None: the preset's (thorough 0, fast 10)."""
-    eval_rays: int = 4096
-    """Fixed rays on which the starts are compared and the final loss is measured."""
+    eval_rays: int | None = None
+    """Fixed rays on which the starts are compared and the final loss is measured.
+    None: the preset's (thorough 4096, fast 1024)."""
     detail_fraction: Annotated[float, tyro.conf.arg(aliases=("--detail-fraction",))] = 0.5
     """Share of each step's rays drawn in proportion to the observed image's gradient magnitude
     (edges: a door's outline, a handle a few pixels wide), the rest uniformly; the small parts that
@@ -198,10 +200,12 @@ class FitConfig:
     PRESETS: ClassVar[dict[str, dict]] = {
         "thorough": dict(start="spread", explore_steps=120, max_steps=400, explore_rays=128,
                          rays_per_step=256, explore_lr=1e-2, patience=60, stop_every=0,
-                         valley_codes=0, valley_first=False, valley_lr=0.0, focus_steps=150),
-        "fast": dict(start="lookup", explore_steps=30, max_steps=120, explore_rays=64,
+                         eval_rays=4096, valley_codes=0, valley_first=False, valley_lr=0.0,
+                         focus_steps=150),
+        "fast": dict(start="lookup", explore_steps=30, max_steps=100, explore_rays=64,
                      rays_per_step=128, explore_lr=3e-2, patience=30, stop_every=10,
-                     valley_codes=3, valley_first=True, valley_lr=5e-3, focus_steps=20),
+                     eval_rays=1024, valley_codes=3, valley_first=True, valley_lr=5e-3,
+                     focus_steps=20),
     }
     """Each preset's values of the fields it governs (the fields that default to None)."""
 

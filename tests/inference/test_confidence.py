@@ -43,7 +43,7 @@ def _calibration(threshold=0.5) -> ConfidenceModel:
 def _infer(capture, model, out):
     return main(["infer", str(capture), "--model", str(model), "--out", str(out), "--restarts",
                  "1", "--max-steps", "2", "--fit.explore-steps", "0", "--focus-steps", "0",
-                 "--threads", "1"])
+                 "--fit.preset", "thorough", "--threads", "1"])
 
 
 def test_infer_reports_the_features_and_with_a_calibration_the_probability(

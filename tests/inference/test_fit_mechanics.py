@@ -64,7 +64,7 @@ def test_fit_moves_z_and_reports_every_start(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
     assert rays.rgb.shape == (3 * 24 * 24, 3)
-    config = FitConfig(restarts=3, explore_steps=10, max_steps=20, explore_rays=32,
+    config = FitConfig(preset="thorough", restarts=3, explore_steps=10, max_steps=20, explore_rays=32,
                        rays_per_step=64, eval_rays=256, detail_fraction=0.0)  # one loss throughout
     outcome = fit_latent(fitted.model, rays, config, fitted.z_obj_mean)
     assert outcome.z.shape == (2 + 8,) and 0.0 <= outcome.q <= 1.0
@@ -121,8 +121,8 @@ def test_rays_near_a_point_are_those_within_the_radius(capture):
 def test_close_look_is_kept_only_when_head_and_render_agree(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    small = FitConfig(restarts=2, explore_steps=3, max_steps=6, explore_rays=32, rays_per_step=32,
-                      eval_rays=64, focus_steps=4, focus_radius_m=0.5)
+    small = FitConfig(preset="thorough", restarts=2, explore_steps=3, max_steps=6, explore_rays=32,
+                      rays_per_step=32, eval_rays=64, focus_steps=4, focus_radius_m=0.5)
     without = fit_latent(fitted.model, rays, replace(small, focus_steps=0), fitted.z_obj_mean)
     # The class this untrained model renders most near its "handle" stands in for the handle.
     handle = fitted.model.keypoints(without.z[None])[0, 0].detach()
@@ -147,16 +147,17 @@ def test_close_look_is_kept_only_when_head_and_render_agree(model_folder, captur
 
 def test_stopping_rule_ends_a_flat_fit_early(model_folder, capture):
     fitted = FittedModel(model_folder)
-    config = FitConfig(restarts=2, explore_steps=5, max_steps=500, patience=5, min_improvement=0.5,
-                       explore_rays=32, rays_per_step=32, eval_rays=64)
+    config = FitConfig(preset="thorough", restarts=2, explore_steps=5, max_steps=500, patience=5,
+                       min_improvement=0.5, explore_rays=32, rays_per_step=32, eval_rays=64)
     outcome = fit_latent(fitted.model, observed_rays(capture), config, fitted.z_obj_mean)
     assert outcome.steps < 500
 
 
 def test_infer_writes_the_design_result_format(model_folder, capture, tmp_path):
     fitted = FittedModel(model_folder)
-    result, outcome = infer(fitted, capture, FitConfig(restarts=2, explore_steps=2, max_steps=5,
-                                                       explore_rays=32, rays_per_step=32, eval_rays=64),
+    result, outcome = infer(fitted, capture, FitConfig(preset="thorough", restarts=2, explore_steps=2,
+                                                       max_steps=5, explore_rays=32, rays_per_step=32,
+                                                       eval_rays=64),
                             np.linspace(0, 1, 5))
     result.write(tmp_path / "r.json")
     doc = json.loads((tmp_path / "r.json").read_text())
@@ -236,7 +237,7 @@ def test_geometric_keypoints_keep_the_head_where_the_handle_is_never_seen(model_
 def test_a_sighting_pulls_the_head_part_towards_the_sighted_point(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    config = FitConfig(restarts=2, explore_steps=20, max_steps=60, explore_rays=32,
+    config = FitConfig(preset="thorough", restarts=2, explore_steps=20, max_steps=60, explore_rays=32,
                        rays_per_step=32, eval_rays=64, focus_steps=0, sighting_weight=1.0)
     torch.manual_seed(1)  # a point the head can reach: its part for another code
     other = torch.cat([torch.zeros(2), fitted.z_obj_mean + torch.randn(8)])
@@ -257,7 +258,7 @@ def test_a_sighting_pulls_the_head_part_towards_the_sighted_point(model_folder, 
 
 def test_a_start_code_of_the_wrong_shape_is_refused(model_folder, capture):
     fitted = FittedModel(model_folder)
-    config = FitConfig(restarts=3, explore_steps=0, max_steps=1, explore_rays=32,
+    config = FitConfig(preset="thorough", restarts=3, explore_steps=0, max_steps=1, explore_rays=32,
                        rays_per_step=32, eval_rays=64, focus_steps=0)
     with pytest.raises(ConfigError, match="z_obj_init has shape"):
         fit_latent(fitted.model, observed_rays(capture), config, fitted.codes[:3])
@@ -293,8 +294,8 @@ def test_infer_uses_a_shipped_handle_detector(model_folder, tmp_path):
                     for p in capture.gt["label_paths"]]
 
     fitted.handle_detector = TrueMasks()
-    small = FitConfig(restarts=2, explore_steps=2, max_steps=4, explore_rays=32, rays_per_step=32,
-                      eval_rays=64, focus_steps=0)
+    small = FitConfig(preset="thorough", restarts=2, explore_steps=2, max_steps=4, explore_rays=32,
+                      rays_per_step=32, eval_rays=64, focus_steps=0)
     result, _ = infer(fitted, capture, small, np.linspace(0, 1, 3))
     seen = result.extra["handle_sighting"]
     assert seen["used"] and seen["sightings"] >= len(seen["views"]) >= 3
@@ -313,7 +314,7 @@ def test_the_reported_q_is_the_articulation_that_was_fitted(model_folder, captur
 
     fitted = FittedModel(model_folder)
     z = torch.cat([q_to_z_art(torch.tensor([-0.2, -0.05])), fitted.z_obj_mean.expand(2, -1)], -1)
-    config = FitConfig(restarts=2, explore_rays=32, focus_steps=0)
+    config = FitConfig(preset="thorough", restarts=2, explore_rays=32, focus_steps=0)
     _adam(fitted.model, z, observed_rays(capture), config, torch.Generator().manual_seed(0),
           steps=1, rays_per_step=32, stop_early=False)
     z = z.detach()
@@ -329,7 +330,7 @@ def test_the_reported_q_is_the_articulation_that_was_fitted(model_folder, captur
 def test_the_start_near_the_sighting_runs_only_with_codes_and_a_sighting(model_folder, capture):
     fitted = FittedModel(model_folder)
     rays = observed_rays(capture)
-    config = FitConfig(start="spread", restarts=2, explore_steps=10, max_steps=12,
+    config = FitConfig(preset="thorough", start="spread", restarts=2, explore_steps=10, max_steps=12,
                        explore_rays=32, rays_per_step=32, eval_rays=64, focus_steps=0)
     z0 = torch.cat([torch.zeros(2), fitted.codes[0]])
     sighting = PartSighting(0, fitted.model.keypoints(z0[None])[0, 0].detach())

@@ -27,8 +27,9 @@ from nfr_drake.inference.fit import (
 from nfr_drake.inference.infer import FittedModel
 from nfr_drake.nfr.latent import q_to_z_art, z_art_to_q
 
-SMALL = FitConfig(start="lookup", restarts=2, explore_steps=2, max_steps=6, explore_rays=32,
-                  rays_per_step=32, eval_rays=64, lookup_q=6, lookup_rays=256, focus_steps=0)
+SMALL = FitConfig(preset="thorough", start="lookup", restarts=2, explore_steps=2, max_steps=6,
+                  explore_rays=32, rays_per_step=32, eval_rays=64, lookup_q=6, lookup_rays=256,
+                  focus_steps=0)
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +128,7 @@ def test_the_fit_stops_early_on_a_flat_loss(model_folder, capture):
 
 def test_presets():
     fast, thorough = FitConfig.fast().resolved(), FitConfig(preset="thorough").resolved()
-    assert FitConfig().preset == "thorough"  # the default
+    assert FitConfig().preset == "fast"  # the default
     for name, value in FitConfig.PRESETS["fast"].items():
         assert getattr(FitConfig(), name) is None  # left to the preset
         assert getattr(fast, name) == value != getattr(thorough, name)

@@ -21,8 +21,8 @@ def one_view(tmp_path_factory):
 
 def _infer(capture, model, *args):
     return main(["infer", str(capture), "--model", str(model), "--restarts", "1", "--max-steps",
-                 "2", "--fit.explore-steps", "0", "--focus-steps", "0", "--threads", "1",
-                 *map(str, args)])
+                 "2", "--fit.explore-steps", "0", "--focus-steps", "0", "--fit.preset", "thorough",
+                 "--threads", "1", *map(str, args)])
 
 
 def test_one_view_warns_on_stderr_and_in_the_result(one_view, model_folder, tmp_path, capsys):

@@ -30,8 +30,8 @@ TINY_MODEL = NFRModelConfig(latent_obj_dim=8, hyper_hidden=16, field_width=16, f
                             pe_frequencies=2, march_steps=3, lstm_hidden=8, pixel_hidden=16,
                             keypoint_hidden=16)
 """An untrained field small enough that a perception test fits it in seconds."""
-TINY_FIT = FitConfig(restarts=2, explore_steps=2, max_steps=5, explore_rays=32, rays_per_step=32,
-                     eval_rays=64)
+TINY_FIT = FitConfig(preset="thorough", restarts=2, explore_steps=2, max_steps=5, explore_rays=32,
+                     rays_per_step=32, eval_rays=64)
 """A fit of a few steps: what the perception tests check is the plumbing, not the accuracy."""
 
 

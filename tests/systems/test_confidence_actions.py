@@ -13,9 +13,9 @@ from nfr_drake.systems.pipeline import perceive_with_confidence
 from nfr_drake.systems.scenario import Scenario
 from tests.systems.conftest import write_tiny_closet_model
 
-FAST = FitConfig(restarts=1, explore_steps=0, max_steps=2, explore_rays=32, rays_per_step=32,
-                 eval_rays=64, lookup_rays=64, focus_steps=0)
-FIT_FLAGS = ["--restarts", "1", "--fit.explore-steps", "0", "--max-steps", "2",
+FAST = FitConfig(preset="thorough", restarts=1, explore_steps=0, max_steps=2, explore_rays=32,
+                 rays_per_step=32, eval_rays=64, lookup_rays=64, focus_steps=0)
+FIT_FLAGS = ["--fit.preset", "thorough", "--restarts", "1", "--fit.explore-steps", "0", "--max-steps", "2",
              "--focus-steps", "0", "--fit.eval-rays", "64", "--fit.lookup-rays", "64"]
 
 

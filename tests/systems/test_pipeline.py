@@ -30,7 +30,7 @@ def _needs(category: str) -> Path:
 
 def test_perception_on_a_fixed_unseen_drawer_is_close_to_ground_truth():
     scenario = Scenario(category="drawer", model=str(_needs("drawer")), seed=100, index=3,
-                        q_start=0.4, views=8, fit=FitConfig(max_steps=300))
+                        q_start=0.4, views=8, fit=FitConfig(preset="thorough", max_steps=300))
     obj = scenario.sample_object()
     predicted, seconds = perceive(scenario, obj)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
@@ -50,7 +50,7 @@ def test_demo_runs_in_reduced_form(tmp_path):
     replay = tmp_path / "demo.html"
     result = subprocess.run(
         [sys.executable, "-m", "nfr_drake.cli", "demo", "--model", str(model), "--views", "4",
-         "--max-steps", "150", "--threads", "1", "--replay", str(replay)],
+         "--fit.preset", "thorough", "--max-steps", "150", "--threads", "1", "--replay", str(replay)],
         capture_output=True, text=True, timeout=900)
     out = result.stdout
     assert result.returncode == 0, out[-2000:] + result.stderr[-3000:]
@@ -75,7 +75,8 @@ def test_pipeline_evaluation_writes_one_row_per_object_and_resumes(tmp_path, cap
 
     model, csv_path = _needs("drawer"), tmp_path / "pipeline.csv"
     for _ in range(2):  # the second call finds the row and runs nothing
-        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100, fit=FitConfig(max_steps=120),
+        eval_pipeline_command("drawer", model, csv_path, n=1, seed=100,
+                              fit=FitConfig(preset="thorough", max_steps=120),
                               min_confidence=0.0)  # never refused: planned and simulated
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 1 and rows[0]["index"] == "0" and rows[0]["planned"] == "True"
