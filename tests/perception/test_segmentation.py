@@ -55,11 +55,19 @@ def test_bad_images_are_one_line_errors(image):
     assert "\n" not in str(err.value)
 
 
-def test_exposure_does_not_change_the_mask():
-    """Each image is standardised first: a uniform gain (without clipping) changes nothing."""
+def test_exposure_barely_changes_the_network_input():
+    """Each image is standardised first, (x - mean) / (std + 0.05): a uniform gain of 2 (without
+    clipping) moves the network's input by about a sixth of its size here, not by the gain (the
+    0.05 keeps flat images from being amplified, so the invariance is not exact)."""
+    torch.manual_seed(0)
     net = Segmenter(SMALL)
+    inputs = []
+    net.stem.register_forward_hook(lambda module, args, output: inputs.append(args[0]))
     image = np.random.default_rng(0).integers(10, 120, (24, 40, 3), dtype=np.uint8)
-    np.testing.assert_allclose(net.object_mask(image), net.object_mask(image * 2), atol=1e-3)
+    net.object_mask(image)
+    net.object_mask(image * 2)
+    change = float((inputs[1] - inputs[0]).norm() / inputs[0].norm())
+    assert 0.0 < change < 0.25
 
 
 def test_training_lowers_the_loss_round_trips_and_refuses_a_second_run(rooms, tmp_path):
