@@ -14,7 +14,7 @@ its start quickly): the starts' losses say which basin of q is right only once z
 adapted, and a start at its band's best q, with codes near the sighting, adapts sooner. The
 refinement's loss is measured on fixed rays every `stop_every` steps, which tells convergence
 from the noise of the steps' random rays, so the fit stops when it has converged. The thorough
-preset spreads its starts evenly over q and runs longer stages, at several times the CPU time.
+preset spreads its starts evenly over q and runs longer stages, at about 4 times the CPU time.
 
 A drawer's pull and depth trade along a shallow valley of the image loss (a deeper drawer pulled
 out less puts its front and handle at the same place), along which Adam creeps: with z_obj held,
@@ -86,8 +86,9 @@ class FitConfig:
     the refinement; at most 100 steps in all, the refinement's of 128 rays with early stopping
     on fixed rays; a close look of 20 steps. "thorough": 4 starts spread over q, explored 120
     steps, compared on 4096 rays, refined with 256 rays per step until the smoothed loss stops
-    improving (at most 400 steps), a close look of 150 steps: several times the fast fit's CPU
-    time, and as accurate within the noise of 20-40 fits (docs/BENCHMARKS.md)."""
+    improving (at most 400 steps), a close look of 150 steps: about 4 times the fast fit's CPU
+    time (2.1-2.3 s median against 8.5-9.1 s), as accurate within the noise of 20-40 fits
+    (docs/BENCHMARKS.md)."""
     start: Literal["lookup", "spread"] | None = None
     """How the starts are chosen. "lookup": candidate codes at `lookup_q` articulations, each with
     the starts' z_obj and, with a sighting, the mean of the `sighting_codes` training z_obj whose
