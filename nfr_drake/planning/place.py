@@ -479,6 +479,20 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
     return None, failed
 
 
+def _pieces(scenes: dict[str, PlanningScene], stages: list[_Stage], sols: list[np.ndarray], q: np.ndarray,
+            p: np.ndarray, cfg: PlaceConfig) -> tuple[list[BsplineTrajectory] | None, str]:
+    """Trajectories (`_optimise_piece`) from the positions q (the tool at p, m, W) through the
+    stages' IK solutions in turn: (the pieces, "") or (None, the failure in one line)."""
+    pieces = []
+    for stage, q_to in zip(stages, sols, strict=True):
+        traj, failed = _optimise_piece(scenes, stage, q, q_to, p, cfg)
+        if traj is None:
+            return None, f"trajectory optimisation to {stage.name}: " + ", ".join(failed)
+        pieces.append(traj)
+        q, p = traj.value(traj.end_time()).ravel(), stage.p_W
+    return pieces, ""
+
+
 def _over(boxes: list[ObstacleBox], a: np.ndarray, b: np.ndarray, X_WB: RigidTransform) -> float:
     """How high a held item's bottom must pass over the boxes (in W) that the horizontal line
     from a to b (m, (3,)) crosses within `_OVER_REACH`: their highest top plus `_OVER_CLEARANCE`,
@@ -523,6 +537,10 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
     """Plan the pick and place (module docstring) for the arm at base X_WB, from its positions q0
     (9,): the end of the opening plan, the hand on `handle` (it backs off the handle first), or,
     with `handle` None, a base re-placed after the opening (`place_bases`, `ready_posture`).
+    Where the pieces to the pick (the last one straight, `_straight_in`) find no trajectory, the
+    pre-pick is re-solved from the pick's posture (the arm on one branch: an IK from the previous
+    knot may jump to another, which no straight piece joins) and they are optimised again, the
+    straight bound unchanged.
     Raises PlanningError when a side-held item has too little room over the goal
     (`side_room_needed`), else naming the stage or the constraints that failed, for each grasp tried
     (the hand either way round about its approach)."""
@@ -596,18 +614,17 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         segments, q, p = [], q0, p_start
         for name, stages, sols in (("to pick", to_pick, sols_a), ("carry", carry, sols_b),
                                    ("retreat", retreat, sols_c)):
-            pieces = []
-            for stage, q_to in zip(stages, sols, strict=True):
-                traj, failed = _optimise_piece(scenes, stage, q, q_to, p, cfg)
-                if traj is None:
-                    failures.append(f"trajectory optimisation to {stage.name}: " + ", ".join(failed))
-                    break
-                pieces.append(traj)
-                q, p = traj.value(traj.end_time()).ravel(), stage.p_W
-            else:
-                segments.append(PlaceSegment(name, pieces))
-                continue
-            break
+            pieces, failed = _pieces(scenes, stages, sols, q, p, cfg)
+            if pieces is None and name == "to pick":  # the straight pick: pre-pick on the pick's branch
+                failures.append(failed)
+                pre, _ = _solve_chain(scenes, stages[-2:-1], sols[-1], cfg)
+                if pre is not None and not np.allclose(pre[0], sols[-2], atol=1e-3):
+                    pieces, failed = _pieces(scenes, stages, [*sols[:-2], pre[0], sols[-1]], q, p, cfg)
+            if pieces is None:
+                failures.append(failed)
+                break
+            segments.append(PlaceSegment(name, pieces))
+            q, p = pieces[-1].value(pieces[-1].end_time()).ravel(), stages[-1].p_W
         else:
             carry_end = segments[1].value(segments[1].duration)
             X_WGend = _tool_pose_at(scenes["free"], carry_end)
