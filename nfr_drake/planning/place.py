@@ -616,9 +616,9 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                                    ("retreat", retreat, sols_c)):
             pieces, failed = _pieces(scenes, stages, sols, q, p, cfg)
             if pieces is None and name == "to pick":  # the straight pick: pre-pick on the pick's branch
-                failures.append(failed)
                 pre, _ = _solve_chain(scenes, stages[-2:-1], sols[-1], cfg)
                 if pre is not None and not np.allclose(pre[0], sols[-2], atol=1e-3):
+                    failures.append(failed)
                     pieces, failed = _pieces(scenes, stages, [*sols[:-2], pre[0], sols[-1]], q, p, cfg)
             if pieces is None:
                 failures.append(failed)
