@@ -19,6 +19,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                  "render a training dataset of one category with Drake"),
     "generate-rooms": ("nfr_drake.data.room_dataset:generate_rooms_command",
                        "render objects in random rooms (furniture, clutter, the arm) for segmentation"),
+    "label-amodal": ("nfr_drake.data.amodal:label_amodal_command",
+                     "add amodal carcass labels (the carcass as if nothing hid it) to room datasets"),
     "captures": ("nfr_drake.data.captures:captures_command",
                  "render capture sets (transforms.json + gt.json) of unseen objects"),
     "validate": ("nfr_drake.data.validate:validate_command",

@@ -171,3 +171,20 @@ class PinholeCamera:
             keys = DISTORTION_KEYS[:4] if n <= 4 else DISTORTION_KEYS
             d.update(zip(keys, np.pad(self.distortion, (0, len(keys) - n)).tolist(), strict=True))
         return d
+
+
+def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (n, 2) (top-left pixel centre at (0.5, 0.5)) of points p_W (n, 3) in a camera at
+    X_WC (4, 4, OpenCV axes), with its distortion; and whether each lies in front of it (n,)."""
+    X_CW = np.linalg.inv(X_WC)
+    p_C = p_W @ X_CW[:3, :3].T + X_CW[:3, 3]
+    front = p_C[:, 2] > 1e-3
+    z = np.where(front, p_C[:, 2], 1.0)
+    xy = p_C[:, :2] / z[:, None]
+    if camera.has_distortion:
+        uv = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3), np.zeros(3),
+                               camera.K_opencv, camera.dist_opencv)[0].reshape(-1, 2) + 0.5
+    else:
+        uv = xy * [camera.fx, camera.fy] + [camera.cx, camera.cy]
+    return uv, front

@@ -9,6 +9,8 @@ DIR/objects/obj_000123/          one room around one target object
     label.npy   uint8  (A, V, S, S)     the TARGET's semantic class, 0 on everything else
     part.npy    int8   (A, V, S, S)     the target's front index, -1 elsewhere
     depth.npy   uint16 (A, V, S, S)     mm along the optical axis (the whole room), 0 = none
+    carcass_amodal.npy uint8 (A, V, S, S) the target's carcass body alone as if nothing hid it
+                (no fronts, no clutter; `data.amodal`), 1 on it; `nfr-drake label-amodal` adds it
     meta.json   q (A, F), X_OC (A, V, 4, 4) OpenCV axes (W = O), keypoints per front (A, K, 3)
                 in O, camera, room (textures, neighbours, clutter, arm, lights), sensor (A, V)
     object.sdf  the target object (textures/ beside it)
@@ -96,6 +98,7 @@ def read_room_spec(root: Path) -> RoomDatasetSpec:
 
 def render_room_arrays(spec: RoomDatasetSpec, index: int):
     """Render room `index` of `spec`: (arrays, meta, sdf, files) ready for `write_object`."""
+    from nfr_drake.data.amodal import amodal_labels
     from nfr_drake.data.camera import PinholeCamera
     from nfr_drake.data.object_records import portable_sdformat
     from nfr_drake.data.render import ObjectRenderer
@@ -132,6 +135,7 @@ def render_room_arrays(spec: RoomDatasetSpec, index: int):
                           for k, front in enumerate(obj.fronts)],
             "camera": camera.to_json(), "room": room.to_json(), "sensor": sensor}
     sdf, textures = portable_sdformat(obj)
+    arrays["carcass_amodal"] = amodal_labels(sdf, X_OC, camera)
     return arrays, meta, sdf, {rel: path.read_bytes() for rel, path in textures.items()}
 
 

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera import PinholeCamera, project_points
 from nfr_drake.errors import NfrDrakeError
 
 
@@ -144,23 +144,6 @@ def background_mask(image: np.ndarray, background_rgb: tuple[float, float, float
         border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]])
         background_rgb = tuple(np.median(border, axis=0))
     return (np.abs(rgb - np.asarray(background_rgb, np.float32)).max(-1) > tolerance).astype(np.float32)
-
-
-def project_points(p_W: np.ndarray, X_WC: np.ndarray, camera: PinholeCamera
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (n, 2) (top-left pixel centre at (0.5, 0.5)) of points p_W (n, 3) in a camera at
-    X_WC (4, 4, OpenCV axes), with its distortion; and whether each lies in front of it (n,)."""
-    X_CW = np.linalg.inv(X_WC)
-    p_C = p_W @ X_CW[:3, :3].T + X_CW[:3, 3]
-    front = p_C[:, 2] > 1e-3
-    z = np.where(front, p_C[:, 2], 1.0)
-    xy = p_C[:, :2] / z[:, None]
-    if camera.has_distortion:
-        uv = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3), np.zeros(3),
-                               camera.K_opencv, camera.dist_opencv)[0].reshape(-1, 2) + 0.5
-    else:
-        uv = xy * [camera.fx, camera.fy] + [camera.cx, camera.cy]
-    return uv, front
 
 
 def carve(p_W: np.ndarray, masks: list[np.ndarray], X_WCs: list[np.ndarray],
