@@ -1,7 +1,7 @@
 """Success rate of the whole pipeline (neural-field keypoints -> plan -> simulation), resumable.
 
 `nfr-drake eval-pipeline` runs `run_scenario` on unseen objects `index = 0 .. n-1` of a capture
-seed and appends one CSV row per object: perception errors, the fit's confidence, planning
+seed (or the chosen indices, `--objects`; each object is drawn from its index alone) and appends one CSV row per object: perception errors, the fit's confidence, planning
 outcome, simulated outcome. A fit refused for its low confidence (`Scenario.min_confidence`) is
 not planned on: its row says `refused`, and the summary counts it apart from the failures. Rows
 already in the CSV are kept, so a killed evaluation continues where it stopped. A piece of
@@ -149,9 +149,10 @@ def object_scenario(base: Scenario, index: int, part_target: bool = False) -> Sc
     return replace(scenario, part=part, q_target=OPEN_TARGET[kind] if part_target else base.q_target)
 
 
-def evaluate_pipeline(base: Scenario, n: int, csv_path: Path, part_target: bool = False) -> list[dict]:
-    """Run `base` on objects index = 0 .. n-1 (`object_scenario`; `part_target`: each at its part's
-    target) and append a `PipelineRow` per object to `csv_path` (objects of the category already
+def evaluate_pipeline(base: Scenario, n: int | list[int], csv_path: Path, part_target: bool = False
+                      ) -> list[dict]:
+    """Run `base` on objects index = 0 .. n-1, or on the indices listed in `n` (`object_scenario`;
+    `part_target`: each at its part's target), and append a `PipelineRow` per object to `csv_path` (objects of the category already
     there are skipped); returns the CSV's rows of the category (string values, as
     `csv.DictReader` reads them). An open-and-place task writes `PlaceRow`s, furniture `PartRow`s."""
     done = set()
@@ -170,7 +171,8 @@ def evaluate_pipeline(base: Scenario, n: int, csv_path: Path, part_target: bool 
         writer = csv.DictWriter(f, fieldnames=fields)
         if new_file:
             writer.writeheader()
-        for i in tqdm(range(n), desc=f"{base.category} pipeline", unit="object"):
+        indices = range(n) if isinstance(n, int) else n
+        for i in tqdm(indices, desc=f"{base.category} pipeline", unit="object"):
             if (base.category, i) in done:
                 continue
             writer.writerow(asdict(_row(object_scenario(base, i, part_target))))
@@ -190,7 +192,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           perceive: Literal["alone", "room"] = "alone",
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
-                          mask_crop: bool = True, threads: int | None = None) -> None:
+                          mask_crop: bool = True, objects: tuple[int, ...] = (),
+                          threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
     own random stream, the others held shut; its fit's confidence is P(that part's handle within
@@ -201,6 +204,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         model: neural-field model folder of that category.
         csv_path: results CSV (appended; existing rows are kept and skipped).
         n: number of objects (indices 0 .. n-1 of the capture seed).
+        objects: run these indices of the capture seed instead of 0 .. n-1 (each object and its
+            item are drawn from the seed and its index alone, so a chosen one is the same as in a
+            run of all; the summary covers the CSV's rows of the category).
         seed: capture seed of the objects.
         q_start: articulation when photographed.
         q_target: articulation to reach (default: 0.6 for closets and furniture doors, as in the
@@ -232,7 +238,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop)
-    rows = evaluate_pipeline(base, n, csv_path, part_target=q_target is None)
+    if any(i < 0 for i in objects):
+        raise NfrDrakeError(f"--objects: indices must not be negative, got {list(objects)}")
+    rows = evaluate_pipeline(base, list(objects) if objects else n, csv_path, part_target=q_target is None)
     print(SUMMARY_HEADER)
     print(summary_row(rows))
     print(perception_summary(rows))
