@@ -1,8 +1,9 @@
 """Success rate of the whole pipeline (neural-field keypoints -> plan -> simulation), resumable.
 
 `nfr-drake eval-pipeline` runs `run_scenario` on unseen objects `index = 0 .. n-1` of a capture
-seed (or the chosen indices, `--objects`; each object is drawn from its index alone) and appends one CSV row per object: perception errors, the fit's confidence, planning
-outcome, simulated outcome. A fit refused for its low confidence (`Scenario.min_confidence`) is
+seed (or the chosen indices, `--objects`; each object is drawn from its index alone) and appends
+one CSV row per object: perception errors, the fit's confidence, planning outcome, simulated
+outcome. A fit refused for its low confidence (`Scenario.min_confidence`) is
 not planned on: its row says `refused`, and the summary counts it apart from the failures. Rows
 already in the CSV are kept, so a killed evaluation continues where it stopped. A piece of
 furniture is opened at one part, drawn from the piece's own random stream (`Scenario.sample_piece`),
@@ -152,9 +153,10 @@ def object_scenario(base: Scenario, index: int, part_target: bool = False) -> Sc
 def evaluate_pipeline(base: Scenario, n: int | list[int], csv_path: Path, part_target: bool = False
                       ) -> list[dict]:
     """Run `base` on objects index = 0 .. n-1, or on the indices listed in `n` (`object_scenario`;
-    `part_target`: each at its part's target), and append a `PipelineRow` per object to `csv_path` (objects of the category already
-    there are skipped); returns the CSV's rows of the category (string values, as
-    `csv.DictReader` reads them). An open-and-place task writes `PlaceRow`s, furniture `PartRow`s."""
+    `part_target`: each at its part's target), and append a `PipelineRow` per object to
+    `csv_path` (objects of the category already there are skipped); returns the CSV's rows of the
+    category (string values, as `csv.DictReader` reads them). An open-and-place task writes
+    `PlaceRow`s, furniture `PartRow`s."""
     done = set()
     row_type = PlaceRow if base.task != "open" else PartRow if base.category == "furniture" else PipelineRow
     fields = list(row_type.__dataclass_fields__)

@@ -28,7 +28,8 @@ def recorded(monkeypatch):
 
 
 def test_objects_runs_the_chosen_indices_drawn_as_in_a_run_of_all(recorded, tmp_path, capsys):
-    args = ["eval-pipeline", "--category", "drawer", "--model", "models/drawer", "--seed", "201", "--threads", "1"]
+    args = ["eval-pipeline", "--category", "drawer", "--model", "models/drawer", "--seed", "201",
+            "--threads", "1"]
     assert main([*args, "--csv-path", str(tmp_path / "some.csv"), "--objects", "3", "8", "10"]) == 0
     with open(tmp_path / "some.csv") as f:
         assert [int(r["index"]) for r in csv.DictReader(f)] == [3, 8, 10]
