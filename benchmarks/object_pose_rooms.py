@@ -2,13 +2,18 @@
 
     python benchmarks/object_pose_rooms.py --category closet --rooms 12
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --setting alone
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter
 
 Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `seed`; one articulation
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
 W by a random X_WO (yaw in [-pi, pi], x and y in [-2, 2] m) and `estimate_object_pose` runs on the
 views' masks: the target's labels (true masks), or, with `--segmenter DIR`, the segmenter's
 probabilities (with `--crop`, those of the crop stage: `segmentation.crop.posed_close_look`, a
-second look at the crop around the box of the pose from the first masks). With `--setting alone`
+second look at the crop around the box of the pose from the first masks). With `--amodal` the
+masks are the carcass's amodal masks instead (the carcass alone as if nothing hid it, no fronts):
+the true ones (`carcass_amodal`, `data.amodal`) or the segmenter's amodal output
+(`Segmenter.carcass_amodal`), and the box is fitted as the carcass (`amodal=True`). With `--setting alone`
 the object of `nfr-drake captures` (seed `seed`, index i) stands alone before the training
 renders' background, photographed by `views` cameras of the paper's distribution
 (`CameraDistribution`) at a q drawn as the rooms' (shut with probability 0.4, else uniform), its
@@ -51,7 +56,10 @@ def _alone(category: str, seed: int, index: int, views: int, size: int):
 
 
 def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 128, seed: int = 900,
-         setting: str = "room", segmenter: Path | None = None, crop: bool = False) -> None:
+         setting: str = "room", segmenter: Path | None = None, crop: bool = False,
+         amodal: bool = False) -> None:
+    if amodal and (crop or setting == "alone"):
+        raise SystemExit("--amodal measures the first-look masks in rooms: no --crop, no --setting alone")
     net = None
     if segmenter is not None:
         from nfr_drake.perception.segmentation.model import load_segmenter
@@ -67,8 +75,12 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             arrays, meta, _, _ = render_room_arrays(spec, i)
             camera, q = PinholeCamera.from_json(meta["camera"]), np.array(meta["q"][0])
             X_OC = np.array(meta["X_OC"])[0]
-            if net is None:
+            if net is None and amodal:
+                masks = [m.astype(np.float32) for m in arrays["carcass_amodal"][0]]
+            elif net is None:
                 masks = [(label > 0).astype(np.float32) for label in arrays["label"][0]]
+            elif amodal:
+                masks = [net.carcass_amodal(rgb) for rgb in arrays["rgb"][0]]
             elif crop:
                 from nfr_drake.perception.segmentation.crop import posed_close_look
 
@@ -83,7 +95,7 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
         started = time.perf_counter()
         try:
             estimate = estimate_object_pose(masks, [X_WO @ X for X in X_OC],
-                                            [camera] * views, category=category)
+                                            [camera] * views, category=category, amodal=amodal)
         except ObjectPoseError as err:
             print(f"room {i}: {err}")
             rows.append((math.inf, math.inf, False))
@@ -104,7 +116,8 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             print(f"{category} {name} ({sel.sum()} rooms): median {cm:.2f} cm, {deg:.2f} deg; "
                   f"within 2 cm and 2 deg: {100 * within:.0f} %")
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, {setting}, masks: "
-          f"{'segmenter ' + str(segmenter) if segmenter else 'true labels'}{', crop stage' if crop else ''}")
+          f"{'segmenter ' + str(segmenter) if segmenter else 'true labels'}{', crop stage' if crop else ''}"
+          f"{', amodal carcass' if amodal else ''}")
 
 
 if __name__ == "__main__":

@@ -26,7 +26,8 @@ def overlay(rgb: np.ndarray, label: np.ndarray, amodal: np.ndarray, scale: int =
     """The photo (S, S, 3) scaled by `scale`, visible pixels tinted green, the amodal label's
     outline in yellow."""
     big = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST).astype(np.float32)
-    vis = cv2.resize((label > 0).astype(np.uint8), None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST) > 0
+    vis = cv2.resize((label > 0).astype(np.uint8), None, fx=scale, fy=scale,
+                     interpolation=cv2.INTER_NEAREST) > 0
     big[vis] = 0.6 * big[vis] + 0.4 * np.array([0, 220, 0], np.float32)
     am = cv2.resize(amodal, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     edge = cv2.morphologyEx(am, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0

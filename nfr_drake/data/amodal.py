@@ -58,7 +58,8 @@ def _solid_points(geometry: ET.Element) -> np.ndarray:
     if (cyl := geometry.find("cylinder")) is not None:
         r, length = float(cyl.findtext("radius")) * circumscribe, float(cyl.findtext("length"))
         rim = np.column_stack([r * np.cos(angles), r * np.sin(angles)])
-        return np.concatenate([np.column_stack([rim, np.full(len(rim), z)]) for z in (-length / 2, length / 2)])
+        return np.concatenate([np.column_stack([rim, np.full(len(rim), z)])
+                               for z in (-length / 2, length / 2)])
     if (sphere := geometry.find("sphere")) is not None:
         r = float(sphere.findtext("radius")) * circumscribe**2
         lat = np.linspace(-np.pi / 2, np.pi / 2, ROUND_SEGMENTS // 2 + 1)

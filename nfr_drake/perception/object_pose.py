@@ -18,6 +18,13 @@ carcass footprint, +x out of the front, +z up; so X_WO is (x, y, yaw) with z = 0
 4. **Yaw**: the minimum-area rectangle of the footprint; +x of O is the rectangle's side facing the
    cameras' mean position (cameras see the front). Fronts are mounted on the carcass, so the
    carcass footprint is the rectangle less `front_thickness_m` at the front.
+5. **Box**: a floor box fitted to the masks from that start (`fit_box`).
+
+The masks are the object's visible pixels (a photo of the object alone, the segmenter's
+`object_mask`), fronts included; or, with `amodal=True`, the carcass's amodal masks (its body
+alone as if nothing hid it, no fronts: `data.amodal`, `Segmenter.carcass_amodal`): the box is then
+the carcass itself, and neither clutter that hides part of it nor an open front in front of it
+moves the box.
 
 Pure numpy and OpenCV; no Drake.
 """
@@ -76,7 +83,8 @@ class HullConfig:
 class ObjectPoseEstimate:
     """X_WO (4, 4): the object frame O in W (z = 0, yaw about z only); size (3,) m: the
     carcass's depth (along O's x), width (y) and height (z); box (6,) and hull_box (6,): the fitted
-    floor box and the hull's (x, y, yaw, depth, width, height; m, rad; fronts included);
+    floor box and the hull's (x, y, yaw, depth, width, height; m, rad; fronts included, unless
+    fitted to amodal carcass masks);
     voxels: occupied voxels of the fine hull."""
 
     X_WO: np.ndarray
@@ -199,10 +207,12 @@ def _object_part(seen: np.ndarray) -> np.ndarray:
 
 def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
                          cameras: list[PinholeCamera], config: HullConfig = HullConfig(),
-                         category: str | None = None) -> ObjectPoseEstimate:
+                         category: str | None = None, amodal: bool = False) -> ObjectPoseEstimate:
     """The object's pose X_WO and carcass size from per-view masks.
 
-    masks: (H, W) each, object probability or 0/1 (any size: scaled to its camera's image);
+    masks: (H, W) each, object probability or 0/1 (any size: scaled to its camera's image): the
+    object's visible pixels, fronts included, or with `amodal` its carcass's amodal masks (the
+    carcass alone, no fronts: the fitted box is the carcass, O under its centre);
     X_WCs: camera poses (4, 4) in W, OpenCV axes, metres, W's floor at z = 0 with z up;
     cameras: their intrinsics; category: when known, the fitted box keeps within its size
     ranges (`category_size_ranges`, 10 % slack), else within 0.1 m and the hull's box + 0.1 m.
@@ -213,6 +223,7 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
     if len(masks) < config.min_views:
         raise ObjectPoseError(f"object pose: {len(masks)} views, need at least {config.min_views}")
     X_WCs = [np.asarray(X, float) for X in X_WCs]
+    front = 0.0 if amodal else config.front_thickness_m
     p_WC = np.stack([X[:3, 3] for X in X_WCs])
     lo = np.array([*(p_WC[:, :2].min(0) - config.search_margin_m), 0.0])
     hi = np.array([*(p_WC[:, :2].max(0) + config.search_margin_m), max(p_WC[:, 2].max(), 0.5)])
@@ -258,11 +269,11 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
             bounds = [(0.1, hull_box[i] + 0.1) for i in (3, 4, 5)]
         else:
             bounds = [(0.9 * lo, 1.1 * hi) for lo, hi in category_size_ranges(category)]
-            bounds[0] = (bounds[0][0] + config.front_thickness_m, bounds[0][1] + config.front_thickness_m)
+            bounds[0] = (bounds[0][0] + front, bounds[0][1] + front)
         starts = [np.concatenate([b[:3], np.clip(b[3:], [lo for lo, _ in bounds], [hi for _, hi in bounds])])
                   for b in starts]
         fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras, bounds), toward)
-    return ObjectPoseEstimate.from_box(fitted, config.front_thickness_m, int(fine.sum()), hull_box)
+    return ObjectPoseEstimate.from_box(fitted, front, int(fine.sum()), hull_box)
 
 
 def box_corners_W(box: np.ndarray) -> np.ndarray:

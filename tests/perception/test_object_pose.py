@@ -123,3 +123,26 @@ def test_a_region_only_a_few_views_hold_is_not_the_object():
         masks.append(np.ones((128, 128), np.float32))
     cm, deg = _errors(estimate_object_pose(masks, X_WCs, [CAMERA] * len(masks), NO_FRONTS), X_WO)
     assert cm < 1.0 and deg < 1.0, (cm, deg)
+
+
+@pytest.mark.parametrize("category", ["closet", "drawer"])
+def test_the_box_fitted_to_true_amodal_labels_of_a_room_is_the_carcass(category):
+    """A generated room (held-out textures, clutter, neighbours, the arm, fronts at random q):
+    fitted to the carcass's amodal labels (`data.amodal`), the box is the carcass, whatever hides
+    it or stands open in front of it."""
+    pytest.importorskip("pydrake")
+    from nfr_drake.data.room_dataset import RoomDatasetSpec, render_room_arrays
+    from nfr_drake.data.rooms import RoomDistribution
+
+    spec = RoomDatasetSpec(category, 1, articulations=1, views=8, size=96, seed=31,
+                           room=RoomDistribution(style="heldout"))
+    arrays, meta, _, _ = render_room_arrays(spec, 0)
+    camera, X_OC = PinholeCamera.from_json(meta["camera"]), np.array(meta["X_OC"])[0]
+    masks = [m.astype(np.float32) for m in arrays["carcass_amodal"][0]]
+    X_WO = _pose(-0.7, 1.1, 0.9)
+    estimate = estimate_object_pose(masks, [X_WO @ X for X in X_OC], [camera] * 8, category=category,
+                                    amodal=True)
+    cm, deg = _errors(estimate, X_WO)
+    assert cm < 3.0 and deg < 3.0, (cm, deg, meta["q"])
+    p = meta["params"]
+    np.testing.assert_allclose(estimate.size, [p["depth"], p["width"], p["height"]], atol=0.04)

@@ -21,7 +21,14 @@ from nfr_drake.perception.segmentation.evaluation import (
     mask_iou,
     touches_border,
 )
-from nfr_drake.perception.segmentation.model import SEGMENT_PX, Segmenter, SegmenterConfig, load_segmenter
+from nfr_drake.perception.segmentation.model import (
+    NUM_CLASSES,
+    SEGMENT_PX,
+    Segmenter,
+    SegmenterConfig,
+    load_segmenter,
+    save_segmenter,
+)
 from nfr_drake.perception.segmentation.training import SegmenterTrainConfig, train_segmenter
 
 SMALL = SegmenterConfig(channels=4, levels=2, bottleneck_dilations=(2,))
@@ -45,6 +52,42 @@ def test_the_mask_has_the_image_size_at_any_size(shape):
     assert mask.shape == shape and mask.dtype == np.float32 and np.all((mask >= 0) & (mask <= 1))
     probs = net.class_probabilities(image)
     np.testing.assert_allclose(probs.sum(-1), 1.0, rtol=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(37, 51), (96, 96), (2, 3)])
+def test_the_amodal_carcass_has_the_image_size(shape):
+    net = Segmenter(SMALL)
+    image = np.random.default_rng(1).integers(0, 255, (*shape, 3), dtype=np.uint8)
+    assert net(torch.zeros(1, 3, 16, 16)).shape == (1, NUM_CLASSES + 1, 16, 16)
+    amodal = net.carcass_amodal(image)
+    assert amodal.shape == shape and amodal.dtype == np.float32 and np.all((amodal >= 0) & (amodal <= 1))
+    assert net.class_probabilities(image).shape == (*shape, NUM_CLASSES)
+
+
+def test_a_model_saved_without_the_amodal_output_gives_its_visible_mask(tmp_path):
+    old = SegmenterConfig(channels=4, levels=2, bottleneck_dilations=(2,), amodal=False)
+    save_segmenter(tmp_path, Segmenter(old), {})
+    record = json.loads((tmp_path / "config.json").read_text())
+    del record["model"]["amodal"]  # a config.json written before the amodal output existed
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    net, _ = load_segmenter(tmp_path)
+    image = np.zeros((20, 20, 3), np.uint8)
+    assert net.object_mask(image).shape == (20, 20)
+    with pytest.raises(NfrDrakeError, match="no amodal carcass output") as err:
+        net.carcass_amodal(image)
+    assert "\n" not in str(err.value)
+
+
+def test_training_the_amodal_output_needs_its_labels(rooms, tmp_path):
+    import shutil
+
+    from nfr_drake.data.amodal import AMODAL_FILE
+
+    copy = tmp_path / "closet"
+    shutil.copytree(rooms, copy)
+    next(copy.glob(f"objects/*/{AMODAL_FILE}")).unlink()
+    with pytest.raises(ConfigError, match="label-amodal"):
+        train_segmenter([copy], tmp_path / "seg", SegmenterTrainConfig(steps=2, batch=2, crop=16), SMALL)
 
 
 @pytest.mark.parametrize("image", [np.zeros((8, 8), np.uint8), np.zeros((8, 8, 4), np.uint8),
@@ -127,6 +170,7 @@ def test_measures(rooms):
     result = evaluate_dataset(Segmenter(SMALL), rooms)
     assert result["category"] == "closet" and 0 < result["images"] <= 4
     assert 0.0 <= result["iou_mean"] <= 1.0
+    assert 0.0 <= result["amodal_iou_mean"] <= 1.0 and 0.0 <= result["amodal_iou_pooled"] <= 1.0
 
 
 def test_cli_errors_are_one_line(tmp_path, capsys):

@@ -76,7 +76,9 @@ def eval_segmenter_command(model: Path, data: list[Path], out: Path | None = Non
               f"IoU mean {r['iou_mean']:.3f} "
               f"median {r['iou_median']:.3f} pooled {r['iou_pooled']:.3f}; cut by the edge "
               f"({r['cut_images']}) {cut}; false-positive area {r['false_positive_area']:.3f}; centre box "
-              f"{r['iou_mean_centre_box']:.3f}")
+              f"{r['iou_mean_centre_box']:.3f}"
+              + (f"; amodal carcass IoU mean {r['amodal_iou_mean']:.3f} median {r['amodal_iou_median']:.3f} "
+                 f"pooled {r['amodal_iou_pooled']:.3f}" if "amodal_iou_mean" in r else ""))
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         Path(out).write_text(json.dumps({"model": str(model), "results": results}, indent=2) + "\n")

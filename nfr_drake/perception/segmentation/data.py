@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import torch
 
+from nfr_drake.data.amodal import AMODAL_FILE
 from nfr_drake.data.dataset import ObjectRecord
 from nfr_drake.data.room_dataset import read_room_spec, room_dirs
 from nfr_drake.errors import DatasetError
@@ -22,7 +23,8 @@ class RoomImages:
     """Every (room, articulation, view) image of some room datasets, in a fixed order.
 
     `category` names the target category of each image; DatasetError when a folder is not a room
-    dataset or holds no complete room.
+    dataset or holds no complete room. `has_amodal`: every room holds its amodal carcass labels
+    (`carcass_amodal.npy`, `nfr-drake label-amodal`).
     """
 
     def __init__(self, roots: list[Path]):
@@ -39,6 +41,8 @@ class RoomImages:
                     for v in range(spec.views):
                         self.index.append((rec, a, v))
                         self.category.append(spec.category)
+        self.has_amodal = all((rec.path / AMODAL_FILE).is_file() for rec, _, _ in self.index)
+        self._amodal: dict[Path, np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.index)
@@ -48,11 +52,23 @@ class RoomImages:
         rec, a, v = self.index[i]
         return np.asarray(rec.rgb[a, v]), np.asarray(rec.label[a, v])
 
+    def amodal(self, i: int) -> np.ndarray:
+        """Image i's amodal carcass label uint8 (S, S), 1 on the carcass; DatasetError when its
+        room has none."""
+        rec, a, v = self.index[i]
+        if rec.path not in self._amodal:
+            path = rec.path / AMODAL_FILE
+            if not path.is_file():
+                raise DatasetError(f"{rec.path}: no amodal carcass labels; run `nfr-drake label-amodal "
+                                   f"--data {rec.path.parent.parent}`")
+            self._amodal[rec.path] = np.load(path, mmap_mode="r")
+        return np.asarray(self._amodal[rec.path][a, v])
+
 
 def augment(rgb: np.ndarray, label: np.ndarray, crop: int, rng: np.random.Generator
             ) -> tuple[np.ndarray, np.ndarray]:
     """A randomly zoomed, cropped, flipped and recoloured copy: RGB float32 (crop, crop, 3) in
-    [0, 1] and labels int64 (crop, crop)."""
+    [0, 1] and labels int64 (crop, crop), or (crop, crop, C) for labels uint8 (S, S, C)."""
     s = rgb.shape[0]
     zoom = rng.uniform(0.7, 1.4)
     side = max(crop, int(round(s * zoom)))
@@ -74,14 +90,21 @@ def augment(rgb: np.ndarray, label: np.ndarray, crop: int, rng: np.random.Genera
     return np.clip(x, 0.0, 1.0), np.ascontiguousarray(y)
 
 
-def sample_batch(data: RoomImages, n: int, crop: int, rng: np.random.Generator
-                 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """n augmented crops of random images: RGB (n, 3, crop, crop) float32 in [0, 1] and class
-    labels (n, crop, crop) int64."""
-    xs, ys = [], []
+def sample_batch(data: RoomImages, n: int, crop: int, rng: np.random.Generator, amodal: bool = False
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """n augmented crops of random images: RGB (n, 3, crop, crop) float32 in [0, 1], class
+    labels (n, crop, crop) int64 and, with `amodal`, the amodal carcass labels (n, crop, crop)
+    float32 0/1 (same zoom, crop and flip), else None."""
+    xs, ys, zs = [], [], []
     for i in rng.integers(0, len(data), n):
-        x, y = augment(*data.image(int(i)), crop, rng)
+        rgb, label = data.image(int(i))
+        if amodal:
+            label = np.stack([label, data.amodal(int(i))], -1)
+        x, y = augment(rgb, label, crop, rng)
         xs.append(x)
-        ys.append(y)
+        ys.append(y[..., 0] if amodal else y)
+        if amodal:
+            zs.append(y[..., 1])
     return (torch.from_numpy(np.stack(xs)).permute(0, 3, 1, 2).contiguous(),
-            torch.from_numpy(np.stack(ys)))
+            torch.from_numpy(np.stack(ys)),
+            torch.from_numpy(np.stack(zs).astype(np.float32)) if amodal else None)

@@ -5,7 +5,10 @@ true one (label > 0), the pooled IoU (all pixels of all images), the same on the
 true mask touches the image border (the object cut by the image edge) and on the others, and the
 false-positive area (predicted object pixels outside the true mask, relative to the true mask's
 area): what a twin beside the object or a similar neighbour adds to the mask. For scale, the
-mean IoU of a fixed guess, the centre box (the middle half of the image in each direction).
+mean IoU of a fixed guess, the centre box (the middle half of the image in each direction). For a
+model with the amodal carcass output and a dataset with its labels (`carcass_amodal.npy`), the
+same IoU (mean, median, pooled) of the amodal carcass (probability > 0.5, first look) against
+them.
 The masks are the first look (`crop` "none"), the single-photo second look ("mask",
 `Segmenter.close_look`) or the posed crop stage over the views of one articulation ("posed",
 `crop.posed_close_look`, with the room's camera poses and the floor at z = 0 of frame O).
@@ -83,6 +86,7 @@ def evaluate_dataset(net: Segmenter, root: Path, crop: Crop = "none") -> dict:
         inter += np.count_nonzero(pred & true)
         union += np.count_nonzero(pred | true)
     ious_a, cut_a = np.asarray(ious), np.asarray(cut, bool)
+    amodal = amodal_iou(net, data) if crop == "none" else {}
 
     def mean(x: np.ndarray) -> float | None:
         return float(x.mean()) if x.size else None
@@ -92,7 +96,27 @@ def evaluate_dataset(net: Segmenter, root: Path, crop: Crop = "none") -> dict:
             "iou_pooled": inter / union if union else 1.0, "cut_images": int(cut_a.sum()),
             "iou_mean_cut": mean(ious_a[cut_a]), "iou_mean_whole": mean(ious_a[~cut_a]),
             "false_positive_area": mean(np.asarray(false_pos)),
-            "iou_below_0.5": int((ious_a < 0.5).sum()), "iou_mean_centre_box": mean(np.asarray(centre))}
+            "iou_below_0.5": int((ious_a < 0.5).sum()), "iou_mean_centre_box": mean(np.asarray(centre)),
+            **amodal}
+
+
+def amodal_iou(net: Segmenter, data: RoomImages) -> dict:
+    """IoU of the amodal carcass (`Segmenter.carcass_amodal` > 0.5) against the amodal labels of
+    every image of `data` whose label is not empty: {"amodal_iou_mean", "amodal_iou_median",
+    "amodal_iou_pooled"}; {} for a model without that output or data without those labels."""
+    if not (net.config.amodal and data.has_amodal):
+        return {}
+    ious, inter, union = [], 0, 0
+    for i in range(len(data)):
+        true = data.amodal(i) > 0
+        if not true.any():
+            continue
+        pred = net.carcass_amodal(data.image(i)[0]) > THRESHOLD
+        ious.append(mask_iou(pred, true))
+        inter += np.count_nonzero(pred & true)
+        union += np.count_nonzero(pred | true)
+    return {"amodal_iou_mean": float(np.mean(ious)), "amodal_iou_median": float(np.median(ious)),
+            "amodal_iou_pooled": inter / union if union else 1.0}
 
 
 def centre_box(shape: tuple[int, int]) -> np.ndarray:

@@ -1,7 +1,10 @@
 """The segmenter: a tiny U-Net that labels each pixel of a photo as background or one of the
 target object's classes (carcass, moving part, handle; docs/CONVENTIONS.md).
 
-The object's mask is the probability of "not background" (`object_mask`). Each image is
+The object's mask is the probability of "not background" (`object_mask`). A fifth output
+(`SegmenterConfig.amodal`) is the probability that a pixel lies on the target's carcass as if
+nothing hid it (no clutter, no neighbour, no arm, no fronts: `data.amodal`), `carcass_amodal`;
+the object's pose is fitted to it (`perception.object_pose`). Each image is
 standardised (its own mean and standard deviation per channel) before the network sees it, so an
 exposure or white-balance change moves nothing; the network is fully convolutional and pads the
 image to a multiple of 2^levels, so it runs on any image size.
@@ -24,7 +27,9 @@ from nfr_drake.jsonio import read_json
 from nfr_drake.nfr.checkpoint import CheckpointError, load_strict, read_tensors
 
 NUM_CLASSES = 4
-"""Outputs per pixel: background, carcass, moving part, handle (the semantic classes)."""
+"""Class outputs per pixel: background, carcass, moving part, handle (the semantic classes)."""
+AMODAL_CHANNEL = NUM_CLASSES
+"""The output holding the amodal carcass logit (sigmoid), in a model with `amodal`."""
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 SEGMENT_PX = 96
@@ -44,11 +49,13 @@ class SegmenterConfig:
     """Architecture: a stride-2 stem of `channels`, then `levels` stride-2 stages, channels
     doubling per stage (at most 4x), two 3x3 convolutions per stage, a bottleneck of dilated
     convolutions (`bottleneck_dilations`) for context, a decoder of the same stages with skip
-    connections, and logits at half resolution upsampled (bilinear) to the image's."""
+    connections, and logits at half resolution upsampled (bilinear) to the image's. `amodal`:
+    one more output, the amodal carcass logit (models saved without it have the 4 classes only)."""
 
     channels: int = 16
     levels: int = 3
     bottleneck_dilations: tuple[int, ...] = (2, 4)
+    amodal: bool = True
 
     def __post_init__(self):
         if self.channels < 1 or self.levels < 1 or min(self.bottleneck_dilations, default=1) < 1:
@@ -57,7 +64,13 @@ class SegmenterConfig:
     @classmethod
     def from_json(cls, d: dict) -> SegmenterConfig:
         return cls(channels=int(d["channels"]), levels=int(d["levels"]),
-                   bottleneck_dilations=tuple(int(x) for x in d["bottleneck_dilations"]))
+                   bottleneck_dilations=tuple(int(x) for x in d["bottleneck_dilations"]),
+                   amodal=bool(d.get("amodal", False)))
+
+    @property
+    def outputs(self) -> int:
+        """Output channels: the classes, and the amodal carcass logit when `amodal`."""
+        return NUM_CLASSES + int(self.amodal)
 
 
 def _block(c_in: int, c_out: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
@@ -66,7 +79,8 @@ def _block(c_in: int, c_out: int, stride: int = 1, dilation: int = 1) -> nn.Sequ
 
 
 class Segmenter(nn.Module):
-    """(B, 3, H, W) RGB in [0, 1] -> class logits (B, NUM_CLASSES, H, W); any H and W."""
+    """(B, 3, H, W) RGB in [0, 1] -> logits (B, config.outputs, H, W): the classes (softmax),
+    then the amodal carcass (sigmoid) when `config.amodal`; any H and W."""
 
     def __init__(self, config: SegmenterConfig):
         super().__init__()
@@ -77,7 +91,7 @@ class Segmenter(nn.Module):
         self.bottleneck = nn.Sequential(*(_block(c[-1], c[-1], dilation=d)
                                           for d in config.bottleneck_dilations))
         self.up = nn.ModuleList(_block(c[i + 1] + c[i], c[i]) for i in reversed(range(config.levels)))
-        self.head = nn.Conv2d(c[0], NUM_CLASSES, 1)
+        self.head = nn.Conv2d(c[0], config.outputs, 1)
 
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
         h, w = rgb.shape[-2:]
@@ -103,6 +117,11 @@ class Segmenter(nn.Module):
     def class_probabilities(self, image: np.ndarray) -> np.ndarray:
         """Per-pixel class probabilities (H, W, NUM_CLASSES), float32, of a uint8 RGB image
         (H, W, 3) of any size; NfrDrakeError on anything else."""
+        return self._probabilities(image)[..., :NUM_CLASSES]
+
+    @torch.no_grad()
+    def _probabilities(self, image: np.ndarray) -> np.ndarray:
+        """(H, W, config.outputs) float32: the class probabilities, then the amodal carcass's."""
         image = np.asarray(image)
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise NfrDrakeError(f"segmenter: expected a uint8 RGB image (H, W, 3), got {image.dtype} "
@@ -111,7 +130,11 @@ class Segmenter(nn.Module):
             raise NfrDrakeError(f"segmenter: image of {image.shape[1]}x{image.shape[0]} px is too small")
         self.eval()
         x = torch.from_numpy(np.ascontiguousarray(image, np.float32) / 255.0).permute(2, 0, 1)[None]
-        return torch.softmax(self(x), dim=1)[0].permute(1, 2, 0).numpy()
+        logits = self(x)[0]
+        probs = [torch.softmax(logits[:NUM_CLASSES], dim=0)]
+        if self.config.amodal:
+            probs.append(torch.sigmoid(logits[AMODAL_CHANNEL:AMODAL_CHANNEL + 1]))
+        return torch.cat(probs).permute(1, 2, 0).numpy()
 
     def object_mask(self, image: np.ndarray, size: int | None = SEGMENT_PX, box: Box | None = None
                     ) -> np.ndarray:
@@ -120,6 +143,22 @@ class Segmenter(nn.Module):
         image scaled, its aspect kept, and the mask scaled back; None: as it is). With `box`
         (the crop stage, `close_look`): only that rectangle of the image (clipped to it) is
         segmented, scaled to about `size`, and the mask is 0 outside it."""
+        return self._per_pixel(image, size, box, lambda p: 1.0 - p[..., 0])
+
+    def carcass_amodal(self, image: np.ndarray, size: int | None = SEGMENT_PX, box: Box | None = None
+                       ) -> np.ndarray:
+        """Probability that each pixel lies on the target's carcass as if nothing hid it (no
+        clutter, neighbour, arm or front in front of it), (H, W) float32 in [0, 1]; `size` and
+        `box` as in `object_mask`. NfrDrakeError for a model without that output."""
+        if not self.config.amodal:
+            raise NfrDrakeError("segmenter: this model has no amodal carcass output (it was trained "
+                                "before it existed); retrain it (`nfr-drake train-segmenter`, docs/ROOMS.md) "
+                                "or use its visible mask (`object_mask`)")
+        return self._per_pixel(image, size, box, lambda p: p[..., AMODAL_CHANNEL])
+
+    def _per_pixel(self, image: np.ndarray, size: int | None, box: Box | None, pick) -> np.ndarray:
+        """`pick` of the outputs (`_probabilities`, (h, w, outputs) -> (h, w)) over the image, at
+        about `size` px, within `box` (0 outside it); `object_mask` says how."""
         image = np.asarray(image)
         h, w = image.shape[:2]
         if box is not None:
@@ -127,15 +166,15 @@ class Segmenter(nn.Module):
             x1, y1 = min(int(box[2]), w), min(int(box[3]), h)
             mask = np.zeros((h, w), np.float32)
             if x1 - x0 >= 2 and y1 - y0 >= 2:
-                mask[y0:y1, x0:x1] = self.object_mask(image[y0:y1, x0:x1], size)
+                mask[y0:y1, x0:x1] = self._per_pixel(image[y0:y1, x0:x1], size, None, pick)
             return mask
         usable = size is not None and image.ndim == 3 and image.dtype == np.uint8 and min(h, w) >= 2
         scale = size / np.sqrt(h * w) if usable else 1.0
         if abs(scale - 1.0) < 0.02:
-            return 1.0 - self.class_probabilities(image)[..., 0]
+            return np.ascontiguousarray(pick(self._probabilities(image)), np.float32)
         small = cv2.resize(image, (max(round(w * scale), 2), max(round(h * scale), 2)),
                            interpolation=cv2.INTER_AREA if scale < 1.0 else cv2.INTER_LINEAR)
-        mask = 1.0 - self.class_probabilities(small)[..., 0]
+        mask = np.ascontiguousarray(pick(self._probabilities(small)), np.float32)
         return cv2.resize(mask, (w, h), interpolation=cv2.INTER_LINEAR)
 
     def close_look(self, image: np.ndarray, box: Box | None = None, size: int | None = SEGMENT_PX,

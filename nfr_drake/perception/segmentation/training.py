@@ -18,7 +18,13 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.resumable import ResumableRun
 from nfr_drake.perception.segmentation.data import RoomImages, sample_batch
-from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig, save_segmenter
+from nfr_drake.perception.segmentation.model import (
+    AMODAL_CHANNEL,
+    NUM_CLASSES,
+    Segmenter,
+    SegmenterConfig,
+    save_segmenter,
+)
 
 CHECKPOINT_DIR = "checkpoint"
 
@@ -27,13 +33,15 @@ CHECKPOINT_DIR = "checkpoint"
 class SegmenterTrainConfig:
     """Training: `steps` Adam steps of `batch` augmented crops of `crop` px; the learning rate
     decays from `lr` to 0 (cosine); the loss adds `dice_weight` times a soft Dice loss of the
-    object mask to the per-pixel cross-entropy of the classes."""
+    object mask to the per-pixel cross-entropy of the classes, and, for a model with the amodal
+    output, `amodal_weight` times the binary cross-entropy of the amodal carcass."""
 
     steps: int = 3000
     batch: int = 16
     crop: int = 80
     lr: float = 2e-3
     dice_weight: float = 1.0
+    amodal_weight: float = 1.0
     checkpoint_every: int = 100
     seed: int = 0
     threads: int | None = None
@@ -47,14 +55,22 @@ class SegmenterTrainConfig:
             raise ConfigError("segmenter training: crop must be >= 16 px, lr > 0, dice_weight >= 0")
 
 
-def segmentation_loss(logits: torch.Tensor, labels: torch.Tensor, dice_weight: float) -> torch.Tensor:
+def segmentation_loss(logits: torch.Tensor, labels: torch.Tensor, dice_weight: float,
+                      amodal: torch.Tensor | None = None, amodal_weight: float = 1.0) -> torch.Tensor:
     """Cross-entropy of the classes plus `dice_weight` times the soft Dice loss of the object
-    mask (every class but background). logits (B, 4, H, W), labels (B, H, W) int64."""
-    ce = nn.functional.cross_entropy(logits, labels)
-    p = 1.0 - torch.softmax(logits, dim=1)[:, 0]
+    mask (every class but background), plus, given `amodal` (B, H, W) float 0/1, `amodal_weight`
+    times the binary cross-entropy of the amodal carcass logit. logits (B, 4 or 5, H, W), labels
+    (B, H, W) int64."""
+    classes = logits[:, :NUM_CLASSES]
+    ce = nn.functional.cross_entropy(classes, labels)
+    p = 1.0 - torch.softmax(classes, dim=1)[:, 0]
     mask = (labels > 0).float()
     dice = 1.0 - (2.0 * (p * mask).sum() + 1.0) / (p.sum() + mask.sum() + 1.0)
-    return ce + dice_weight * dice
+    loss = ce + dice_weight * dice
+    if amodal is not None:
+        loss = loss + amodal_weight * nn.functional.binary_cross_entropy_with_logits(
+            logits[:, AMODAL_CHANNEL], amodal)
+    return loss
 
 
 def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConfig,
@@ -76,6 +92,9 @@ def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConf
     rng = np.random.default_rng(config.seed)
     data = RoomImages(list(data_dirs))
     model = model or SegmenterConfig()
+    if model.amodal and not data.has_amodal:
+        raise ConfigError("train-segmenter: a room of the data has no amodal carcass labels; run "
+                          "`nfr-drake label-amodal --data ...` first (or train without the amodal output)")
     net = Segmenter(model)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
@@ -85,8 +104,8 @@ def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConf
     out.mkdir(parents=True, exist_ok=True)
 
     def loss() -> torch.Tensor:
-        rgb, labels = sample_batch(data, config.batch, config.crop, rng)
-        return segmentation_loss(net(rgb), labels, config.dice_weight)
+        rgb, labels, amodal = sample_batch(data, config.batch, config.crop, rng, model.amodal)
+        return segmentation_loss(net(rgb), labels, config.dice_weight, amodal, config.amodal_weight)
 
     net.train()
     run.train(config.steps, config.checkpoint_every, loss, "train segmenter")
