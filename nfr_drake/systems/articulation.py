@@ -37,7 +37,7 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
+from pydrake.multibody.tree import JacobianWrtVariable, JointActuatorIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
@@ -112,6 +112,17 @@ class SimulationConfig:
     squeeze_force: float = 40.0
     """Contact grasp: each finger's PD pushes this hard on what it closes on, N (its target lies
     `squeeze_force / Kp` past the closed pads; the Panda hand's continuous force is 70 N)."""
+    second_pull: bool = True
+    """Contact grasp, a straight planned pull (a drawer): once the pull has settled, the robot
+    compares the tool's travel since the fingers closed, from its own joint positions (forward
+    kinematics), with the planned handle travel, and pulls again along the plan's line by the
+    shortfall (`SecondPull`) when it exceeds `second_pull_min` (at most `second_pull_max`)."""
+    second_pull_time: float = 1.0
+    """Time the second pull takes (its ramp, 60%, then settling), s; taken whether or not it pulls."""
+    second_pull_min: float = 0.002
+    second_pull_max: float = 0.02
+    """The smallest shortfall pulled again and the most pulled, m: the hand cannot tell a bar
+    slipping in its fingers from a drawer at its stop, and 3 cm past the stop dragged bars out."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
@@ -120,10 +131,18 @@ class SimulationConfig:
             raise NfrDrakeError(f"simulation: grasp must be one of {', '.join(GRASPS)}, got {self.grasp!r}")
         if self.squeeze_force <= 0.0:
             raise NfrDrakeError("simulation: squeeze_force must be positive")
+        if not 0.0 <= self.second_pull_min <= self.second_pull_max or self.second_pull_time <= 0.0:
+            raise NfrDrakeError("simulation: need 0 <= second_pull_min <= second_pull_max and "
+                                "second_pull_time > 0")
 
     @property
     def contact(self) -> bool:
         return self.grasp == "contact"
+
+    def pulls_again(self, plan: PlanResult) -> bool:
+        """Whether the run takes `second_pull_time` after the opening to pull again: a contact
+        grasp whose planned handle path is straight (`straight_pull`)."""
+        return self.contact and self.second_pull and straight_pull(plan) is not None
 
     def finger_target(self, closed: float) -> float:
         """Each finger's commanded opening when closing on something `closed` m from the centre
@@ -168,6 +187,9 @@ class SimulationResult:
     p_W_tool: np.ndarray = field(repr=False)
     p_W_handle: np.ndarray = field(repr=False)
     grasp: str = "constraint"
+    shortfall: float = float("nan")
+    """The pull's shortfall the robot measured before pulling again (`SecondPull`), m; nan when
+    it did not measure (no straight pull by contact, or no grasp)."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -284,11 +306,100 @@ class CompliantCommand(LeafSystem):
         output.SetFromVector(measured + a * (desired - measured))
 
 
-def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig) -> PiecewisePolynomial:
-    """The plan with a dwell at the grasp and the fingers closing during it; [q; v], 9 + 9 values."""
+_STRAIGHT = 0.003
+"""A planned handle path within this of its chord is a straight pull, m."""
+
+
+def straight_pull(plan: PlanResult) -> np.ndarray | None:
+    """The planned handle travel (last waypoint minus first, W, m, (3,)) when the handle's
+    waypoints lie within `_STRAIGHT` of that line and it is over 1 cm long (a drawer's pull), else
+    None (a door's arc)."""
+    points = np.array([w.p_WH for w in plan.waypoints])
+    travel = points[-1] - points[0]
+    length = np.linalg.norm(travel)
+    if length < 0.01:
+        return None
+    off = (points - points[0]) - np.outer((points - points[0]) @ travel / length**2, travel)
+    return travel if np.linalg.norm(off, axis=1).max() <= _STRAIGHT else None
+
+
+class SecondPull(LeafSystem):
+    """Adds a joint offset to the robot's desired state: none until one is set (`set`), then
+    dq (arm joints, rad) ramped in smoothly over [t_in, t_in + ramp] and, when t_out >= 0, out
+    over [t_out, t_out + ramp_out]; the velocities get the ramp's rate.
+
+    Input port "desired_state" and output port "command": [q; v], 2 * num_positions values (arm
+    joints first). The offset lives in the context (a numeric parameter), set during a run."""
+
+    def __init__(self, num_positions: int):
+        super().__init__()
+        self._n = num_positions
+        self.DeclareNumericParameter(BasicVector(np.r_[np.zeros(NUM_ARM_JOINTS), 0.0, 1.0, -1.0, 1.0]))
+        self.DeclareVectorInputPort("desired_state", 2 * num_positions)
+        self.DeclareVectorOutputPort("command", 2 * num_positions, self._calc)
+
+    def set(self, root_context, dq: np.ndarray, t_in: float, ramp: float, t_out: float = -1.0,
+            ramp_out: float = 1.0) -> None:
+        """Set the offset dq (NUM_ARM_JOINTS,) in the diagram's context `root_context`."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        context.get_mutable_numeric_parameter(0).SetFromVector(np.r_[dq, t_in, ramp, t_out, ramp_out])
+
+    @staticmethod
+    def _ramp(t: float, t0: float, duration: float) -> tuple[float, float]:
+        x = np.clip((t - t0) / duration, 0.0, 1.0)
+        rate = 0.5 * np.pi / duration * np.sin(np.pi * x) if 0.0 < x < 1.0 else 0.0
+        return 0.5 - 0.5 * np.cos(np.pi * x), rate
+
+    def _calc(self, context, output: BasicVector) -> None:
+        desired = self.get_input_port(0).Eval(context).copy()
+        p = context.get_numeric_parameter(0).get_value()
+        dq, (t_in, ramp, t_out, ramp_out) = p[:NUM_ARM_JOINTS], p[NUM_ARM_JOINTS:]
+        if np.any(dq):
+            t = context.get_time()
+            a, a_dot = self._ramp(t, t_in, ramp)
+            if t_out >= 0.0:
+                b, b_dot = self._ramp(t, t_out, ramp_out)
+                a, a_dot = a * (1.0 - b), a_dot * (1.0 - b) - a * b_dot
+            desired[:NUM_ARM_JOINTS] += a * dq
+            desired[self._n:self._n + NUM_ARM_JOINTS] += a_dot * dq
+        output.SetFromVector(desired)
+
+
+def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp: np.ndarray,
+                       q_end: np.ndarray, q_command: np.ndarray, config: SimulationConfig
+                       ) -> tuple[np.ndarray, float]:
+    """The arm joints' offset (NUM_ARM_JOINTS,) that moves the tool by the pull's shortfall along
+    the planned handle `travel` (W, m), and the shortfall (m): the planned length less the tool's
+    travel from `q_grasp` (the fingers just closed) to `q_end` (the pull settled), both measured
+    joint positions of the robot (9,), by forward kinematics in `robot_plant` (the arm alone, as
+    the controller's). The offset is the least-squares joint step at `q_command` (the commanded
+    end) for that translation, the hand's orientation kept; zero below `second_pull_min`, the
+    shortfall clipped to `second_pull_max`."""
+    context = robot_plant.CreateDefaultContext()
+    tool = robot_plant.GetFrameByName(TOOL_FRAME)
+    length = float(np.linalg.norm(travel))
+    u = travel / length
+    tool_at = []
+    for q in (q_grasp, q_end):
+        robot_plant.SetPositions(context, q)
+        tool_at.append(tool.CalcPoseInWorld(context).translation())
+    shortfall = length - float((tool_at[1] - tool_at[0]) @ u)
+    if shortfall < config.second_pull_min:
+        return np.zeros(NUM_ARM_JOINTS), shortfall
+    robot_plant.SetPositions(context, q_command)
+    J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, tool, np.zeros(3),
+                                                robot_plant.world_frame(), robot_plant.world_frame())
+    twist = np.r_[np.zeros(3), min(shortfall, config.second_pull_max) * u]
+    return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], twist, rcond=None)[0], shortfall
+
+
+def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0
+                              ) -> PiecewisePolynomial:
+    """The plan with a dwell at the grasp and the fingers closing during it, held `hold` s longer
+    at its end; [q; v], 9 + 9 values."""
     traj, t_g, dwell = plan.trajectory, plan.t_grasp, config.dwell
     velocity = traj.MakeDerivative()
-    end = plan.duration + dwell + config.settle
+    end = plan.duration + dwell + config.settle + hold
     times = np.unique(np.r_[np.arange(0.0, end, 0.01), t_g, t_g + dwell, end])
 
     def plan_time(t):
@@ -360,15 +471,19 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(clear_of, moving_geometries))
 
-    _controller_plant = add_gravity_compensation(builder, plant, robot, plan.X_WB)  # kept alive here
+    controller_plant = add_gravity_compensation(builder, plant, robot, plan.X_WB)  # kept alive here
     add_joint_friction(builder, plant, joint)
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
-    desired = builder.AddNamedSystem("plan", TrajectorySource(_desired_state_trajectory(plan, fingers)))
+    again = config.second_pull_time if config.pulls_again(plan) else 0.0
+    desired = builder.AddNamedSystem("plan", TrajectorySource(
+        _desired_state_trajectory(plan, fingers, again)))
+    second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
+    builder.Connect(desired.get_output_port(), second_pull.get_input_port())
     t_activate = plan.t_grasp + 0.5 * config.dwell
     stiffness = 1.0 if config.contact else config.grasped_stiffness
     command = builder.AddNamedSystem("compliance", CompliantCommand(
         plant.num_positions(robot), NUM_ARM_JOINTS, t_activate, stiffness))
-    builder.Connect(desired.get_output_port(), command.get_input_port(0))
+    builder.Connect(second_pull.get_output_port(), command.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
     builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
     shut, opened = obj.shut_and_open(joint)
@@ -392,13 +507,21 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     simulator.Initialize()
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
-    end = plan.duration + config.dwell + config.settle
+    t_pulled = plan.duration + config.dwell + config.settle  # the plan's pull has settled
+    end = t_pulled + again
     t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
-    grasped, grasp_offset = False, float("nan")
+    grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
-    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, end])
+    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, t_pull, t_pulled, end])
     for t in samples:
         simulator.AdvanceTo(t)
+        if t == t_pull:
+            q_grasp = plant.GetPositions(plant_context, robot)
+        if t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
+            dq, shortfall = second_pull_offset(
+                controller_plant, straight_pull(plan), q_grasp, plant.GetPositions(plant_context, robot),
+                plan.trajectory.value(plan.trajectory.end_time()).ravel(), config)
+            second_pull.set(context, dq, t_pulled, 0.6 * again)
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
         if not grasped:  # until the grasp: the grip point nearest the tool
@@ -434,7 +557,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
                             float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
-                            config.grasp)
+                            config.grasp, shortfall)
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

@@ -48,6 +48,7 @@ from nfr_drake.planning.place import (
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.systems.articulation import (
     CompliantCommand,
+    SecondPull,
     SimulationConfig,
     SimulationResult,
     _desired_state_trajectory,
@@ -58,8 +59,10 @@ from nfr_drake.systems.articulation import (
     hydroelastic_grip,
     joint_error_text,
     rigid_hydroelastic,
+    second_pull_offset,
     set_arm_gains,
     simulate_articulation,
+    straight_pull,
 )
 from nfr_drake.systems.interior import free_height_above_goal
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
@@ -171,6 +174,8 @@ class PlaceSimulationResult:
     times: np.ndarray = field(repr=False)
     q_object: np.ndarray = field(repr=False)
     p_W_item: np.ndarray = field(repr=False)
+    shortfall: float = float("nan")
+    """The pull's shortfall measured before the second pull (`SimulationResult.shortfall`), m."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -198,23 +203,28 @@ class _Stiffening(CompliantCommand):
 
 @dataclass
 class _Timeline:
-    """Times of the combined run, s: the opening's (grasp switched on, pull from, end), the
-    release of the handle, the item's grasp (switched on) and release, the end."""
+    """Times of the combined run, s: the opening's (grasp switched on, pull from, the planned
+    pull settled, end: after the second pull, `SimulationConfig.second_pull`), the item's grasp
+    (switched on) and release, the end; the hand's backing off the handle (from, duration)."""
 
     t_activate: float
     t_pull: float
+    t_pulled: float
     t_opened: float
     t_item: float
     t_item_release: float
     t_end: float
+    t_back: float
+    back_duration: float
 
 
 def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSimulationConfig,
-                    finger_closed: float, item_half_width: float, finger_item: float
+                    finger_closed: float, item_half_width: float, finger_item: float, again: float = 0.0
                     ) -> tuple[PiecewisePolynomial, _Timeline]:
     """[q; v] of the robot (9 + 9) over the whole run: the opening as `simulate_articulation`
     plays it (none when `open_plan` is None: the arm starts at the place's first positions, the
-    fingers open, and the timeline's opening times are -1), the fingers opening, the segments with
+    fingers open, and the timeline's opening times are -1), `again` s held on the handle (the
+    second pull's time, `SecondPull` adds its motion), the fingers opening, the segments with
     the fingers closing on the item after the first (to its sides in 70% of the dwell, then to
     `finger_item`: a contact grasp does not hit it) and opening after the second, the settling
     time."""
@@ -226,7 +236,7 @@ def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSi
         opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
         t_o = opening.end_time()
     to_pick, carry, retreat = place.segments
-    t1 = t_o + cfg.release
+    t1 = t_o + again + cfg.release
     t2 = t1 + to_pick.duration
     t3 = t2 + cfg.pick_dwell
     t4 = t3 + carry.duration
@@ -252,7 +262,7 @@ def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSi
     def fingers(t: float) -> float:
         ramp = lambda a, b, t0, d: a + np.clip((t - t0) / d, 0.0, 1.0) * (b - a)  # noqa: E731
         if t < t2:
-            return ramp(finger_closed, FINGER_OPEN, t_o, cfg.release)
+            return ramp(finger_closed, FINGER_OPEN, t_o + again, cfg.release)
         if t < t2 + 0.7 * cfg.pick_dwell:
             return ramp(FINGER_OPEN, item_half_width, t2, 0.7 * cfg.pick_dwell)
         if t < t4:
@@ -269,9 +279,10 @@ def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSi
     knots = np.r_[head_t, times]
     values = np.vstack([head, np.hstack([q, v])]).T
     t_g = -1.0 if open_plan is None else open_plan.t_grasp
-    opened = (-1.0, -1.0, -1.0) if open_plan is None else (
-        t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o)
-    timeline = _Timeline(*opened, t2 + 0.5 * cfg.pick_dwell, t4, end)
+    opened = (-1.0, -1.0, -1.0, -1.0) if open_plan is None else (
+        t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o, t_o + again)
+    back = float(to_pick.pieces[0].end_time() - to_pick.pieces[0].start_time())
+    timeline = _Timeline(*opened, t2 + 0.5 * cfg.pick_dwell, t4, end, t1, back)
     return PiecewisePolynomial.FirstOrderHold(knots, values), timeline
 
 
@@ -346,15 +357,18 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeBetween(hand_set, held))
 
-    _controller_plant = add_gravity_compensation(builder, plant, robot, X_WB)  # kept alive here
+    controller_plant = add_gravity_compensation(builder, plant, robot, X_WB)  # kept alive here
     add_joint_friction(builder, plant, joint)
+    again = sim.second_pull_time if open_plan is not None and sim.pulls_again(open_plan) else 0.0
     desired, times = _desired_states(open_plan, place, cfg, sim.finger_target(sim.finger_closed),
-                                     item.width / 2, sim.finger_target(item.width / 2))
+                                     item.width / 2, sim.finger_target(item.width / 2), again)
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
+    second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
+    builder.Connect(source.get_output_port(), second_pull.get_input_port())
     command = builder.AddNamedSystem("compliance", _Stiffening(
         plant.num_positions(robot), NUM_ARM_JOINTS, times.t_activate, times.t_opened,
         1.0 if contact else sim.grasped_stiffness))
-    builder.Connect(source.get_output_port(), command.get_input_port(0))
+    builder.Connect(second_pull.get_output_port(), command.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
     builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
     if meshcat is not None:
@@ -376,9 +390,11 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
     samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_activate,
-                              times.t_opened, times.t_item, times.t_item_release, times.t_end])
+                              times.t_pull, times.t_pulled, times.t_opened, times.t_item,
+                              times.t_item_release, times.t_end])
     samples = samples[samples >= 0.0]
     grip, held_handle, drift, p_item, q_object, q_opened, lifted = 0, [], [], [], [], float("nan"), 0.0
+    shortfall = float("nan")
     for t in samples:
         simulator.AdvanceTo(t)
         X_WT = tool.CalcPoseInWorld(ctx)
@@ -386,6 +402,14 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         if t <= times.t_activate:
             grip = int(np.argmin(np.linalg.norm(grips_B - X_WH.inverse() @ X_WT.translation(), axis=1)))
         p_grip = X_WH @ grips_B[grip]
+        if t == times.t_pull:
+            q_grasp = plant.GetPositions(ctx, robot)
+        if t == times.t_pulled and again and held_handle[0]:  # the robot measures its pull, pulls again
+            dq, shortfall = second_pull_offset(
+                controller_plant, straight_pull(open_plan), q_grasp, plant.GetPositions(ctx, robot),
+                open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel(), sim)
+            second_pull.set(simulator.get_mutable_context(), dq, times.t_pulled, 0.6 * again,
+                            times.t_back, times.back_duration)  # and lets it go as it backs off
         if t == times.t_activate:  # the fingers have closed on the handle
             held_handle = [bool(np.all(np.abs(X_WT.inverse() @ p_grip) <= sim.capture_half_extents))]
             if held_handle[0] and not contact:
@@ -420,7 +444,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
     if opening is not None:
         grasped, q_opened, joint_error = opening.grasped, opening.q_final, opening.joint_error
-        max_drift, opened = opening.max_drift, opening.success
+        max_drift, opened, shortfall = opening.max_drift, opening.success, opening.shortfall
     X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
     goal = scene_object.ground_truth.point("goal", q_final)
     item_error = float(np.linalg.norm(X_WI.translation() - goal))
@@ -434,7 +458,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     return PlaceSimulationResult(sim.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
                                  float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
                                  resting, float(q_final), still_open, opened, success, samples,
-                                 np.array(q_object), np.array(p_item))
+                                 np.array(q_object), np.array(p_item), shortfall)
 
 
 @dataclass
