@@ -248,8 +248,9 @@ def _within_reach(obstacles: list[ObstacleBox], X_WB: RigidTransform) -> list[Ob
 class _Scenes:
     """The planning scenes of one base pose: `approach` (up to the grasp: also an open door's
     panel, `grasp.door_panel_box`), `follow` (once grasped: the door moves with the hand) and
-    `end` (the last waypoint: when a place follows, also the door at the target, which the hand
-    holding its handle may touch and the arm must clear; else `follow`)."""
+    `end` (the last waypoint: also a door at the target, which the hand holding its handle may
+    touch and the rest of the arm must clear: the door swings towards the arm as it opens, and
+    the follow scene has no door; a drawer's is `follow`)."""
 
     approach: PlanningScene
     follow: PlanningScene
@@ -504,8 +505,9 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
     put (a true model's geometry without the moving part); None: the keypoint-derived carcass box.
     must_reach: points in W (m, (M, 3)) the base must stay within `config.place_reach` of
     (horizontally), for a motion after this one, the first in sight past the obstacles and the
-    door open at q_target (a place: the pre-place point, then the goal); the arm then also ends
-    clear of that door. Raises PlanningError naming the constraints that failed.
+    door open at q_target (a place: the pre-place point, then the goal). A door's plan ends with
+    the arm clear of the door at q_target (the hand may touch it). Raises PlanningError naming
+    the constraints that failed.
     """
     config = config or PlannerConfig()
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -518,7 +520,7 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
         onward = config.end_stop_overshoot * handle_tangent(kt, 1.0)
         waypoints.append(replace(end, p_WH=end.p_WH + onward))
     obstacles, door = list(obstacles) if obstacles is not None else [carcass_box(kt)], door_panel_box(kt)
-    door_end = door_panel_box(kt.with_current(q_target)) if must_reach is not None else None
+    door_end = door_panel_box(kt.with_current(q_target))
     failures = []
     bases = [X for z_B in _base_heights(waypoints, config)
              for X in _base_candidates(kt, waypoints, obstacles, config, z_B,
