@@ -1,12 +1,12 @@
 """Amodal carcass labels over the photos of a room dataset: a check that they are right.
 
-    python scripts/amodal_labels_figure.py --data data/rooms/drawer_heldout --rooms 0 1 2 3 \
-        --out docs/images/amodal_labels.png
+    python scripts/amodal_labels_figure.py --data data/rooms/closet_heldout data/rooms/drawer_heldout \
+        --rooms 0 1 2 --out docs/images/amodal_labels.png
 
-Per room one row of its views: the photo with the target's visible pixels (`label.npy`) tinted
-green and the outline of its amodal carcass label (`carcass_amodal.npy`, `nfr-drake label-amodal`)
-in yellow; where the yellow outline runs over clutter, a neighbour, the arm or a front, the label
-holds the carcass that these hide.
+Per room (`rooms` of each dataset) one row of its views: the photo with the target's visible
+pixels (`label.npy`) tinted green and the outline of its amodal carcass label
+(`carcass_amodal.npy`, `nfr-drake label-amodal`) in yellow; where the yellow outline runs over
+clutter, a neighbour, the arm or a front, the label holds the carcass that these hide.
 """
 
 from __future__ import annotations
@@ -35,17 +35,16 @@ def overlay(rgb: np.ndarray, label: np.ndarray, amodal: np.ndarray, scale: int =
     return big.clip(0, 255).astype(np.uint8)
 
 
-def main(data: Path = Path("data/rooms/drawer_heldout"), rooms: list[int] = [0, 1, 2, 3],  # noqa: B006
-         articulation: int = 0, out: Path = Path("amodal_labels.png")) -> None:
-    folders = room_dirs(data)
+def main(data: list[Path] = [Path("data/rooms/drawer_heldout")], rooms: list[int] = [0, 1, 2],  # noqa: B006
+         articulation: int = 0, scale: int = 2, out: Path = Path("amodal_labels.png")) -> None:
     rows = []
-    for i in rooms:
-        rec = ObjectRecord(folders[i])
+    for root, i in [(root, i) for root in data for i in rooms]:
+        rec = ObjectRecord(room_dirs(root)[i])
         amodal = np.load(rec.path / AMODAL_FILE)
         tiles = [overlay(np.asarray(rec.rgb[articulation, v]), np.asarray(rec.label[articulation, v]),
-                         amodal[articulation, v]) for v in range(amodal.shape[1])]
+                         amodal[articulation, v], scale) for v in range(amodal.shape[1])]
         row = np.concatenate([np.pad(t, ((2, 2), (2, 2), (0, 0)), constant_values=255) for t in tiles], 1)
-        cv2.putText(row, f"{data.name} {i}", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
+        cv2.putText(row, f"{root.name} {i}", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
                     cv2.LINE_AA)
         rows.append(row)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -212,10 +212,11 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
 
 def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
                    q_grid: np.ndarray, masks: list[np.ndarray], room_loss: RoomLoss = "background",
-                   keypoint_source: KeypointSource = "head", room: bool = True
-                   ) -> tuple[FitResult, FitOutcome, CaptureSet]:
+                   keypoint_source: KeypointSource = "head", room: bool = True,
+                   carcass: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
-    object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), the
+    object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), or
+    from the carcass's amodal masks `carcass` when given (`carcass_masks`: the box is the carcass), the
     fit runs in that O (the pixels off the masks painted in the training background or left out of
     the image loss, `room_loss`; `room`: the masks are a room segmenter's, the confidence's
     silhouette, see `infer`), and the result's
@@ -223,8 +224,9 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
     images = capture.load_images()
-    estimate = estimate_object_pose([shrunk(m) for m in masks], [f.X_OC for f in capture.frames],
-                                    [f.camera for f in capture.frames], category=fitted.category)
+    estimate = estimate_object_pose([shrunk(m) for m in (masks if carcass is None else carcass)],
+                                    [f.X_OC for f in capture.frames], [f.camera for f in capture.frames],
+                                    category=fitted.category, amodal=carcass is not None)
     X_OW = np.linalg.inv(estimate.X_WO)
     in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
                       capture.gt, capture.extra)
@@ -316,6 +318,19 @@ def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.nd
 
     net, _ = load_segmenter(segmenter)
     return [cv2.resize(net.object_mask(shrunk(image)), image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
+            for image in images]
+
+
+def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray] | None:
+    """The segmenter's amodal carcass probability (H, W) per uint8 RGB image (H, W, 3): the
+    carcass as if nothing hid it (`Segmenter.carcass_amodal`, run as in `object_masks`); None
+    for a model without that output (trained before it existed)."""
+    from nfr_drake.perception.segmentation.model import load_segmenter
+
+    net, _ = load_segmenter(segmenter)
+    if not net.config.amodal:
+        return None
+    return [cv2.resize(net.carcass_amodal(shrunk(image)), image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
             for image in images]
 
 
@@ -517,8 +532,9 @@ def infer_command(
             with a board lying on the floor, a room capture): the object's pose is estimated from
             its masks, the fit runs in that frame and the result's positions are in W.
         masks: with --estimate-pose, the object's masks: "segmenter" (`--segmenter`, a photo of
-            a room; they are also the fit confidence's observed silhouette) or "background" (an
-            object alone before a uniform background).
+            a room; they are also the fit confidence's observed silhouette; the pose comes from
+            its amodal carcass output when it has one) or "background" (an object alone before a
+            uniform background).
         segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
         room_loss: with --estimate-pose, the pixels off the object's mask are painted in the
             training background ("background": the field's silhouette must match the mask) or
@@ -559,8 +575,9 @@ def infer_command(
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
         views = object_masks(cap.load_images(), segmenter if masks == "segmenter" else None)
+        carcass = carcass_masks(cap.load_images(), segmenter) if masks == "segmenter" else None
         result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
-                                              room=masks == "segmenter")
+                                              room=masks == "segmenter", carcass=carcass)
         pose = np.array(result.extra["object_pose"]["X_WO"])
         print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "
               f"{np.degrees(np.arctan2(pose[1, 0], pose[0, 0])):.1f} deg; size (depth x width x "

@@ -71,6 +71,12 @@ class HullConfig:
     """Thickness of the fronts mounted on the carcass (the generators' 15-25 mm)."""
     refine: bool = True
     """Fit a box to the masks from the hull's footprint (`fit_box`); else the hull's box."""
+    outside_weight: float = 2.0
+    """What box off a visible mask costs per pixel (`silhouette_score`): more than the cover it
+    adds, so that the box settles on the carcass and leaves the fronts and handles out."""
+    amodal_outside_weight: float = 1.0
+    """The same for amodal carcass masks: the box models the whole mask, so a pixel belongs in
+    it when its probability exceeds 0.5."""
 
     def __post_init__(self):
         if not 0.0 < self.voxel_m <= self.coarse_voxel_m:
@@ -272,7 +278,8 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
             bounds[0] = (bounds[0][0] + front, bounds[0][1] + front)
         starts = [np.concatenate([b[:3], np.clip(b[3:], [lo for lo, _ in bounds], [hi for _, hi in bounds])])
                   for b in starts]
-        fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras, bounds), toward)
+        weight = config.amodal_outside_weight if amodal else config.outside_weight
+        fitted = _front_facing(fit_box(starts, masks, X_WCs, cameras, bounds, weight), toward)
     return ObjectPoseEstimate.from_box(fitted, front, int(fine.sum()), hull_box)
 
 
@@ -341,11 +348,12 @@ def _front_facing(box: np.ndarray, toward: np.ndarray) -> np.ndarray:
 
 
 def fit_box(starts: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
-            cameras: list[PinholeCamera], bounds: list[tuple[float, float]]) -> np.ndarray:
+            cameras: list[PinholeCamera], bounds: list[tuple[float, float]], outside_weight: float = 2.0
+            ) -> np.ndarray:
     """The floor box (x, y, yaw, depth, width, height) whose silhouettes best lie on the masks
-    (`silhouette_score`) with its depth, width and height within `bounds` ((min, max) each, m;
-    a box outside costs 10 per m): Nelder-Mead from each start (an open door turns the hull's
-    footprint), restarted from its result with a smaller simplex; the best of them."""
+    (`silhouette_score` with `outside_weight`) with its depth, width and height within `bounds`
+    ((min, max) each, m; a box outside costs 10 per m): Nelder-Mead from each start (an open door
+    turns the hull's footprint), restarted from its result with a smaller simplex; the best of them."""
     from scipy.optimize import minimize
 
     masks = [np.clip(np.asarray(m, np.float32), 0.0, 1.0) for m in masks]
@@ -354,7 +362,8 @@ def fit_box(starts: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.nd
     def cost(box: np.ndarray) -> float:
         size = np.clip(box[3:], lo, hi)
         excess = float(np.abs(box[3:] - size).sum())
-        return -silhouette_score(np.concatenate([box[:3], size]), masks, X_WCs, cameras) + 10.0 * excess
+        return -silhouette_score(np.concatenate([box[:3], size]), masks, X_WCs, cameras,
+                                 outside_weight) + 10.0 * excess
 
     fits = []
     for start in starts:

@@ -230,13 +230,17 @@ class NfrPerceptionSystem(LeafSystem):
             return [self._segmenter.object_mask(image) for image in images]
         return [background_mask(image, self._background_rgb) for image in images]
 
-    def _object_pose(self, masks: list[np.ndarray]) -> tuple[RigidTransform, dict, list[str]]:
-        """X_WO (given, or estimated from the object's masks), what the result's extra says of it,
-        and warnings."""
+    def _object_pose(self, masks: list[np.ndarray], images: list[np.ndarray]
+                     ) -> tuple[RigidTransform, dict, list[str]]:
+        """X_WO (given, or estimated from the segmenter's amodal carcass when it has that output,
+        else from the object's masks), what the result's extra says of it, and warnings."""
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
+        amodal = self._segmenter is not None and self._segmenter.config.amodal
+        if amodal:
+            masks = [self._segmenter.carcass_amodal(image) for image in images]
         estimate = estimate_object_pose(masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
-                                        self._hull_config, self._model.category)
+                                        self._hull_config, self._model.category, amodal)
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
                 {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist()},
@@ -246,12 +250,12 @@ class NfrPerceptionSystem(LeafSystem):
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
         masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
         try:
-            X_WO, pose, warnings = self._object_pose(masks)
+            X_WO, pose, warnings = self._object_pose(masks, images)
         except ObjectPoseError:
             if self._segmenter is None or not self._mask_crop:
                 raise
             masks = [self._segmenter.object_mask(image) for image in images]  # the first look
-            X_WO, pose, warnings = self._object_pose(masks)
+            X_WO, pose, warnings = self._object_pose(masks, images)
             warnings.append("the crop stage's masks agree on no object; the segmenter's first look "
                             "gave the pose and the masks")
         X_OW = X_WO.inverse()

@@ -45,8 +45,8 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
     class Stop(Exception):
         pass
 
-    def estimate(masks, X_WCs, cameras, category=None):
-        seen.extend(m.shape for m in masks)
+    def estimate(masks, X_WCs, cameras, category=None, amodal=False):
+        seen.extend((m.shape, float(m.mean()), amodal) for m in masks)
         raise Stop
 
     monkeypatch.setattr(infer, "estimate_object_pose", estimate)
@@ -60,7 +60,13 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
     with pytest.raises(Stop):
         infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
                              np.linspace(0, 1, 3), [np.ones((768, 1024))] * 3)
-    assert seen == [(MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX)] * 3
+    assert seen == [((MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX), 1.0, False)] * 3
+    seen.clear()  # the segmenter's amodal carcass, when given, makes the pose (the box is the carcass)
+    with pytest.raises(Stop):
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
+                             np.linspace(0, 1, 3), [np.ones((768, 1024))] * 3,
+                             carcass=[np.zeros((768, 1024))] * 3)
+    assert seen == [((MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX), 0.0, True)] * 3
 
 
 @pytest.mark.parametrize("room_loss", ["background", "masked"])
