@@ -38,8 +38,9 @@ from nfr_drake.data.rooms import RoomDistribution
 from nfr_drake.perception.object_pose import ObjectPoseError, estimate_object_pose
 
 
-def _alone(category: str, seed: int, index: int, views: int, size: int):
-    """(masks, X_OC (V, 4, 4), camera, q) of an object alone, its labels as masks."""
+def _alone(category: str, seed: int, index: int, views: int, size: int, amodal: bool = False):
+    """(masks, X_OC (V, 4, 4), camera, q) of an object alone, its labels as masks (with `amodal`,
+    its carcass's amodal labels)."""
     from nfr_drake.data.camera_placement import CameraDistribution
     from nfr_drake.data.render import ObjectRenderer
     from nfr_drake.data.room_dataset import SHUT_PROBABILITY
@@ -50,6 +51,12 @@ def _alone(category: str, seed: int, index: int, views: int, size: int):
     q = rng.uniform(0.0, 1.0, obj.num_fronts) * (rng.uniform(size=obj.num_fronts) >= SHUT_PROBABILITY)
     camera = PinholeCamera.from_fov(size, size, math.radians(50.0))
     X_OC = CameraDistribution().sample(rng, views, obj.look_at_target(), obj.swept_bounds(), camera)
+    if amodal:
+        from nfr_drake.data.amodal import amodal_labels
+        from nfr_drake.data.object_records import portable_sdformat
+
+        labels = amodal_labels(portable_sdformat(obj)[0], X_OC[None], camera)[0]
+        return [m.astype(np.float32) for m in labels], X_OC, camera, q
     renderer = ObjectRenderer(obj, camera)
     masks = [(renderer.render(q, X).label > 0).astype(np.float32) for X in X_OC]
     return masks, X_OC, camera, q
@@ -58,8 +65,10 @@ def _alone(category: str, seed: int, index: int, views: int, size: int):
 def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 128, seed: int = 900,
          setting: str = "room", segmenter: Path | None = None, crop: bool = False,
          amodal: bool = False) -> None:
-    if amodal and (crop or setting == "alone"):
-        raise SystemExit("--amodal measures the first-look masks in rooms: no --crop, no --setting alone")
+    if amodal and crop:
+        raise SystemExit("--amodal measures the first look's masks: no --crop")
+    if setting == "alone" and segmenter is not None:
+        raise SystemExit("--setting alone measures the true labels: no --segmenter")
     net = None
     if segmenter is not None:
         from nfr_drake.perception.segmentation.model import load_segmenter
@@ -70,7 +79,7 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
     rows = []
     for i in range(rooms):
         if setting == "alone":
-            masks, X_OC, camera, q = _alone(category, seed, i, views, size)
+            masks, X_OC, camera, q = _alone(category, seed, i, views, size, amodal)
         else:
             arrays, meta, _, _ = render_room_arrays(spec, i)
             camera, q = PinholeCamera.from_json(meta["camera"]), np.array(meta["q"][0])
