@@ -143,7 +143,7 @@ class Segmenter(nn.Module):
         image scaled, its aspect kept, and the mask scaled back; None: as it is). With `box`
         (the crop stage, `close_look`): only that rectangle of the image (clipped to it) is
         segmented, scaled to about `size`, and the mask is 0 outside it."""
-        return self._per_pixel(image, size, box, lambda p: 1.0 - p[..., 0])
+        return self._per_pixel(image, size, box, lambda im: 1.0 - self.class_probabilities(im)[..., 0])
 
     def carcass_amodal(self, image: np.ndarray, size: int | None = SEGMENT_PX, box: Box | None = None
                        ) -> np.ndarray:
@@ -154,11 +154,11 @@ class Segmenter(nn.Module):
             raise NfrDrakeError("segmenter: this model has no amodal carcass output (it was trained "
                                 "before it existed); retrain it (`nfr-drake train-segmenter`, docs/ROOMS.md) "
                                 "or use its visible mask (`object_mask`)")
-        return self._per_pixel(image, size, box, lambda p: p[..., AMODAL_CHANNEL])
+        return self._per_pixel(image, size, box, lambda im: self._probabilities(im)[..., AMODAL_CHANNEL])
 
     def _per_pixel(self, image: np.ndarray, size: int | None, box: Box | None, pick) -> np.ndarray:
-        """`pick` of the outputs (`_probabilities`, (h, w, outputs) -> (h, w)) over the image, at
-        about `size` px, within `box` (0 outside it); `object_mask` says how."""
+        """`pick` (a uint8 RGB image (h, w, 3) -> a probability (h, w)) over the image, at about
+        `size` px, within `box` (0 outside it); `object_mask` says how."""
         image = np.asarray(image)
         h, w = image.shape[:2]
         if box is not None:
@@ -171,10 +171,10 @@ class Segmenter(nn.Module):
         usable = size is not None and image.ndim == 3 and image.dtype == np.uint8 and min(h, w) >= 2
         scale = size / np.sqrt(h * w) if usable else 1.0
         if abs(scale - 1.0) < 0.02:
-            return np.ascontiguousarray(pick(self._probabilities(image)), np.float32)
+            return np.ascontiguousarray(pick(image), np.float32)
         small = cv2.resize(image, (max(round(w * scale), 2), max(round(h * scale), 2)),
                            interpolation=cv2.INTER_AREA if scale < 1.0 else cv2.INTER_LINEAR)
-        mask = np.ascontiguousarray(pick(self._probabilities(small)), np.float32)
+        mask = np.ascontiguousarray(pick(small), np.float32)
         return cv2.resize(mask, (w, h), interpolation=cv2.INTER_LINEAR)
 
     def close_look(self, image: np.ndarray, box: Box | None = None, size: int | None = SEGMENT_PX,
