@@ -232,19 +232,31 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _object_pose(self, masks: list[np.ndarray], images: list[np.ndarray]
                      ) -> tuple[RigidTransform, dict, list[str]]:
-        """X_WO (given, or estimated from the segmenter's amodal carcass when it has that output,
-        else from the object's masks), what the result's extra says of it, and warnings."""
+        """X_WO (given, or estimated from the segmenter's amodal carcass when it has that output;
+        from the object's masks without it, or when the amodal masks give no pose), what the
+        result's extra says of it, and warnings."""
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
-        amodal = self._segmenter is not None and self._segmenter.config.amodal
-        if amodal:
-            masks = [self._segmenter.carcass_amodal(image) for image in images]
+        warnings = []
+        if self._segmenter is not None and self._segmenter.config.amodal:
+            carcass = [self._segmenter.carcass_amodal(image) for image in images]
+            try:
+                return self._estimate(carcass, True, warnings)
+            except ObjectPoseError:
+                warnings.append("the segmenter's amodal carcass masks agree on no object; its visible "
+                                "masks gave the pose")
+        return self._estimate(masks, False, warnings)
+
+    def _estimate(self, masks: list[np.ndarray], amodal: bool, warnings: list[str]
+                  ) -> tuple[RigidTransform, dict, list[str]]:
+        """X_WO estimated from `masks` (`amodal`: the carcass's), what the result's extra says of
+        it, and `warnings` with the size's problem added."""
         estimate = estimate_object_pose(masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
                                         self._hull_config, self._model.category, amodal)
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
-                {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist()},
-                [problem] if problem else [])
+                {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
+                 "amodal": amodal}, warnings + ([problem] if problem else []))
 
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]

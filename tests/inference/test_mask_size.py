@@ -69,6 +69,34 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
     assert seen == [((MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX), 0.0, True)] * 3
 
 
+def test_amodal_masks_that_give_no_pose_fall_back_to_the_visible_ones(monkeypatch):
+    from nfr_drake.perception.object_pose import ObjectPoseError
+
+    asked = []
+
+    class Stop(Exception):
+        pass
+
+    def estimate(masks, X_WCs, cameras, category=None, amodal=False):
+        asked.append(amodal)
+        if amodal:
+            raise ObjectPoseError("object pose: the masks agree on no object")
+        raise Stop
+
+    monkeypatch.setattr(infer, "estimate_object_pose", estimate)
+
+    class _Capture:
+        frames = [type("F", (), {"X_OC": np.eye(4), "camera": None})()] * 3
+
+        def load_images(self):
+            return [np.zeros((60, 80, 3), np.uint8)] * 3
+
+    with pytest.raises(Stop):
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
+                             np.linspace(0, 1, 3), [np.ones((60, 80))] * 3, carcass=[np.zeros((60, 80))] * 3)
+    assert asked == [True, False]
+
+
 @pytest.mark.parametrize("room_loss", ["background", "masked"])
 def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path, room_loss):
     """With "background" the fit sees the photo painted in the training background off the mask

@@ -2,6 +2,7 @@
 masks in the fit, and a pose the masks do not give."""
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from nfr_drake.errors import ConfigError
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
+from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig
 from nfr_drake.systems import perception as perception_module
 from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
 from nfr_drake.systems.pipeline import perception_room, run_scenario
@@ -146,6 +148,14 @@ def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, mon
     from the segmenter's first look, and the result says so."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    real_load = perception_module.load_segmenter
+
+    def visible_only(folder):
+        net, record = real_load(folder)
+        net.config = replace(net.config, amodal=False)  # the pose from the visible masks
+        return net, record
+
+    monkeypatch.setattr(perception_module, "load_segmenter", visible_only)
     monkeypatch.setattr(perception_module, "posed_close_look",
                         lambda net, images, *args: [np.zeros(i.shape[:2], np.float32) for i in images])
     real_estimate = perception_module.estimate_object_pose
@@ -165,6 +175,52 @@ def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, mon
     result = system.get_fit_result_output_port().Eval(system.GetMyContextFromRoot(simulator.get_context()))
     assert any("first look" in w for w in result.extra["warnings"])
     assert result.extra["object_pose"]["estimated"] is True
+
+
+@pytest.mark.parametrize("carcass_gives_a_pose", [True, False])
+def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monkeypatch, carcass_gives_a_pose):
+    """A segmenter with the amodal carcass output: the pose is fitted to it (amodal=True, the box
+    is the carcass), or, when those masks give none, to the visible masks; the fit gets the
+    visible masks."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    carcass = []
+
+    def amodal_net(folder):
+        net = Segmenter(SegmenterConfig(channels=4, levels=2, bottleneck_dilations=(2,), amodal=True))
+        net.carcass_amodal = lambda image: carcass.append(image.shape) or np.full(image.shape[:2], 0.75,
+                                                                                    np.float32)
+        return net, {}
+
+    monkeypatch.setattr(perception_module, "load_segmenter", amodal_net)
+    poses_from = []
+
+    def estimate(masks, X_WCs, cameras, config, category, amodal=False):
+        poses_from.append(([float(m.mean()) for m in masks], amodal))
+        if amodal and not carcass_gives_a_pose:
+            raise ObjectPoseError("object pose: the masks agree on no object")
+        return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.0, 1, np.zeros(6))
+
+    monkeypatch.setattr(perception_module, "estimate_object_pose", estimate)
+    monkeypatch.setattr(perception_module, "posed_close_look",
+                        lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
+    calls = []
+
+    class Stop(Exception):
+        pass
+
+    def infer(*args, **kwargs):
+        calls.append(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(perception_module, "infer", infer)
+    diagram, _ = _perception_scene(model_dir, "room", X_WO, known=False)
+    with pytest.raises(Stop):
+        Simulator(diagram).Initialize()
+    assert carcass == [(32, 32, 3)] * 3
+    expected = [([0.75] * 3, True)] + ([] if carcass_gives_a_pose else [([pytest.approx(0.3)] * 3, False)])
+    assert poses_from == expected
+    assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.3] * 3)  # the fit's masks
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):
