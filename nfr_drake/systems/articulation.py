@@ -117,12 +117,20 @@ class SimulationConfig:
     compares the tool's travel since the fingers closed, from its own joint positions (forward
     kinematics), with the planned handle travel, and pulls again along the plan's line by the
     shortfall (`SecondPull`) when it exceeds `second_pull_min` (at most `second_pull_max`)."""
-    second_pull_time: float = 1.0
-    """Time the second pull takes (its ramp, 60%, then settling), s; taken whether or not it pulls."""
+    second_pull_time: float = 1.5
+    """Time the second pull takes (its ramp, 40%, settling to 80%, then held), s; taken whether or
+    not it pulls."""
     second_pull_min: float = 0.002
     second_pull_max: float = 0.02
     """The smallest shortfall pulled again and the most pulled, m: the hand cannot tell a bar
     slipping in its fingers from a drawer at its stop, and 3 cm past the stop dragged bars out."""
+    pull_to_stop: float = 0.03
+    """A pull planned to the end of travel (q 1, fully open): the second pull goes on this far
+    past the planned end (m), the arm compliant (`pull_to_stop_stiffness`), so the drawer's stop,
+    not the keypoints' predicted travel, ends it; then the arm holds where it came to rest."""
+    pull_to_stop_stiffness: float = 0.1
+    """Fraction of the arm's PD gains during a pull to the stop (about 600 N/m at the tool: some
+    20 N against the stop for 3 cm past it, under the grip's 80 N of friction)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
@@ -134,6 +142,8 @@ class SimulationConfig:
         if not 0.0 <= self.second_pull_min <= self.second_pull_max or self.second_pull_time <= 0.0:
             raise NfrDrakeError("simulation: need 0 <= second_pull_min <= second_pull_max and "
                                 "second_pull_time > 0")
+        if self.pull_to_stop < 0.0 or not 0.0 < self.pull_to_stop_stiffness <= 1.0:
+            raise NfrDrakeError("simulation: need pull_to_stop >= 0 and pull_to_stop_stiffness in (0, 1]")
 
     @property
     def contact(self) -> bool:
@@ -306,8 +316,10 @@ class CompliantCommand(LeafSystem):
         output.SetFromVector(measured + a * (desired - measured))
 
 
-_STRAIGHT = 0.003
-"""A planned handle path within this of its chord is a straight pull, m."""
+_STRAIGHT = (0.003, 0.03)
+"""A planned handle path within the larger of these of its chord (m, and a fraction of its
+length) is a straight pull: a drawer's path from the neural field's keypoints bows 3-5 mm over
+27-34 cm (1-2%), a door's arc opened 14 degrees or more over 3%."""
 
 
 def straight_pull(plan: PlanResult) -> np.ndarray | None:
@@ -320,29 +332,60 @@ def straight_pull(plan: PlanResult) -> np.ndarray | None:
     if length < 0.01:
         return None
     off = (points - points[0]) - np.outer((points - points[0]) @ travel / length**2, travel)
-    return travel if np.linalg.norm(off, axis=1).max() <= _STRAIGHT else None
+    return travel if np.linalg.norm(off, axis=1).max() <= max(_STRAIGHT[0], _STRAIGHT[1] * length) else None
 
 
 class SecondPull(LeafSystem):
     """Adds a joint offset to the robot's desired state: none until one is set (`set`), then
     dq (arm joints, rad) ramped in smoothly over [t_in, t_in + ramp] and, when t_out >= 0, out
-    over [t_out, t_out + ramp_out]; the velocities get the ramp's rate.
+    over [t_out, t_out + ramp_out]; the velocities get the ramp's rate. From t_in to t_soft the
+    arm's gains are scaled by `stiffness` (as `CompliantCommand` does, from the measured state).
 
-    Input port "desired_state" and output port "command": [q; v], 2 * num_positions values (arm
-    joints first). The offset lives in the context (a numeric parameter), set during a run."""
+    Input ports "desired_state" and "measured_state", output port "command": [q; v], 2 *
+    num_positions values (arm joints first). The offset lives in the context (a numeric
+    parameter), set during a run (`pull`, `hold`)."""
 
     def __init__(self, num_positions: int):
         super().__init__()
         self._n = num_positions
-        self.DeclareNumericParameter(BasicVector(np.r_[np.zeros(NUM_ARM_JOINTS), 0.0, 1.0, -1.0, 1.0]))
+        self.DeclareNumericParameter(BasicVector(np.r_[np.zeros(NUM_ARM_JOINTS), 0.0, 1.0, -1.0, 1.0,
+                                                       0.0, 1.0]))
         self.DeclareVectorInputPort("desired_state", 2 * num_positions)
+        self.DeclareVectorInputPort("measured_state", 2 * num_positions)
         self.DeclareVectorOutputPort("command", 2 * num_positions, self._calc)
 
     def set(self, root_context, dq: np.ndarray, t_in: float, ramp: float, t_out: float = -1.0,
-            ramp_out: float = 1.0) -> None:
+            ramp_out: float = 1.0, t_soft: float = 0.0, stiffness: float = 1.0) -> None:
         """Set the offset dq (NUM_ARM_JOINTS,) in the diagram's context `root_context`."""
         context = self.GetMyMutableContextFromRoot(root_context)
-        context.get_mutable_numeric_parameter(0).SetFromVector(np.r_[dq, t_in, ramp, t_out, ramp_out])
+        context.get_mutable_numeric_parameter(0).SetFromVector(
+            np.r_[dq, t_in, ramp, t_out, ramp_out, t_soft, stiffness])
+
+    def pull(self, root_context, robot_plant: MultibodyPlant, plan: PlanResult, q_grasp: np.ndarray,
+             q_now: np.ndarray, config: SimulationConfig, t: float, t_out: float = -1.0,
+             ramp_out: float = 1.0) -> float:
+        """At time t, the planned pull settled, the robot at `q_now` (measured, (9,)): pull again by
+        the measured shortfall (`second_pull_offset`; past the planned end and compliant when the
+        plan pulls to the end of travel, `pull_to_stop`), ramped in over 40% of
+        `second_pull_time`, out from t_out if >= 0. Returns the shortfall, m."""
+        to_stop = plan.waypoints[-1].q >= 1.0
+        q_command = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+        dq, shortfall = second_pull_offset(robot_plant, straight_pull(plan), q_grasp, q_now, q_command,
+                                           config, config.pull_to_stop if to_stop else 0.0)
+        t_soft = t + 0.8 * config.second_pull_time if to_stop else t
+        self.set(root_context, dq, t, 0.4 * config.second_pull_time, t_out, ramp_out, t_soft,
+                 config.pull_to_stop_stiffness)
+        return shortfall
+
+    def hold(self, root_context, q_now: np.ndarray, q_command: np.ndarray) -> None:
+        """From now on, full stiffness and the arm held where it is (`q_now`, measured): the
+        offset becomes q_now - q_command (the plan's end), its ramp-out kept."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        p = context.get_numeric_parameter(0).get_value().copy()
+        p[:NUM_ARM_JOINTS] = (q_now - q_command)[:NUM_ARM_JOINTS]
+        p[NUM_ARM_JOINTS:NUM_ARM_JOINTS + 2] = (context.get_time() - 1.0, 1e-3)  # fully in
+        p[NUM_ARM_JOINTS + 4] = context.get_time()  # the compliant stretch ends
+        context.get_mutable_numeric_parameter(0).SetFromVector(p)
 
     @staticmethod
     def _ramp(t: float, t0: float, duration: float) -> tuple[float, float]:
@@ -353,28 +396,33 @@ class SecondPull(LeafSystem):
     def _calc(self, context, output: BasicVector) -> None:
         desired = self.get_input_port(0).Eval(context).copy()
         p = context.get_numeric_parameter(0).get_value()
-        dq, (t_in, ramp, t_out, ramp_out) = p[:NUM_ARM_JOINTS], p[NUM_ARM_JOINTS:]
+        dq, (t_in, ramp, t_out, ramp_out, t_soft, stiffness) = p[:NUM_ARM_JOINTS], p[NUM_ARM_JOINTS:]
+        t = context.get_time()
         if np.any(dq):
-            t = context.get_time()
             a, a_dot = self._ramp(t, t_in, ramp)
             if t_out >= 0.0:
                 b, b_dot = self._ramp(t, t_out, ramp_out)
                 a, a_dot = a * (1.0 - b), a_dot * (1.0 - b) - a * b_dot
             desired[:NUM_ARM_JOINTS] += a * dq
             desired[self._n:self._n + NUM_ARM_JOINTS] += a_dot * dq
+        if t_in <= t < t_soft and stiffness < 1.0:
+            measured = self.get_input_port(1).Eval(context)
+            arm = np.r_[np.arange(NUM_ARM_JOINTS), self._n + np.arange(NUM_ARM_JOINTS)]
+            desired[arm] = measured[arm] + stiffness * (desired[arm] - measured[arm])
         output.SetFromVector(desired)
 
 
 def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp: np.ndarray,
-                       q_end: np.ndarray, q_command: np.ndarray, config: SimulationConfig
-                       ) -> tuple[np.ndarray, float]:
+                       q_end: np.ndarray, q_command: np.ndarray, config: SimulationConfig,
+                       past: float = 0.0) -> tuple[np.ndarray, float]:
     """The arm joints' offset (NUM_ARM_JOINTS,) that moves the tool by the pull's shortfall along
     the planned handle `travel` (W, m), and the shortfall (m): the planned length less the tool's
     travel from `q_grasp` (the fingers just closed) to `q_end` (the pull settled), both measured
     joint positions of the robot (9,), by forward kinematics in `robot_plant` (the arm alone, as
     the controller's). The offset is the least-squares joint step at `q_command` (the commanded
     end) for that translation, the hand's orientation kept; zero below `second_pull_min`, the
-    shortfall clipped to `second_pull_max`."""
+    shortfall clipped to `second_pull_max`; `past` (m) is added (a pull to the stop: always
+    moves)."""
     context = robot_plant.CreateDefaultContext()
     tool = robot_plant.GetFrameByName(TOOL_FRAME)
     length = float(np.linalg.norm(travel))
@@ -384,12 +432,13 @@ def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp:
         robot_plant.SetPositions(context, q)
         tool_at.append(tool.CalcPoseInWorld(context).translation())
     shortfall = length - float((tool_at[1] - tool_at[0]) @ u)
-    if shortfall < config.second_pull_min:
+    step = (min(shortfall, config.second_pull_max) if shortfall >= config.second_pull_min else 0.0) + past
+    if step <= 0.0:
         return np.zeros(NUM_ARM_JOINTS), shortfall
     robot_plant.SetPositions(context, q_command)
     J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, tool, np.zeros(3),
                                                 robot_plant.world_frame(), robot_plant.world_frame())
-    twist = np.r_[np.zeros(3), min(shortfall, config.second_pull_max) * u]
+    twist = np.r_[np.zeros(3), step * u]
     return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], twist, rcond=None)[0], shortfall
 
 
@@ -478,7 +527,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     desired = builder.AddNamedSystem("plan", TrajectorySource(
         _desired_state_trajectory(plan, fingers, again)))
     second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
-    builder.Connect(desired.get_output_port(), second_pull.get_input_port())
+    builder.Connect(desired.get_output_port(), second_pull.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), second_pull.get_input_port(1))
     t_activate = plan.t_grasp + 0.5 * config.dwell
     stiffness = 1.0 if config.contact else config.grasped_stiffness
     command = builder.AddNamedSystem("compliance", CompliantCommand(
@@ -508,20 +558,22 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
     t_pulled = plan.duration + config.dwell + config.settle  # the plan's pull has settled
-    end = t_pulled + again
+    end, t_held = t_pulled + again, t_pulled + 0.8 * again
     t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
-    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, t_pull, t_pulled, end])
+    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, t_pull, t_pulled,
+                              t_held, end])
     for t in samples:
         simulator.AdvanceTo(t)
         if t == t_pull:
             q_grasp = plant.GetPositions(plant_context, robot)
         if t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
-            dq, shortfall = second_pull_offset(
-                controller_plant, straight_pull(plan), q_grasp, plant.GetPositions(plant_context, robot),
-                plan.trajectory.value(plan.trajectory.end_time()).ravel(), config)
-            second_pull.set(context, dq, t_pulled, 0.6 * again)
+            shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
+                                         plant.GetPositions(plant_context, robot), config, t)
+        if t == t_held and again and grasped:
+            second_pull.hold(context, plant.GetPositions(plant_context, robot),
+                             plan.trajectory.value(plan.trajectory.end_time()).ravel())
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
         if not grasped:  # until the grasp: the grip point nearest the tool

@@ -59,10 +59,8 @@ from nfr_drake.systems.articulation import (
     hydroelastic_grip,
     joint_error_text,
     rigid_hydroelastic,
-    second_pull_offset,
     set_arm_gains,
     simulate_articulation,
-    straight_pull,
 )
 from nfr_drake.systems.interior import free_height_above_goal
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
@@ -364,7 +362,8 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
                                      item.width / 2, sim.finger_target(item.width / 2), again)
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
     second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
-    builder.Connect(source.get_output_port(), second_pull.get_input_port())
+    builder.Connect(source.get_output_port(), second_pull.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), second_pull.get_input_port(1))
     command = builder.AddNamedSystem("compliance", _Stiffening(
         plant.num_positions(robot), NUM_ARM_JOINTS, times.t_activate, times.t_opened,
         1.0 if contact else sim.grasped_stiffness))
@@ -390,7 +389,8 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
     samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_activate,
-                              times.t_pull, times.t_pulled, times.t_opened, times.t_item,
+                              times.t_pull, times.t_pulled, times.t_pulled + 0.8 * again, times.t_opened,
+                              times.t_item,
                               times.t_item_release, times.t_end])
     samples = samples[samples >= 0.0]
     grip, held_handle, drift, p_item, q_object, q_opened, lifted = 0, [], [], [], [], float("nan"), 0.0
@@ -405,11 +405,12 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         if t == times.t_pull:
             q_grasp = plant.GetPositions(ctx, robot)
         if t == times.t_pulled and again and held_handle[0]:  # the robot measures its pull, pulls again
-            dq, shortfall = second_pull_offset(
-                controller_plant, straight_pull(open_plan), q_grasp, plant.GetPositions(ctx, robot),
-                open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel(), sim)
-            second_pull.set(simulator.get_mutable_context(), dq, times.t_pulled, 0.6 * again,
-                            times.t_back, times.back_duration)  # and lets it go as it backs off
+            shortfall = second_pull.pull(simulator.get_mutable_context(), controller_plant, open_plan,
+                                         q_grasp, plant.GetPositions(ctx, robot), sim, t, times.t_back,
+                                         times.back_duration)  # and lets it go as it backs off
+        if t == times.t_pulled + 0.8 * again and again and held_handle[0]:
+            second_pull.hold(simulator.get_mutable_context(), plant.GetPositions(ctx, robot),
+                             open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel())
         if t == times.t_activate:  # the fingers have closed on the handle
             held_handle = [bool(np.all(np.abs(X_WT.inverse() @ p_grip) <= sim.capture_half_extents))]
             if held_handle[0] and not contact:
