@@ -3,7 +3,9 @@
 A tiny U-Net (`model.Segmenter`) trained on Drake renders of objects in random rooms
 (`nfr_drake.data.rooms`, `nfr-drake generate-rooms`) labels each pixel as background, carcass,
 moving part or handle of the target; `Segmenter.object_mask(image)` is the probability that a
-pixel shows the object, (H, W), for a uint8 RGB image of any size. Files of a model folder
+pixel shows the object, (H, W), for a uint8 RGB image of any size, and
+`Segmenter.carcass_amodal(image)` that it lies on the target's carcass as if nothing hid it
+(trained on the amodal labels of `nfr_drake.data.amodal`). Files of a model folder
 (`models/segmenter/`): `model.safetensors`, `config.json` (architecture and training record),
 `MODEL_CARD.md`; nothing is ever unpickled. Results and failure cases: docs/ROOMS.md.
 
