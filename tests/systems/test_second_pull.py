@@ -34,6 +34,11 @@ def test_a_straight_handle_path_is_a_pull_and_an_arc_is_not():
     arc = [[0.5 + 0.4 * np.sin(a), 0.4 * (1 - np.cos(a)), 0.4] for a in angles]
     assert straight_pull(_plan(arc)) is None
     assert straight_pull(_plan([[0.5, 0.1, 0.4], [0.505, 0.1, 0.4]])) is None  # no travel to speak of
+    # A fitted drawer path bowing 5 mm over 27 cm is a pull; a door swung 20 degrees is not.
+    bowed = [[0.5 + 0.03 * k, 0.1 + 0.005 * np.sin(np.pi * k / 9), 0.4] for k in range(10)]
+    assert straight_pull(_plan(bowed)) is not None
+    swung = [[0.5 + 0.4 * np.sin(a), 0.4 * (1 - np.cos(a)), 0.4] for a in np.radians(np.linspace(0, 20, 10))]
+    assert straight_pull(_plan(swung)) is None
 
 
 @pytest.fixture(scope="module")
