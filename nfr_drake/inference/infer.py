@@ -137,13 +137,21 @@ image loss ("masked"; the field may then grow where the mask is not: an open doo
 carcass)."""
 
 
+PAINT_THRESHOLD = 0.5
+"""Object probability above which `paint_background` keeps a pixel of the photo (the segmenter's
+decision threshold, at which its masks' IoU is measured)."""
+
+
 def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
-    """Each uint8 RGB image (H, W, 3) blended into `background_rgb` (in [0, 1]) by its object
-    mask (H, W) in [0, 1]: m image + (1 - m) background, so that a photo of a room looks like the
-    training renders of the object alone wherever the mask holds."""
-    background = 255.0 * np.asarray(background_rgb, np.float32)
-    return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
+    """Each uint8 RGB image (H, W, 3) with the pixels off its object mask (H, W) in [0, 1] (at
+    most `PAINT_THRESHOLD`) painted in `background_rgb` (in [0, 1]) and those on it kept as they
+    are, so that a photo of a room looks like the training renders of the object alone. Not a
+    blend by the mask: an unsure mask's blend leaves floor and wall showing faintly through the
+    background, which the field renders as more object (a drawer fitted open) and on which the
+    handle detector fires (docs/ROOMS.md, "Why drawers fail in rooms")."""
+    background = np.round(255.0 * np.asarray(background_rgb, np.float32)).astype(np.uint8)
+    return [np.where((m > PAINT_THRESHOLD)[..., None], image, background).astype(np.uint8)
             for image, m in zip(images, masks, strict=True)]
 
 
