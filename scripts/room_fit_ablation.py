@@ -1,0 +1,222 @@
+"""Which stage loses an object's fit in a room: the pipeline's room photos fitted stage by stage.
+
+    OMP_NUM_THREADS=1 python scripts/room_fit_ablation.py --category drawer --seed 200 --objects 0 3 8
+
+For each object of the seed, the perception diagram of `nfr-drake eval-pipeline --perceive room
+--object-pose estimated` (`pipeline.perception_simulator`: ten 128 px cameras around a coarse
+look, the held-out room) photographs it in its room; the same cameras photograph it alone before
+the training background (training lights), and alone under the room's lights (the room's
+geometry left out). The true visible mask: the alone photo's pixels off the background where the
+room's depth agrees with the alone depth (within 2 cm: not hidden by the arm or clutter).
+Settings, each one fit (`infer`, the scenario's fit options) in the frame O of the pose named:
+
+- ``alone``: the alone photos, the true pose (the paper's setting);
+- ``alone_roomlight``: alone under the room's lights, the true pose;
+- ``true_mask``: the room photos painted in the training background off the true visible mask, the
+  true pose;
+- ``seg_mask``: painted off the segmenter's masks as the pipeline makes them (crop stage;
+  `paint_background`: the pixels at p <= 0.5 painted, the rest kept), the true pose;
+- ``seg_mask_nodet``: ``seg_mask`` without the handle detector's sighting;
+- ``seg_mask_masked``: ``seg_mask`` with the pixels off the mask left out of the loss instead;
+- ``pipeline``: ``seg_mask`` in the pose the pipeline estimates (the amodal carcass);
+- ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
+  into the background by the mask's probability (m photo + (1 - m) background, the painting
+  before commit f4d43af); ``seg_mask_blend_nodet``: ``seg_mask_blend`` without the handle
+  detector's sighting.
+
+Per setting: keypoint RMSE at the observed state and handle error (cm, in W), q error, the
+handle detector's triangulated handle error (cm; nan when fewer than 3 views agree), the fit's
+seconds. Per object: the detector's handle pixels (p > 0.5) on the raw room photos and the share
+of them off the true (whole) silhouette, and the object's extent in the photos (its silhouette's
+bounding box's longer side over the image side, median over the views). Prints a line per
+setting and object, then medians; `--csv` writes the rows.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import math
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+from unittest import mock
+
+import cv2
+import numpy as np
+import torch
+import tyro
+from pydrake.math import RigidTransform
+
+from nfr_drake.cpu import set_torch_threads
+from nfr_drake.data.capture import CaptureFrame, CaptureSet
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
+from nfr_drake.data.rooms import Room
+from nfr_drake.eval.pipeline_eval import object_scenario
+from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import infer, paint_background
+from nfr_drake.perception.handle_triangulation import locate_handle
+from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
+from nfr_drake.systems.pipeline import perception_simulator
+from nfr_drake.systems.scenario import Scenario
+from nfr_drake.world.keypoints import KeypointTrajectory
+
+SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
+            "pipeline", "seg_mask_blend", "seg_mask_blend_nodet", "pipeline_blend")
+VISIBLE_DEPTH_M = 0.02
+"""A silhouette pixel is visible in the room when the room's depth there is within this of the
+object's alone."""
+
+
+def shots(scenario: Scenario, room_geometry: bool = True):
+    """Colour (H, W, 3) uint8 and depth (H, W) m photos of the scenario's perception cameras, and
+    its perception system; `room_geometry` False: the room's lights without its geometry."""
+    with mock.patch.object(Room, "add_to", Room.add_to if room_geometry else lambda *a, **k: None):
+        simulator, perception = perception_simulator(scenario, scenario.sample_object())
+    diagram, context = simulator.get_system(), simulator.get_context()
+    colour, depth = [], []
+    for i in range(len(perception.cameras)):
+        sensor = diagram.GetSubsystemByName(f"nfr_camera_{i}")
+        sensor_context = sensor.GetMyContextFromRoot(context)
+        colour.append(sensor.color_image_output_port().Eval(sensor_context).data[..., :3].copy())
+        depth.append(sensor.depth_image_32F_output_port().Eval(sensor_context).data[..., 0].copy())
+    return colour, depth, perception
+
+
+def blend(images: list[np.ndarray], masks: list[np.ndarray]) -> list[np.ndarray]:
+    """Each photo blended into the training background by its mask: m photo + (1 - m) background."""
+    background = 255.0 * np.asarray(DEFAULT_BACKGROUND_RGB, np.float32)
+    return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
+            for image, m in zip(images, masks, strict=True)]
+
+
+def handle_error_cm(handle_O, p_O: np.ndarray) -> float:
+    """Distance (cm) of a triangulated handle from the true one p_O (3,), both in the fit's O; nan
+    without a handle."""
+    return math.nan if handle_O is None else 100.0 * float(np.linalg.norm(handle_O.p_O - p_O))
+
+
+def capture_in(X_WO: RigidTransform, X_WCs: list[RigidTransform], cameras: list) -> CaptureSet:
+    """The cameras as a capture set with their poses in O (the object at X_WO)."""
+    X_OW = X_WO.inverse()
+    return CaptureSet(Path("cameras"), [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), c)
+                                        for i, (X_WC, c) in enumerate(zip(X_WCs, cameras, strict=True))])
+
+
+def pose_error(X_WO: RigidTransform, X_WO_hat: RigidTransform | None) -> tuple[float, float]:
+    """Position (cm, on the floor) and yaw (degrees) error of X_WO_hat; inf without one."""
+    if X_WO_hat is None:
+        return math.inf, math.inf
+    d = X_WO.inverse() @ X_WO_hat
+    R = d.rotation().matrix()
+    return 100.0 * float(np.linalg.norm(d.translation()[:2])), abs(math.degrees(math.atan2(R[1, 0], R[0, 0])))
+
+
+def median(values: list[float]) -> float:
+    """Median of the values that are not nan (nan when none is)."""
+    kept = [v for v in values if not math.isnan(v)]
+    return float(np.median(kept)) if kept else math.nan
+
+
+def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (0, 3, 8),
+         settings: tuple[str, ...] = SETTINGS, csv_path: Path | None = None, threads: int = 1) -> None:
+    set_torch_threads(threads)
+    base = Scenario(category=category, model=f"models/{category}", seed=seed, object_pose="estimated",
+                    perceive="room", fit=FitConfig(preset="fast"), min_confidence=0.0)
+    rows = []
+    for index in objects:
+        started = time.perf_counter()
+        scenario = object_scenario(base, index)
+        obj = scenario.sample_object()
+        room, room_depth, perception = shots(scenario)
+        lit, _, _ = shots(scenario, room_geometry=False)
+        alone, alone_depth, _ = shots(replace(scenario, perceive="alone"))
+        fitted = perception._model
+        whole = [background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5 for image in alone]
+        visible = [(w & (np.abs(d_room - d_alone) < VISIBLE_DEPTH_M)).astype(np.float32)
+                   for w, d_room, d_alone in zip(whole, room_depth, alone_depth, strict=True)]
+        seg = perception._masks(room)
+        X_WO = scenario.X_WO
+        try:
+            X_WO_hat, pose, _ = perception._object_pose(seg, room)
+        except ObjectPoseError:  # the pipeline plans nothing; its row is left out
+            X_WO_hat, pose = None, {"amodal": None}
+        truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
+        handle_W = truth.point("handle", truth.q_current)
+        runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
+                "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
+                "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
+                "seg_mask_nodet": (paint_background(room, seg), seg, X_WO, False, False),
+                "seg_mask_masked": (room, seg, X_WO, True, True),
+                "pipeline": (paint_background(room, seg), seg, X_WO_hat, False, True),
+                "seg_mask_blend": (blend(room, seg), seg, X_WO, False, True),
+                "seg_mask_blend_nodet": (blend(room, seg), seg, X_WO, False, False),
+                "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True)}
+        detector = fitted.handle_detector
+        maps = detector.detect(room)
+        fired = [m.probability > 0.5 for m in maps]
+        near = [cv2.dilate(w.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0 for w in whole]
+        fired_px = sum(int(f.sum()) for f in fired)
+        off = sum(int((f & ~n).sum()) for f, n in zip(fired, near, strict=True))
+        sides = [max(np.ptp(r), np.ptp(c)) / max(w.shape) for w in whole if (rc := np.nonzero(w))[0].size
+                 for r, c in [rc]]
+        pose_cm, pose_deg = pose_error(X_WO, X_WO_hat)
+        common = {"index": index, "pose_cm": pose_cm, "pose_deg": pose_deg,
+                  "amodal_pose": pose.get("amodal"), "detector_px_room": fired_px,
+                  "detector_off_object": off / fired_px if fired_px else math.nan,
+                  "extent": float(np.median(sides)),
+                  "visible_share": float(sum(v.sum() for v in visible) / max(1, sum(w.sum() for w in whole)))}
+        for name in settings:
+            images, masks, X, masked, use_detector = runs[name]
+            if X is None:
+                continue
+            cap = capture_in(X, perception.camera_poses, perception.cameras)
+            t0 = time.perf_counter()
+            config = replace(scenario.fit, handle_detector=use_detector)
+            result, _ = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
+                              masked_loss=masked, room=masks is not None)
+            seconds = time.perf_counter() - t0
+            R, t = X.rotation().matrix(), X.translation()
+            names = [n for n in truth.names if n in result.keypoints]
+            predicted = np.stack([R @ result.keypoints[n] + t for n in names])
+            true_now = np.stack([truth.point(n, truth.q_current) for n in names])
+            X_OW = X.inverse()
+            sighted = locate_handle(detector.detect(images), cap.frames) if use_detector else None
+            row = {**common, "setting": name, "q_true": scenario.q_start, "q": result.q,
+                   "q_error": abs(result.q - scenario.q_start),
+                   "keypoint_rmse_cm": 100 * float(np.sqrt(np.mean(np.sum((predicted - true_now) ** 2, -1)))),
+                   "handle_cm": 100 * float(np.linalg.norm(predicted[names.index("handle")] - handle_W)),
+                   "sighting_cm": handle_error_cm(sighted, X_OW.multiply(handle_W)),
+                   "sighting_views": 0 if sighted is None else len(sighted.views), "seconds": seconds}
+            rows.append(row)
+            print(f"{category} {index} {name:16s} q {result.q:.3f} (true {scenario.q_start:.2f}); keypoints "
+                  f"{row['keypoint_rmse_cm']:.2f} cm, handle {row['handle_cm']:.2f} cm; detector's handle "
+                  f"{row['sighting_cm']:.1f} cm ({row['sighting_views']} views); {seconds:.0f} s", flush=True)
+        print(f"{category} {index}: pose {common['pose_cm']:.2f} cm {common['pose_deg']:.2f} deg (amodal "
+              f"{common['amodal_pose']}); extent {common['extent']:.2f} of the image side; visible share "
+              f"of the silhouette {common['visible_share']:.2f}; detector on the raw room photos "
+              f"{fired_px} px, {100 * common['detector_off_object']:.0f} % off the object "
+              f"({time.perf_counter() - started:.0f} s)", flush=True)
+    print(f"{category}, objects {list(objects)} of seed {seed}, medians (handle within 2 cm: count; "
+          "shut fitted open: q error above 0.1):")
+    for name in settings:
+        sub = [r for r in rows if r["setting"] == name]
+        med = lambda key, sub=sub: median([r[key] for r in sub])  # noqa: E731
+        print(f"  {name:16s} keypoints {med('keypoint_rmse_cm'):.2f} cm, handle {med('handle_cm'):.2f} cm, "
+              f"q error {med('q_error'):.3f}, detector's handle {med('sighting_cm'):.1f} cm, "
+              f"handle within 2 cm {sum(r['handle_cm'] <= 2 for r in sub)} / {len(sub)}, q error above 0.1 "
+              f"{sum(r['q_error'] > 0.1 for r in sub)}, detector's handle within 2 cm "
+              f"{sum(r['sighting_cm'] <= 2 for r in sub)} "
+              f"(none {sum(math.isnan(r['sighting_cm']) for r in sub)})")
+    if csv_path is not None:
+        csv_path.parent.mkdir(parents=True, exist_ok=True)
+        with open(csv_path, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, torch threads {torch.get_num_threads()}")
+
+
+if __name__ == "__main__":
+    tyro.cli(main)
