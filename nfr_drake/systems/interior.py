@@ -33,7 +33,9 @@ def free_height_above_goal(obj: ArticulatedObject, X_WO: RigidTransform, q: floa
     in [0, 1]) as seen from a camera `LOOK_OUT` in front of the front plane (`front_distance` m from
     the goal along `out`, the front's outward horizontal unit normal, (3,) in W), `LOOK_HEIGHT`
     above the goal, looking in level: the lowest surface seen in the vertical column of radius
-    `COLUMN_RADIUS` about the goal, more than 1 cm above it, less the goal's height, m; when
+    `COLUMN_RADIUS` about the goal, above the camera (a level camera sees a shelf's underside
+    above itself; what it sees below is the floor's top, over the goal where the goal lies low:
+    1.5 cm for a fitted goal of closet 14 of capture seed 200), less the goal's height, m; when
     nothing is seen there, the height the view reaches at the column's near side (a shelf above
     it may be there)."""
     out = np.asarray(out, dtype=float) * [1.0, 1.0, 0.0]
@@ -52,7 +54,7 @@ def free_height_above_goal(obj: ArticulatedObject, X_WO: RigidTransform, q: floa
     p_W = (X_WC.rotation().matrix() @ p_C.T).T + p_WC
     near = np.hypot(*(p_W[:, :2] - np.asarray(goal)[:2]).T) <= COLUMN_RADIUS
     above = p_W[near, 2] - goal[2]
-    above = above[above > 0.01]
+    above = above[above > LOOK_HEIGHT]
     if above.size:
         return float(above.min())
     return LOOK_HEIGHT + (front_distance + LOOK_OUT - COLUMN_RADIUS) * cam.cy / cam.fy

@@ -31,3 +31,20 @@ def test_the_look_sees_the_lowest_shelf_over_the_goal(shelves):
         assert seen == pytest.approx(underside - goal[2], abs=0.005)
     else:
         assert 0.2 <= seen <= H - 2 * t + 1e-6
+
+
+@pytest.mark.parametrize("low", [0.0, 0.015, 0.025])
+def test_a_goal_fitted_below_the_floor_does_not_see_the_floor_as_a_shelf(low):
+    """A fitted goal up to 2.5 cm below the true inner floor (closet 14 of capture seed 200: the
+    look saw the floor's top 1.5 cm over its fitted goal and the place was refused): the free
+    height is still the shelf's underside over the goal, m."""
+    for seed in range(60):
+        obj = sample_closet(np.random.default_rng(seed), ClosetRanges(height=(0.45, 0.7)))
+        if obj.params["shelves"] == 1:
+            break
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    goal = kt.point("goal", 0.6) - [0.0, 0.0, low]
+    _, opening = compartment_entry(kt, 0.6)
+    seen = free_height_above_goal(obj, RigidTransform(), 0.6, goal, front_normal(kt, 0.6), opening)
+    t, H = obj.params["panel_thickness"], obj.params["height"]
+    assert seen == pytest.approx(t + (H - 2 * t) / 2 - t / 2 - goal[2], abs=0.005)
