@@ -486,7 +486,11 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
                                                duration))
         options = SolverOptions()
         options.SetOption(SnoptSolver.id(), "Major iterations limit", 500)
-        result = SnoptSolver().Solve(prog, None, options)
+        try:
+            result = SnoptSolver().Solve(prog, None, options)
+        except RuntimeError as err:  # FCL's distance query can fail on a degenerate pair of shapes
+            added, failed = [], [f"collision query error in the solver ({str(err).splitlines()[0][:80]})"]
+            continue
         if result.is_success():
             traj = trajopt.ReconstructTrajectory(result)
             dense = np.linspace(1.0 / samples, 1.0, 4 * samples - 3)  # from the first sample on

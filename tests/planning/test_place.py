@@ -262,3 +262,32 @@ def test_a_carried_item_keeps_its_clearance_between_collision_samples():
                     if any("held" in query.inspector().GetName(g) for g in (p.id_A, p.id_B))]
             closest = min([closest, *held])
     assert closest >= 0.5 * PlaceConfig().min_distance - 1e-4
+
+
+def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkeypatch):
+    """FCL's distance query can raise inside SNOPT on a degenerate pair of capsules (drawer 25 of
+    capture seed 201 stopped an evaluation with a traceback): the piece fails, the plan raises a
+    PlanningError naming it."""
+    import nfr_drake.planning.place as place_module
+    from nfr_drake.planning.planner import PlanningError
+
+    real = place_module.SnoptSolver
+
+    class Failing(real):
+        def Solve(self, prog, *args):
+            if prog.num_vars() > 50:  # a trajectory's program, not an IK's
+                raise RuntimeError("Exception while evaluating SNOPT costs and constraints: 'Error with "
+                                   "configuration\n  Original error message: ...'")
+            return super().Solve(prog, *args)
+
+    monkeypatch.setattr(place_module, "SnoptSolver", Failing)
+    obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    item = sample_item(np.random.default_rng(3))
+    opening = plan_articulation(kt, 1.0, config=PlannerConfig(place_reach=PLACE_REACH["drawer"][1]),
+                                must_reach=place_reach_points(kt, 1.0, item))
+    fixed, moving = compartment_obstacles(kt, 1.0)
+    table, X_WI = table_beside(opening.X_WB, [*fixed, *moving], ITEM_REACH["top"])
+    with pytest.raises(PlanningError, match="collision query error in the solver"):
+        plan_place(opening.X_WB, opening.trajectory.value(opening.duration).ravel(),
+                   place_problem(kt, 1.0, item, X_WI, table), handle=opening.waypoints[-1])
