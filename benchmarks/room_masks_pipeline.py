@@ -21,7 +21,6 @@ mask's bounding box over the image side, and its area over the image's, per phot
 
 from __future__ import annotations
 
-import csv
 import datetime
 import math
 import os
@@ -33,6 +32,7 @@ import numpy as np
 import tyro
 
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
+from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask, estimate_object_pose
 from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.evaluation import mask_iou
@@ -119,11 +119,7 @@ def main(category: str = "closet", n: int = 20, seed: int = 200, segmenter: Path
         print(f"  {name:6s} mask IoU {iou:.3f}; pose {cm:.2f} cm, {deg:.2f} deg; within 2 cm and 2 deg "
               f"{within} / {len(rows)}")
     if csv_path is not None:
-        csv_path.parent.mkdir(parents=True, exist_ok=True)
-        with open(csv_path, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        write_rows_csv(csv_path, rows)
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, segmenter {segmenter}")
 
 

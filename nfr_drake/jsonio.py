@@ -1,7 +1,8 @@
-"""Reading JSON files with one clear error for a missing or malformed file."""
+"""Reading JSON files with one clear error for a missing or malformed file; writing result rows as CSV."""
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -19,3 +20,14 @@ def read_json(path: str | Path, error: type[NfrDrakeError], what: str = "file"):
         raise error(f"{path}: cannot read the {what} ({err.strerror})") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise error(f"{path}: malformed JSON ({err})") from None
+
+
+def write_rows_csv(path: str | Path, rows: list[dict]) -> None:
+    """Rows (dicts with the same keys, in the first row's order) as a CSV file with a header; the
+    parent folder is made."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)

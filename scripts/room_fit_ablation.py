@@ -34,7 +34,6 @@ setting and object, then medians; `--csv` writes the rows.
 
 from __future__ import annotations
 
-import csv
 import datetime
 import math
 import os
@@ -56,6 +55,7 @@ from nfr_drake.data.rooms import Room
 from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import infer, paint_background
+from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.perception.handle_triangulation import locate_handle
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
 from nfr_drake.systems.pipeline import perception_simulator
@@ -210,11 +210,7 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
               f"{sum(r['sighting_cm'] <= 2 for r in sub)} "
               f"(none {sum(math.isnan(r['sighting_cm']) for r in sub)})")
     if csv_path is not None:
-        csv_path.parent.mkdir(parents=True, exist_ok=True)
-        with open(csv_path, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        write_rows_csv(csv_path, rows)
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, torch threads {torch.get_num_threads()}")
 
 

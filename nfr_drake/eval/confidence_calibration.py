@@ -13,7 +13,6 @@ OUT/features.csv, OUT/confidence.json, OUT/report.md and OUT/calibration.png, an
 
 from __future__ import annotations
 
-import csv
 import datetime
 import math
 import os
@@ -45,6 +44,7 @@ from nfr_drake.inference.confidence import (
 )
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import FittedModel
+from nfr_drake.jsonio import write_rows_csv
 
 TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_view", "one_minus"),
          ("edge_contact", "identity"), ("sighting_missing", "identity"),
@@ -387,10 +387,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
     rows = featurize(lines)
     failed = [line for line in lines if line["handle_error_m"] is None]
-    with open(out / "features.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows_csv(out / "features.csv", rows)
     command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
     calib_folder = calibration_captures or data / "furniture_calib"
     data_text = (f"calibration split: {calib_folder} (capture seed 500), "
