@@ -38,6 +38,18 @@ def test_segmenter_sees_shrunk_photos_and_masks_keep_the_photo_size(monkeypatch,
     assert masks[0][:, :500].min() > 0.99 and masks[0][:, 524:].max() < 0.01
 
 
+def _three_views(height: int, width: int):
+    """A stand-in capture of three black (height, width) photos, all at X_OC = identity."""
+
+    class _Capture:
+        frames = [type("F", (), {"X_OC": np.eye(4), "camera": None})()] * 3
+
+        def load_images(self):
+            return [np.zeros((height, width, 3), np.uint8)] * 3
+
+    return _Capture()
+
+
 def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
     """Ten 1024 px masks made the visual hull take minutes: the estimate gets them at MASK_SIZE_PX."""
     seen = []
@@ -51,19 +63,13 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
 
     monkeypatch.setattr(infer, "estimate_object_pose", estimate)
 
-    class _Capture:
-        frames = [type("F", (), {"X_OC": np.eye(4), "camera": None})()] * 3
-
-        def load_images(self):
-            return [np.zeros((768, 1024, 3), np.uint8)] * 3
-
     with pytest.raises(Stop):
-        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _three_views(768, 1024), None,
                              np.linspace(0, 1, 3), [np.ones((768, 1024))] * 3)
     assert seen == [((MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX), 1.0, False)] * 3
     seen.clear()  # the segmenter's amodal carcass, when given, makes the pose (the box is the carcass)
     with pytest.raises(Stop):
-        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _three_views(768, 1024), None,
                              np.linspace(0, 1, 3), [np.ones((768, 1024))] * 3,
                              carcass=[np.zeros((768, 1024))] * 3)
     assert seen == [((MASK_SIZE_PX * 3 // 4, MASK_SIZE_PX), 0.0, True)] * 3
@@ -85,14 +91,8 @@ def test_amodal_masks_that_give_no_pose_fall_back_to_the_visible_ones(monkeypatc
 
     monkeypatch.setattr(infer, "estimate_object_pose", estimate)
 
-    class _Capture:
-        frames = [type("F", (), {"X_OC": np.eye(4), "camera": None})()] * 3
-
-        def load_images(self):
-            return [np.zeros((60, 80, 3), np.uint8)] * 3
-
     with pytest.raises(Stop):
-        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _Capture(), None,
+        infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _three_views(60, 80), None,
                              np.linspace(0, 1, 3), [np.ones((60, 80))] * 3, carcass=[np.zeros((60, 80))] * 3)
     assert asked == [True, False]
 
