@@ -591,8 +591,9 @@ def infer_command(
         if masks == "segmenter" and not (segmenter / "config.json").is_file():
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
-        views = object_masks(cap.load_images(), segmenter if masks == "segmenter" else None)
-        carcass = carcass_masks(cap.load_images(), segmenter) if masks == "segmenter" else None
+        photos = cap.load_images()
+        views = object_masks(photos, segmenter if masks == "segmenter" else None)
+        carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
         result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
                                               room=masks == "segmenter", carcass=carcass)
         pose = np.array(result.extra["object_pose"]["X_WO"])
