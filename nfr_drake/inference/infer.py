@@ -59,7 +59,7 @@ from nfr_drake.perception.handle_triangulation import (
     locate_handles,
     project,
 )
-from nfr_drake.perception.object_pose import ObjectPoseError, background_mask, estimate_object_pose
+from nfr_drake.perception.object_pose import background_mask, estimate_object_pose_carcass_first
 
 
 class FittedModel:
@@ -233,18 +233,9 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
     images = capture.load_images()
-    poses = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
-    warnings = []
-    estimate = None
-    if carcass is not None:
-        try:
-            estimate = estimate_object_pose([shrunk(m) for m in carcass], *poses, category=fitted.category,
-                                            amodal=True)
-        except ObjectPoseError:
-            warnings.append("the segmenter's amodal carcass masks agree on no object; its visible masks "
-                            "gave the pose")
-    if estimate is None:
-        estimate = estimate_object_pose([shrunk(m) for m in masks], *poses, category=fitted.category)
+    estimate, amodal, warnings = estimate_object_pose_carcass_first(
+        [shrunk(m) for m in masks], None if carcass is None else [shrunk(m) for m in carcass],
+        [f.X_OC for f in capture.frames], [f.camera for f in capture.frames], category=fitted.category)
     X_OW = np.linalg.inv(estimate.X_WO)
     in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
                       capture.gt, capture.extra)
@@ -256,7 +247,7 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
     result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
     result.extra["object_pose"] = {"X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
-                                   "room_loss": room_loss, "amodal": carcass is not None and not warnings}
+                                   "room_loss": room_loss, "amodal": amodal}
     problem = estimate.size_problem(fitted.category)
     result.extra["warnings"] += warnings + ([problem] if problem else [])
     return result, outcome, in_O

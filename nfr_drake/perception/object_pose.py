@@ -283,6 +283,28 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
     return ObjectPoseEstimate.from_box(fitted, front, int(fine.sum()), hull_box)
 
 
+AMODAL_FALLBACK = "the segmenter's amodal carcass masks agree on no object; its visible masks gave the pose"
+"""The warning of `estimate_object_pose_carcass_first` when the amodal masks give no pose."""
+
+
+def estimate_object_pose_carcass_first(visible: list[np.ndarray], carcass: list[np.ndarray] | None,
+                                       X_WCs: list[np.ndarray], cameras: list[PinholeCamera],
+                                       config: HullConfig = HullConfig(), category: str | None = None
+                                       ) -> tuple[ObjectPoseEstimate, bool, list[str]]:
+    """`estimate_object_pose` from the carcass's amodal masks when given (`amodal=True`), else, or
+    when they give no pose, from the `visible` masks (each (H, W)). Returns the estimate, whether
+    the amodal masks gave it, and warnings ([AMODAL_FALLBACK] when they were given but gave none).
+    ObjectPoseError when the visible masks give none either."""
+    if carcass is not None:
+        try:
+            return estimate_object_pose(carcass, X_WCs, cameras, config=config, category=category,
+                                        amodal=True), True, []
+        except ObjectPoseError:
+            pass
+    estimate = estimate_object_pose(visible, X_WCs, cameras, config=config, category=category)
+    return estimate, False, [AMODAL_FALLBACK] if carcass is not None else []
+
+
 def box_corners_W(box: np.ndarray) -> np.ndarray:
     """The 8 corners (8, 3) in W of a floor box (x, y, yaw, depth, width, height): centre of its
     footprint at (x, y), its depth along the yawed x, standing on z = 0."""

@@ -65,7 +65,7 @@ from nfr_drake.perception.object_pose import (
     HullConfig,
     ObjectPoseError,
     background_mask,
-    estimate_object_pose,
+    estimate_object_pose_carcass_first,
 )
 from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
@@ -233,26 +233,16 @@ class NfrPerceptionSystem(LeafSystem):
     def _object_pose(self, masks: list[np.ndarray], images: list[np.ndarray]
                      ) -> tuple[RigidTransform, dict, list[str]]:
         """X_WO (given, or estimated from the segmenter's amodal carcass when it has that output;
-        from the object's masks without it, or when the amodal masks give no pose), what the
-        result's extra says of it, and warnings."""
+        from the object's masks without it, or when the amodal masks give no pose:
+        `estimate_object_pose_carcass_first`), what the result's extra says of it, and warnings."""
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
-        warnings = []
+        carcass = None
         if self._segmenter is not None and self._segmenter.config.amodal:
             carcass = [self._segmenter.carcass_amodal(image) for image in images]
-            try:
-                return self._estimate(carcass, True, warnings)
-            except ObjectPoseError:
-                warnings.append("the segmenter's amodal carcass masks agree on no object; its visible "
-                                "masks gave the pose")
-        return self._estimate(masks, False, warnings)
-
-    def _estimate(self, masks: list[np.ndarray], amodal: bool, warnings: list[str]
-                  ) -> tuple[RigidTransform, dict, list[str]]:
-        """X_WO estimated from `masks` (`amodal`: the carcass's), what the result's extra says of
-        it, and `warnings` with the size's problem added."""
-        estimate = estimate_object_pose(masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
-                                        self._hull_config, self._model.category, amodal)
+        estimate, amodal, warnings = estimate_object_pose_carcass_first(
+            masks, carcass, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras, self._hull_config,
+            self._model.category)
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
                 {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),

@@ -9,6 +9,7 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import read_capture_set, write_capture_set
 from nfr_drake.inference import infer
 from nfr_drake.inference.infer import MASK_SIZE_PX, object_masks, shrunk
+from nfr_drake.perception import object_pose
 
 
 class _RecordingSegmenter:
@@ -57,11 +58,11 @@ def test_pose_is_estimated_from_shrunk_masks(monkeypatch):
     class Stop(Exception):
         pass
 
-    def estimate(masks, X_WCs, cameras, category=None, amodal=False):
+    def estimate(masks, X_WCs, cameras, config=None, category=None, amodal=False):
         seen.extend((m.shape, float(m.mean()), amodal) for m in masks)
         raise Stop
 
-    monkeypatch.setattr(infer, "estimate_object_pose", estimate)
+    monkeypatch.setattr(object_pose, "estimate_object_pose", estimate)
 
     with pytest.raises(Stop):
         infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _three_views(768, 1024), None,
@@ -83,13 +84,13 @@ def test_amodal_masks_that_give_no_pose_fall_back_to_the_visible_ones(monkeypatc
     class Stop(Exception):
         pass
 
-    def estimate(masks, X_WCs, cameras, category=None, amodal=False):
+    def estimate(masks, X_WCs, cameras, config=None, category=None, amodal=False):
         asked.append(amodal)
         if amodal:
             raise ObjectPoseError("object pose: the masks agree on no object")
         raise Stop
 
-    monkeypatch.setattr(infer, "estimate_object_pose", estimate)
+    monkeypatch.setattr(object_pose, "estimate_object_pose", estimate)
 
     with pytest.raises(Stop):
         infer.infer_in_world(type("Fitted", (), {"category": "closet"})(), _three_views(60, 80), None,
@@ -108,7 +109,7 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
         pass
 
     estimate = type("Estimate", (), {"X_WO": np.eye(4)})()
-    monkeypatch.setattr(infer, "estimate_object_pose", lambda *args, **kwargs: estimate)
+    monkeypatch.setattr(object_pose, "estimate_object_pose", lambda *args, **kwargs: estimate)
 
     def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room):
         seen.update(images=images, masked_loss=masked_loss)

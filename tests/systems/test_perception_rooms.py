@@ -19,6 +19,7 @@ from nfr_drake.data.rooms import RoomDistribution, sample_room
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
+from nfr_drake.perception import object_pose as object_pose_module
 from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
 from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig
 from nfr_drake.systems import perception as perception_module
@@ -158,16 +159,16 @@ def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, mon
     monkeypatch.setattr(perception_module, "load_segmenter", visible_only)
     monkeypatch.setattr(perception_module, "posed_close_look",
                         lambda net, images, *args: [np.zeros(i.shape[:2], np.float32) for i in images])
-    real_estimate = perception_module.estimate_object_pose
+    real_estimate = object_pose_module.estimate_object_pose
     poses_from = []
 
-    def estimate(masks, *args):
+    def estimate(masks, *args, **kwargs):
         poses_from.append(max(float(m.max()) for m in masks))
         if poses_from[-1] == 0.0:
-            return real_estimate(masks, *args)  # raises ObjectPoseError: nothing on the masks
+            return real_estimate(masks, *args, **kwargs)  # raises ObjectPoseError: nothing on the masks
         return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.02, 1, np.zeros(6))
 
-    monkeypatch.setattr(perception_module, "estimate_object_pose", estimate)
+    monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
     diagram, system = _perception_scene(model_dir, "room", X_WO, known=False)
     simulator = Simulator(diagram)
     simulator.Initialize()
@@ -201,7 +202,7 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
             raise ObjectPoseError("object pose: the masks agree on no object")
         return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.0, 1, np.zeros(6))
 
-    monkeypatch.setattr(perception_module, "estimate_object_pose", estimate)
+    monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
     monkeypatch.setattr(perception_module, "posed_close_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
     calls = []
