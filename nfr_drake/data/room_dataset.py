@@ -172,6 +172,7 @@ def generate_rooms_command(
     twin_probability: float = 0.0,
     cut_probability: float = 0.2,
     robot_probability: float = 0.8,
+    margin: tuple[float, float] = (0.05, 0.5),
     workers: int = 1,
     shard: str = "0/1",
 ) -> None:
@@ -190,11 +191,13 @@ def generate_rooms_command(
         twin_probability: chance of a copy of the object right beside it.
         cut_probability: chance that a view's image edge cuts the object.
         robot_probability: chance that the Panda arm stands in front of the object.
+        margin: range of the free border around the object's bounds, a fraction of the half-image.
         workers: rendering processes.
         shard: i/n renders rooms with index % n == i.
     """
     room = RoomDistribution(style=style, neighbours=neighbours, twin_probability=twin_probability,
-                            cut_probability=cut_probability, robot_probability=robot_probability)
+                            cut_probability=cut_probability, robot_probability=robot_probability,
+                            margin=margin)
     spec = RoomDatasetSpec(category, rooms, articulations, views, size, seed, room=room)
     rendered = generate_rooms(spec, out, workers, shard)
     print(f"rendered {len(rendered)} rooms into {out}")

@@ -8,7 +8,13 @@ import pytest
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.render import ObjectRenderer
-from nfr_drake.data.room_dataset import RoomDatasetSpec, generate_rooms, read_room_spec, room_dirs
+from nfr_drake.data.room_dataset import (
+    RoomDatasetSpec,
+    generate_rooms,
+    generate_rooms_command,
+    read_room_spec,
+    room_dirs,
+)
 from nfr_drake.data.room_lighting import sample_room_lighting
 from nfr_drake.data.room_textures import FLOOR_KINDS, WALL_KINDS, room_texture_image
 from nfr_drake.data.rooms import RoomDistribution, sample_room, sample_room_cameras
@@ -59,6 +65,25 @@ def test_cameras_frame_the_object_and_cut_it_when_asked():
 
     assert border_share(0.0) == 0.0
     assert border_share(1.0) >= 0.5
+
+
+def test_the_margin_sets_how_much_of_the_image_the_object_spans(tmp_path):
+    rng = np.random.default_rng(1)
+    obj = sample_object("drawer", rng)
+    alone = ObjectRenderer(obj, CAMERA)
+
+    def spans(margin: tuple[float, float]) -> np.ndarray:
+        """The silhouette's bounding box's longer side over the image side, per view (shut fronts)."""
+        dist = RoomDistribution(cut_probability=0.0, margin=margin)
+        masks = [alone.render(0.0, x).label > 0 for x in sample_room_cameras(rng, 6, obj, CAMERA, dist)]
+        return np.array([max(np.ptp(r), np.ptp(c)) + 1 for r, c in (np.nonzero(m) for m in masks)]) / 48
+
+    far = spans((0.7, 0.7))
+    assert np.all(far <= 0.3 + 2 / 48)  # the swept bounds fit in the middle 30 % of the image
+    assert np.median(spans((0.05, 0.05))) > 2 * np.median(far)
+    generate_rooms_command("drawer", 1, tmp_path / "wide", articulations=1, views=1, size=32,
+                           margin=(0.05, 0.7))
+    assert read_room_spec(tmp_path / "wide").room.margin == (0.05, 0.7)
 
 
 def test_heldout_textures_and_lights_are_another_family():
