@@ -3,20 +3,30 @@
 Each view goes through a small ResNet-style downward path (the paper used ResNet-34 in a U-Net;
 this CPU-sized version keeps the residual stages and global pooling); its camera pose (rotation and
 translation of X_OC) is appended to the pooled features and mixed by an MLP. The per-view codes are
-averaged over views, and a head predicts the current articulation q, the K keypoints in frame O,
-and, for prismatic categories, the joint travel at q = 1 (m), which the straight-pull assumption
-needs to extrapolate keypoints to other q (see `extrapolate_keypoints`).
+averaged over views, and a head predicts, per part slot (one for closets and drawers; furniture's
+`MAX_FRONTS`, slot k = front k in canonical order as the neural field's, docs/NEURAL_FIELD.md
+"Furniture: several parts"), the current articulation q and the K keypoints in frame O; for
+prismatic categories the joint travel at q = 1 (m), which the straight-pull assumption needs to
+extrapolate keypoints to other q (`extrapolate_keypoints`); for furniture whether the slot holds
+a front and whether it is a door or a drawer, the keypoints those of the field's slots
+(`SLOT_KEYPOINTS`: a drawer's axis points give its pull line and travel, `slot_trajectory`).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
 from torch import nn
 
+from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
 from nfr_drake.errors import ConfigError
+from nfr_drake.objects.articulated import axis_angle_rotation
+from nfr_drake.objects.fronts import DOOR_OPENING
+
+JOINT_TYPES = ("revolute", "prismatic", "per_slot")
+"""A baseline's joint types: closets, drawers, and furniture (each slot's predicted type)."""
 
 
 @dataclass(frozen=True)
@@ -25,10 +35,12 @@ class BaselineConfig:
 
     Attributes:
         category: object category the model was trained on.
-        keypoint_names: keypoints predicted, in this order.
-        joint_type: "revolute" (closets) or "prismatic" (drawers).
+        keypoint_names: keypoints predicted per slot, in this order.
+        joint_type: "revolute" (closets), "prismatic" (drawers) or "per_slot" (furniture: each
+            slot's predicted type, door or drawer; keypoint_names are `SLOT_KEYPOINTS`).
         channels: channels of the residual stages; each stage halves the resolution.
         embed_dim: width of the per-view code and the head.
+        num_slots: part slots S (1 but for "per_slot").
     """
 
     category: str
@@ -36,12 +48,17 @@ class BaselineConfig:
     joint_type: str
     channels: tuple[int, ...] = (24, 48, 96, 192)
     embed_dim: int = 256
+    num_slots: int = 1
 
     def __post_init__(self):
-        if self.joint_type not in ("revolute", "prismatic"):
-            raise ConfigError(f"joint_type must be revolute or prismatic, got {self.joint_type!r}")
+        if self.joint_type not in JOINT_TYPES:
+            raise ConfigError(f"joint_type must be one of {JOINT_TYPES}, got {self.joint_type!r}")
         if not self.keypoint_names or "handle" not in self.keypoint_names:
             raise ConfigError("keypoint_names must include 'handle'")
+        if (self.num_slots > 1) != (self.joint_type == "per_slot") or self.num_slots < 1:
+            raise ConfigError("num_slots is 1, or more for joint_type 'per_slot'")
+        if self.joint_type == "per_slot" and tuple(self.keypoint_names) != SLOT_KEYPOINTS:
+            raise ConfigError(f"a 'per_slot' baseline predicts the slot keypoints {SLOT_KEYPOINTS}")
         if not self.channels or min(self.channels) < 1 or self.embed_dim < 1:
             raise ConfigError("channels and embed_dim must be positive")
 
@@ -72,11 +89,15 @@ class _ResidualStage(nn.Module):
 
 @dataclass
 class BaselineOutput:
-    """q: (B,) in [0, 1]; keypoints: (B, K, 3) in O, m; travel: (B,) m (prismatic only, else 0)."""
+    """Per slot (S = `BaselineConfig.num_slots`): q (B, S) in [0, 1]; keypoints (B, S, K, 3) in O,
+    m; travel (B, S) m (prismatic only, else 0); exists (B, S) and types (B, S, 2) logits (whether
+    the slot holds a front; door or drawer, `PART_TYPES`), "per_slot" only, else None."""
 
     q: torch.Tensor
     keypoints: torch.Tensor
-    travel: torch.Tensor = field(default=None)
+    travel: torch.Tensor
+    exists: torch.Tensor | None = None
+    types: torch.Tensor | None = None
 
 
 class ImageEncoderBaseline(nn.Module):
@@ -90,7 +111,9 @@ class ImageEncoderBaseline(nn.Module):
                                                                             strict=True)])
         self.view_mlp = nn.Sequential(nn.Linear(config.channels[-1] + 12, config.embed_dim),
                                       nn.ReLU(), nn.Linear(config.embed_dim, config.embed_dim))
-        n_out = 1 + 3 * len(config.keypoint_names) + 1
+        # per slot: q, the keypoints, then the travel or (per_slot) the exists and type logits
+        n_out = config.num_slots * (1 + 3 * len(config.keypoint_names)
+                                    + (1 + len(PART_TYPES) if config.joint_type == "per_slot" else 1))
         self.head = nn.Sequential(nn.ReLU(), nn.Linear(config.embed_dim, config.embed_dim),
                                   nn.ReLU(), nn.Linear(config.embed_dim, n_out))
 
@@ -99,13 +122,16 @@ class ImageEncoderBaseline(nn.Module):
         features = self.stages(images.flatten(0, 1)).mean(dim=(-2, -1))  # (B V, C)
         pose = torch.cat([X_OC[..., :3, :3].flatten(-2), X_OC[..., :3, 3]], -1).flatten(0, 1)
         codes = self.view_mlp(torch.cat([features, pose], -1)).view(B, V, -1).mean(1)
-        out = self.head(codes)
+        out = self.head(codes).view(B, self.config.num_slots, -1)
         K = len(self.config.keypoint_names)
-        travel = nn.functional.softplus(out[:, -1])
+        q, keypoints, rest = out[..., 0], out[..., 1:1 + 3 * K].unflatten(-1, (K, 3)), out[..., 1 + 3 * K:]
+        if self.config.joint_type == "per_slot":
+            return BaselineOutput(torch.sigmoid(q), keypoints, torch.zeros_like(q), rest[..., 0],
+                                  rest[..., 1:])
+        travel = nn.functional.softplus(rest[..., 0])
         if self.config.joint_type == "revolute":
             travel = torch.zeros_like(travel)
-        return BaselineOutput(q=torch.sigmoid(out[:, 0]), keypoints=out[:, 1:1 + 3 * K].view(B, K, 3),
-                              travel=travel)
+        return BaselineOutput(torch.sigmoid(q), keypoints, travel)
 
 
 def extrapolate_keypoints(keypoint_names: tuple[str, ...], joint_type: str, keypoints: np.ndarray,
@@ -135,4 +161,34 @@ def extrapolate_keypoints(keypoint_names: tuple[str, ...], joint_type: str, keyp
     for i, angle in enumerate(sign * dq * np.pi / 2):
         c, s = np.cos(angle), np.sin(angle)
         out[i, h, :2] = hinge[:2] + [c * d[0] - s * d[1], s * d[0] + c * d[1]]
+    return out
+
+
+def slot_trajectory(part_type: str, keypoints: np.ndarray, q: float, q_grid: np.ndarray) -> np.ndarray:
+    """A furniture slot's keypoints at other articulations from one observed state, by explicit
+    geometric assumption, the one-part baseline's (`extrapolate_keypoints`) per slot.
+
+    A door turns about the line through its axis points by `DOOR_OPENING` over q in [0, 1], its
+    free edge (the side of the goal, which lies behind the door) swinging out of the carcass (+x
+    of O); only the handle moves. A drawer's handle and goal move along its axis points' line
+    (shut handle -> fully open handle) by their difference over [0, 1].
+
+    Args:
+        part_type: "door" or "drawer" (`PART_TYPES`).
+        keypoints: (4, 3) at articulation q in O, m, `SLOT_KEYPOINTS` order.
+        q_grid: (N,) articulations to predict.
+    Returns: (N, 4, 3).
+    """
+    handle, goal, axis_0, axis_1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
+    kp = np.asarray(keypoints, float)
+    out = np.repeat(kp[None], len(q_grid), axis=0)
+    dq = np.asarray(q_grid, float) - q
+    if part_type == "drawer":
+        out[:, [handle, goal]] += (dq[:, None] * (kp[axis_1] - kp[axis_0]))[:, None]
+        return out
+    axis = kp[axis_1] - kp[axis_0]
+    axis /= max(np.linalg.norm(axis), 1e-9)
+    sign = 1.0 if np.cross(axis, kp[goal] - kp[axis_0])[0] >= 0 else -1.0
+    for i, angle in enumerate(sign * dq * DOOR_OPENING):
+        out[i, handle] = kp[axis_0] + axis_angle_rotation(axis, angle) @ (kp[handle] - kp[axis_0])
     return out

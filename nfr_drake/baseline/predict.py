@@ -8,19 +8,31 @@ import cv2
 import numpy as np
 import torch
 
-from nfr_drake.baseline.model import ImageEncoderBaseline, extrapolate_keypoints
+from nfr_drake.baseline.model import ImageEncoderBaseline, extrapolate_keypoints, slot_trajectory
 from nfr_drake.data.capture import CaptureSet
+from nfr_drake.data.slot_dataset import PART_TYPES, slot_part
 
 
 @dataclass
 class BaselinePrediction:
-    """q in [0, 1]; keypoints (K, 3) in O at q; travel (m, prismatic); trajectory (N, K, 3) on q_grid."""
+    """Per slot (S = 1 but for furniture): q (S,) in [0, 1]; keypoints (S, K, 3) in O at q;
+    travel (S,) m (prismatic); exists bool (S,) and types (S,) index into `PART_TYPES` (one part:
+    the category's, a closet's door or a drawer); trajectory (S, N, K, 3) on q_grid (N,), each slot
+    swept with the others held."""
 
-    q: float
+    q: np.ndarray
     keypoints: np.ndarray
-    travel: float
+    travel: np.ndarray
+    exists: np.ndarray
+    types: np.ndarray
     q_grid: np.ndarray
     trajectory: np.ndarray
+
+    def parts(self) -> list[dict]:
+        """Furniture: the slots found as the furniture fit's result lists them, `parts: [{index,
+        type, q, keypoints, trajectory}]` (`data.slot_dataset.slot_part`)."""
+        return [slot_part(k, self.types[k], self.q[k], self.keypoints[k], self.q_grid, self.trajectory[k])
+                for k in np.flatnonzero(self.exists)]
 
 
 @torch.no_grad()
@@ -32,10 +44,18 @@ def predict_capture(model: ImageEncoderBaseline, capture: CaptureSet, image_size
     x = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2).float()[None] / 255.0
     poses = torch.from_numpy(np.stack([f.X_OC for f in capture.frames])).float()[None]
     out = model(x, poses)
-    q = float(out.q[0])
+    q = out.q[0].double().numpy()
     keypoints = out.keypoints[0].double().numpy()
-    travel = float(out.travel[0])
+    travel = out.travel[0].double().numpy()
     cfg = model.config
-    trajectory = extrapolate_keypoints(cfg.keypoint_names, cfg.joint_type, keypoints, q, travel,
-                                       q_grid)
-    return BaselinePrediction(q, keypoints, travel, np.asarray(q_grid), trajectory)
+    if cfg.joint_type == "per_slot":
+        exists = (out.exists[0] > 0).numpy()
+        types = out.types[0].argmax(-1).numpy()
+        trajectory = np.stack([slot_trajectory(PART_TYPES[t], kp, qk, q_grid)
+                               for t, kp, qk in zip(types, keypoints, q, strict=True)])
+    else:
+        exists = np.ones(1, bool)
+        types = np.array([PART_TYPES.index("door" if cfg.joint_type == "revolute" else "drawer")])
+        trajectory = extrapolate_keypoints(cfg.keypoint_names, cfg.joint_type, keypoints[0], q[0],
+                                           travel[0], q_grid)[None]
+    return BaselinePrediction(q, keypoints, travel, exists, types, np.asarray(q_grid), trajectory)

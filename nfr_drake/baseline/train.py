@@ -1,8 +1,10 @@
 """Training the image-encoder baseline on a rendered dataset; `nfr-drake train-baseline`.
 
 Each step draws `batch` (object, articulation) instances, each with a random subset of its views,
-and regresses q, the keypoints and (prismatic categories) the travel. Checkpoints are written
-atomically every `checkpoint_every` steps; `--resume` continues a killed run.
+and regresses q, the keypoints and (prismatic categories) the travel; on a furniture dataset the
+same per slot (slot k = front k, `data.slot_dataset`), over the slots that hold a front, plus
+whether each slot holds one and its type (cross-entropies). Checkpoints are written atomically
+every `checkpoint_every` steps; `--resume` continues a killed run.
 """
 
 from __future__ import annotations
@@ -17,11 +19,13 @@ from pathlib import Path
 import numpy as np
 import torch
 from safetensors.torch import save_file
+from torch import nn
 from tqdm import tqdm
 
-from nfr_drake.baseline.model import BaselineConfig, ImageEncoderBaseline
+from nfr_drake.baseline.model import BaselineConfig, BaselineOutput, ImageEncoderBaseline
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.dataset import RenderedDataset
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS, SlotDataset, open_dataset
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.jsonio import read_json
 from nfr_drake.nfr.checkpoint import CheckpointError, load_strict, read_tensors
@@ -40,6 +44,7 @@ class BaselineTrainConfig:
         lr: Adam learning rate, decayed x0.1 over the last quarter.
         keypoint_weight: weight of the keypoint MSE (m^2) against the q MSE; keypoints matter most.
         travel_weight: weight of the travel MSE (m^2), prismatic categories only.
+        slot_weight: weight of the slot exists and type cross-entropies, furniture only.
         checkpoint_every: steps between checkpoints.
         log_every: steps between rows of metrics.csv.
         seed: seed of the sampler and the initial weights.
@@ -52,6 +57,7 @@ class BaselineTrainConfig:
     lr: float = 1e-3
     keypoint_weight: float = 100.0
     travel_weight: float = 100.0
+    slot_weight: float = 1.0
     checkpoint_every: int = 500
     log_every: int = 50
     seed: int = 0
@@ -89,23 +95,66 @@ def load_baseline(folder: Path) -> tuple[ImageEncoderBaseline, dict]:
     return model.eval(), doc
 
 
+def baseline_architecture(data: RenderedDataset) -> BaselineConfig:
+    """The baseline of a dataset's category: one revolute (closets) or prismatic (drawers) part, or
+    a `SlotDataset`'s slots (furniture)."""
+    if isinstance(data, SlotDataset):
+        return BaselineConfig(data.spec.category, SLOT_KEYPOINTS, "per_slot", num_slots=data.num_slots)
+    joint_type = "revolute" if data.spec.category == "closet" else "prismatic"
+    return BaselineConfig(data.spec.category, data.keypoint_names, joint_type)
+
+
 def _sample_batch(data: RenderedDataset, rng: np.random.Generator, batch: int, views: int):
-    """images (B, V', 3, S, S), X_OC (B, V', 4, 4), q (B,), keypoints (B, K, 3), travel (B,)."""
+    """images (B, V', 3, S, S), X_OC (B, V', 4, 4), and per slot (one but for furniture) q (B, S),
+    keypoints (B, S, K, 3), travel (B, S) (m, one part), exists bool (B, S), types (B, S)."""
     A, V = data.spec.articulations, data.spec.views
     n_views = min(views, V)
-    images, poses, qs, kps, travel = [], [], [], [], []
+    images, poses, qs, kps, travel, exists, types = [], [], [], [], [], [], []
     for _ in range(batch):
-        rec = data.records[rng.integers(data.num_objects)]
+        j = rng.integers(data.num_objects)
+        rec = data.records[j]
         a = rng.integers(A)
         vs = np.sort(rng.choice(V, n_views, replace=False))
         images.append(np.asarray(rec.rgb[a, vs]))
         poses.append(rec.X_OC[a, vs])
-        qs.append(rec.q[a])
-        kps.append(rec.keypoints[a])
-        travel.append(rec.meta["joint_upper"])
+        if isinstance(data, SlotDataset):
+            slots = data.slots[j]
+            qs.append(slots.q[a])
+            kps.append(slots.keypoints[a])
+            travel.append(np.zeros(data.num_slots, np.float32))
+            exists.append(slots.exists)
+            types.append(slots.types)
+        else:
+            qs.append(rec.q[a, None])
+            kps.append(rec.keypoints[a, None])
+            travel.append(np.array([rec.meta["joint_upper"]], np.float32))
+            exists.append(np.ones(1, bool))
+            types.append(np.zeros(1, np.int64))
     images = torch.from_numpy(np.stack(images)).permute(0, 1, 4, 2, 3).float() / 255.0
-    return (images, torch.from_numpy(np.stack(poses)), torch.tensor(np.array(qs)),
-            torch.from_numpy(np.stack(kps)), torch.tensor(travel, dtype=torch.float32))
+    return (images, torch.from_numpy(np.stack(poses)),
+            *(torch.from_numpy(np.stack(x)) for x in (qs, kps, travel, exists, types)))
+
+
+def baseline_loss(pred: BaselineOutput, targets: tuple[torch.Tensor, ...], joint_type: str,
+                  config: BaselineTrainConfig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(loss, q MSE, keypoint MSE in m^2) of a prediction against `_sample_batch`'s targets (q,
+    keypoints, travel, exists, types) of a baseline of `joint_type`: the q
+    and keypoint (and, prismatic, travel) errors averaged over the slots that hold a front, plus
+    (furniture) the exists cross-entropy over every slot and the type's over the fronts."""
+    q, keypoints, travel, exists, types = targets
+    mask = exists.float()
+    n = mask.sum().clamp(min=1.0)
+    q_mse = (((pred.q - q) ** 2) * mask).sum() / n
+    kp_mse = (((pred.keypoints - keypoints) ** 2).sum(-1).mean(-1) * mask).sum() / n
+    loss = q_mse + config.keypoint_weight * kp_mse
+    if joint_type == "per_slot":
+        exists_ce = nn.functional.binary_cross_entropy_with_logits(pred.exists, mask)
+        type_ce = (nn.functional.cross_entropy(pred.types.flatten(0, 1), types.flatten(), reduction="none")
+                   * mask.flatten()).sum() / n
+        loss = loss + config.slot_weight * (exists_ce + type_ce)
+    elif joint_type == "prismatic":
+        loss = loss + config.travel_weight * (((pred.travel - travel) ** 2) * mask).sum() / n
+    return loss, q_mse, kp_mse
 
 
 def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resume: bool = False,
@@ -113,10 +162,9 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
     """Train (or resume) a baseline into `out`; returns `out`. A dataset missing objects is
     refused unless `allow_incomplete`."""
     set_torch_threads(config.threads)
-    data = RenderedDataset(data_dir)
+    data = open_dataset(data_dir)
     data.require_complete(allow_incomplete)
-    joint_type = "revolute" if data.spec.category == "closet" else "prismatic"
-    arch = BaselineConfig(data.spec.category, data.keypoint_names, joint_type)
+    arch = baseline_architecture(data)
     torch.manual_seed(config.seed)
     model = ImageEncoderBaseline(arch)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
@@ -146,13 +194,8 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
             lr = config.lr * (0.1 if step >= 0.75 * config.steps else 1.0)
             for group in optimiser.param_groups:
                 group["lr"] = lr
-            images, poses, q, kp, travel = _sample_batch(data, rng, config.batch, config.views)
-            pred = model(images, poses)
-            q_mse = ((pred.q - q) ** 2).mean()
-            kp_mse = ((pred.keypoints - kp) ** 2).sum(-1).mean()
-            loss = q_mse + config.keypoint_weight * kp_mse
-            if joint_type == "prismatic":
-                loss = loss + config.travel_weight * ((pred.travel - travel) ** 2).mean()
+            images, poses, *targets = _sample_batch(data, rng, config.batch, config.views)
+            loss, q_mse, kp_mse = baseline_loss(model(images, poses), targets, arch.joint_type, config)
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -171,7 +214,8 @@ def train_baseline(data_dir: Path, out: Path, config: BaselineTrainConfig, resum
 def train_baseline_command(data: Path, out: Path, steps: int = 6000, batch: int = 8,
                            views: int = 5, lr: float = 1e-3, threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
-    """Train the paper's image-encoder baseline on a dataset from `nfr-drake generate`.
+    """Train the paper's image-encoder baseline on a dataset from `nfr-drake generate` (a
+    furniture dataset: one slot per front, as the furniture field's).
 
     Args:
         data: dataset folder.

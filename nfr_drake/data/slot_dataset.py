@@ -32,6 +32,19 @@ def slot_keypoint_names(num_slots: int = MAX_FRONTS) -> tuple[str, ...]:
     return tuple(f"front{k}/{n}" for k in range(num_slots) for n in SLOT_KEYPOINTS)
 
 
+def slot_part(slot: int, part_type: int, q: float, keypoints: np.ndarray, q_grid: np.ndarray,
+              path: np.ndarray) -> dict:
+    """One slot as a part of a fit result's `parts` (`inference.result.FitResult`), {index, type,
+    q, keypoints, trajectory}: part_type indexes `PART_TYPES`; keypoints (4, 3) in O at q,
+    `SLOT_KEYPOINTS` order, written name -> [x, y, z]; trajectory q (N,) = q_grid and name ->
+    (N, 3) from path (N, 4, 3)."""
+    return {"index": int(slot), "type": PART_TYPES[int(part_type)], "q": float(q),
+            "keypoints": {n: np.asarray(keypoints[i], float).tolist() for i, n in enumerate(SLOT_KEYPOINTS)},
+            "trajectory": {"q": np.asarray(q_grid, float).tolist(),
+                           "keypoints": {n: np.asarray(path[:, i], float).tolist()
+                                         for i, n in enumerate(SLOT_KEYPOINTS)}}}
+
+
 class SlotTargets(NamedTuple):
     """One object's slot targets: q float32 (A, S), 0 where no front; keypoints float32
     (A, S, 4, 3) in O, zero where no front; exists bool (S,); types int64 (S,) index into

@@ -8,7 +8,6 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.evaluate import Method
 from nfr_drake.eval.methods import baseline_method, neural_field_methods
-from nfr_drake.eval.parts import NO_BASELINE
 from nfr_drake.eval.report import run_evaluation, set_categories
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
@@ -37,7 +36,7 @@ def eval_command(
         sets: folders of capture sets (each a set; its folder name names it in the tables).
         out: output folder.
         model: neural-field model folder.
-        baseline: image-encoder baseline folder (closets and drawers).
+        baseline: image-encoder baseline folder, of the sets' category.
         category: the sets' category, checked against their gt.json (default: theirs).
         limit: use only the first n captures of each set.
         fit: options of the neural field's fit.
@@ -49,13 +48,14 @@ def eval_command(
     categories = set_categories(sets)
     if category is not None and categories != {category}:
         raise NfrDrakeError(f"--category {category}, but the sets hold {', '.join(sorted(categories))}")
-    if baseline is not None and categories == {"furniture"}:
-        raise NfrDrakeError(f"--baseline: {NO_BASELINE}")
     methods: dict[str, Method] = {}
     if model is not None:
         methods.update(neural_field_methods(model, fit, furniture_fit))
     if baseline is not None:
-        methods["baseline"] = baseline_method(baseline)
+        baseline_category, methods["baseline"] = baseline_method(baseline)
+        if categories != {baseline_category}:
+            raise NfrDrakeError(f"--baseline {baseline} is a {baseline_category} baseline, but the sets "
+                                f"hold {', '.join(sorted(categories))}")
     if not methods:
         raise NfrDrakeError("give --model and/or --baseline")
     print(run_evaluation(methods, sets, out, limit, example_plots))

@@ -86,8 +86,9 @@ def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     return method
 
 
-def baseline_method(baseline_dir: Path) -> Method:
-    """The image-encoder baseline, keypoints along q by the explicit geometric assumption."""
+def baseline_method(baseline_dir: Path) -> tuple[str, Method]:
+    """The image-encoder baseline's category and method, keypoints along q by the explicit
+    geometric assumption; a furniture baseline's method gives a `PartsPrediction` (every slot)."""
     from nfr_drake.baseline.predict import predict_capture
     from nfr_drake.baseline.train import load_baseline
 
@@ -98,8 +99,14 @@ def baseline_method(baseline_dir: Path) -> Method:
     def method(capture: CaptureSet, grid: np.ndarray) -> Prediction:
         started = time.perf_counter()
         pred = predict_capture(model, capture, size, grid)
-        return Prediction(pred.q, {n: pred.keypoints[i] for i, n in enumerate(names)},
-                          {n: pred.trajectory[:, i] for i, n in enumerate(names)},
+        return Prediction(float(pred.q[0]), {n: pred.keypoints[0, i] for i, n in enumerate(names)},
+                          {n: pred.trajectory[0, :, i] for i, n in enumerate(names)},
                           time.perf_counter() - started)
 
-    return method
+    def parts_method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
+        started = time.perf_counter()
+        pred = predict_capture(model, capture, size, grid)
+        return PartsPrediction(pred.q, pred.exists, pred.types, pred.keypoints, pred.trajectory,
+                               time.perf_counter() - started)
+
+    return model.config.category, parts_method if model.config.num_slots > 1 else method

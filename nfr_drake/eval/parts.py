@@ -103,11 +103,6 @@ def score_parts(capture: CaptureSet, prediction: PartsPrediction, set_name: str,
     return rows
 
 
-NO_BASELINE = ("no encoder baseline for furniture exists (`nfr-drake train-baseline` trains "
-               "one-part models, closets and drawers)")
-"""What the furniture table says in the baseline's row."""
-
-
 def _median(values: list[float], p90: bool = True) -> str:
     if not values:
         return "n/a"
@@ -119,8 +114,7 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
     """Markdown table per set and method: pieces, parts, part count right (share of pieces),
     parts found and type right (share of parts), medians (and 90th percentiles) of the door and
     drawer articulation errors, keypoint RMSE, handle error and handle trajectory RMSE, the median
-    fit time, the parts refused by the fit confidence (`evaluate.refusal_cells`); and per set a
-    row saying that there is no encoder baseline for furniture."""
+    fit time, the parts refused by the fit confidence (`evaluate.refusal_cells`)."""
     results = list(results)
     lines = ["| set | method | pieces | parts | part count right | parts found | type right | "
              "door error (deg) | drawer error (cm) | keypoint RMSE (cm) | handle error (cm) | "
@@ -140,8 +134,6 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
                      _median([r.handle_trajectory_rmse_cm for r in rows]),
                      _median([r.seconds for r in pieces], p90=False)] + refusal_cells(rows)
             lines.append(f"| {set_name} | {method} | " + " | ".join(cells) + " |")
-        empty = " |" * (10 + len(REFUSAL_COLUMNS))
-        lines.append(f"| {set_name} | encoder baseline | {NO_BASELINE} |" + empty)
     return "\n".join(lines)
 
 

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS, slot_part
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
@@ -198,14 +198,10 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
 
 
 def part_json(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> dict:
-    """Slot `slot` of a fit as a part, {index, type, q, keypoints, trajectory}: keypoints name ->
-    [x, y, z] in O at the fitted q; trajectory q (N,) and name -> (N, 3), the slot swept over
-    q_grid (N,) with the others held."""
-    path = part_trajectory(model, fit.z, slot, q_grid)
-    return {"index": slot, "type": PART_TYPES[int(fit.types[slot])], "q": float(fit.q[slot]),
-            "keypoints": {n: fit.keypoints[slot, i].tolist() for i, n in enumerate(SLOT_KEYPOINTS)},
-            "trajectory": {"q": np.asarray(q_grid, float).tolist(),
-                           "keypoints": {n: path[:, i].tolist() for i, n in enumerate(SLOT_KEYPOINTS)}}}
+    """Slot `slot` of a fit as a part (`slot_part`) at the fitted q, swept over q_grid (N,) with
+    the others held."""
+    return slot_part(slot, fit.types[slot], fit.q[slot], fit.keypoints[slot], q_grid,
+                     part_trajectory(model, fit.z, slot, q_grid))
 
 
 def parts_json(model: NFRModel, fit: FurnitureFit, q_grid: np.ndarray) -> list[dict]:
