@@ -9,12 +9,13 @@ keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top 
 handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time.
 Handles (`--handles`): "detector", those triangulated from the 2D handle detector in `--detector`
 (default MODEL/handle_detector) join the fit (part count, starts, handle term:
-`nfr_drake.inference.furniture_fit`); "none", the fit without them; "true", gt.json's handles
-(the ceiling of what sightings can give, for diagnosis only). The handle count and the time to
-sight them are in each row.
+`nfr_drake.inference.furniture_fit`); "encoder", the handles of the slots the encoder baseline in
+`--baseline` (default MODEL/baseline) finds, in their place (its prediction as the fit's start);
+"none", the fit without them; "true", gt.json's handles (the ceiling of what sightings can give,
+for diagnosis only). The handle count and the time to sight them are in each row.
 
     python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json]
-        [--handles detector|none|true] [--detector DIR]
+        [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR]
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nfr_drake.baseline.predict import predict_capture
+from nfr_drake.baseline.train import load_baseline
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
@@ -40,13 +43,18 @@ from nfr_drake.perception.handle_triangulation import locate_handles
 
 
 def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handles: str = "none",
-             detector=None) -> dict:
+             detector=None, baseline=None) -> dict:
+    """One capture's row; `detector` for handles "detector", `baseline` (model, image size) for
+    "encoder"."""
     gt = json.loads((capture_dir / "gt.json").read_text())
     capture = read_capture_set(capture_dir)
     started = time.perf_counter()
     if handles == "detector":
         handles_O = np.array([h.p_O for h in locate_handles(detector.detect(capture.load_images()),
                                                             capture.frames)]).reshape(-1, 3)
+    elif handles == "encoder":
+        pred = predict_capture(baseline[0], capture, baseline[1], np.zeros(1))
+        handles_O = pred.keypoints[pred.exists, SLOT_KEYPOINTS.index("handle")]
     elif handles == "true":
         handles_O = np.array([p["keypoints"]["handle"] for p in gt["parts"]])
     else:
@@ -100,12 +108,16 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=FurnitureFitConfig.steps)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path)
-    parser.add_argument("--handles", choices=("detector", "none", "true"), default="detector")
+    parser.add_argument("--handles", choices=("detector", "encoder", "none", "true"), default="detector")
     parser.add_argument("--detector", type=Path, help="default: MODEL/handle_detector")
+    parser.add_argument("--baseline", type=Path, help="default: MODEL/baseline")
     args = parser.parse_args()
-    detector = None
+    detector = baseline = None
     if args.handles == "detector":
         detector = load_detector(args.detector or args.model / "handle_detector")[0]
+    if args.handles == "encoder":
+        encoder, doc = load_baseline(args.baseline or args.model / "baseline")
+        baseline = (encoder, doc["training"]["image_size"])
     set_torch_threads(args.threads)
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
@@ -114,7 +126,7 @@ def main() -> None:
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:
-        rows.append(evaluate(model, codes, d, config, args.handles, detector))
+        rows.append(evaluate(model, codes, d, config, args.handles, detector, baseline))
         r = rows[-1]
         print(f"{r['capture']}: fronts {r['fronts']}, found {r['found']}, handles {r['handles']}, "
               f"{r['seconds']:.1f} s, " + ", ".join(
