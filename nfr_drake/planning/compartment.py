@@ -5,10 +5,12 @@ The keypoints give the front plane, the hinge line, the goal (a closet's inner f
 drawer's inner floor centre that moves with it) and the handle; the rest comes from the categories'
 layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
 - a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
-  `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
-  shelves: a third of the way up) or, where the free height above the goal was measured (a look
-  into the opened closet, `nfr_drake.systems.interior`), at that height, and its open door
-  (`grasp.door_panel_box` at the target);
+  `grasp.carcass_box`, solid from its lowest shelf up: a shelf at the lowest height a closet of
+  that height can have (two shelves: a third of the way up) or, where the free height above the
+  goal was measured (a look into the opened closet, `nfr_drake.systems.interior`), at that
+  height; what lies above that shelf is not seen (a second shelf's front edge stopped a carried
+  item that cut through the space above the first), and its open door (`grasp.door_panel_box`
+  at the target);
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
   behind the handle, its back as far behind the goal as the front is ahead, side walls at the
   narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`), as high as a front with its handle at
@@ -97,9 +99,9 @@ def _closet(kt: KeypointTrajectory, q: float, free_height: float | None) -> list
         _box("compartment_side_a", R, axes, [back, y0 - half, 0.0], [front, y0 - half + _WALL, top]),
         _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + half, top]),
     ]
-    if shelf < top - _WALL:
+    if shelf < top - _WALL:  # solid up to the top: the look sees the lowest shelf, not those above
         boxes.append(_box("compartment_shelf", R, axes, [back, y0 - half, shelf],
-                          [front - 0.01, y0 + half, shelf + _WALL]))
+                          [front - 0.01, y0 + half, top - _WALL]))
     door = door_panel_box(kt.with_current(q))
     return boxes, [door] if door is not None else []
 

@@ -183,6 +183,21 @@ def test_a_measured_free_height_replaces_the_assumed_lowest_shelf():
     assert free_height(fixed, goal) > 0.35  # the top panel
 
 
+def test_the_closet_above_its_lowest_shelf_is_solid():
+    """Keypoint-derived boxes: the look measures the lowest shelf over the goal, not those above
+    it, so the compartment above that shelf is one solid box up to the top (a carried item that
+    cut through the space over the first shelf landed on the second's front edge); under it, and
+    in front of the front plane, free."""
+    kt = KeypointTrajectory.from_articulated_object(_short_closet_with_shelves(0), RigidTransform(), 0.6)
+    goal, n = kt.point("goal", 0.6), front_normal(kt, 0.6)
+    fixed, _ = compartment_obstacles(kt, 0.6, 0.15)
+    depth = compartment_entry(kt, 0.6)[1]
+    inside = [goal + [0.0, 0.0, dz] + f * depth * n for dz in (0.2, 0.3) for f in (0.0, 0.5, 0.8)]
+    assert all(min(distance_to_box(b, np.array([p]))[0] for b in fixed) <= 0.0 for p in inside)
+    free = [goal + [0.0, 0.0, 0.1], goal + [0.0, 0.0, 0.25] + (depth + 0.02) * n]
+    assert all(min(distance_to_box(b, np.array([p]))[0] for b in fixed) > 0.0 for p in free)
+
+
 def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
     """Two shelves in a 0.40 m closet leave about 12 cm over the floor: less than the wrist needs
     with its clearances (12.6 cm), whatever the item; refused before any IK, naming both heights."""
@@ -262,6 +277,46 @@ def test_a_carried_item_keeps_its_clearance_between_collision_samples():
                     if any("held" in query.inspector().GetName(g) for g in (p.id_A, p.id_B))]
             closest = min([closest, *held])
     assert closest >= 0.5 * PlaceConfig().min_distance - 1e-4
+
+
+@pytest.mark.slow
+def test_the_carry_keeps_a_wider_berth_and_out_of_the_front():
+    """Closet 2 of capture seed 200, true keypoints, the door at 0.6: from the lift to above the
+    pre-place the held item and the arm clear the compartment, its door and the table by at least
+    half `carry_distance` (2.5 cm) between samples, more than the 1 cm elsewhere; down to the
+    pre-place the item goes no further in than the pre-place (carried 1 cm clear along the
+    neural field's boxes, items struck closets' front edges and fell)."""
+    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
+    from nfr_drake.systems.scenario import Scenario
+
+    scenario = Scenario(category="closet", seed=200, index=2, q_target=0.6)
+    obj, _ = scenario.sample_piece()
+    item = scenario.sample_item()
+    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
+    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
+    plan, table = _place_in_front(kt, 0.6, item, obstacles, PlaceConfig())
+    scene = build_planning_scene(plan.X_WB, [*obstacles[0], *obstacles[1], table], (item, plan.X_GI))
+    query_port = scene.plant.get_geometry_query_input_port()
+    up_and_over = plan.segments[1].pieces[1:-4]  # after the lift, before the pre-place and the way in
+    assert up_and_over
+    closest = np.inf
+    for piece in up_and_over:
+        for t in np.linspace(0.0, piece.end_time(), 200):
+            scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+            query = query_port.Eval(scene.plant_context)
+            name = query.inspector().GetName
+            pairs = query.ComputeSignedDistancePairwiseClosestPoints(0.05)
+            closest = min([closest, *(p.distance for p in pairs  # the robot and its item to the rest
+                                      if not all(name(g).startswith("panda::") for g in (p.id_A, p.id_B)))])
+    assert closest >= 0.5 * PlaceConfig().carry_distance - 1e-4
+    cfg = PlaceConfig()
+    problem = place_problem(kt, 0.6, item, plan.X_WI_pick, table, obstacles, cfg, plan.X_WB.translation())
+    p_pre = problem.goal + [0.0, 0.0, cfg.drop_height] - problem.entry_depth * problem.entry
+    for piece in plan.segments[1].pieces[-4:-3]:  # down to the pre-place
+        for t in np.linspace(0.0, piece.end_time(), 100):
+            scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+            X_WI = scene.tool_frame.CalcPoseInWorld(scene.plant_context) @ plan.X_GI
+            assert (X_WI.translation() - p_pre) @ problem.entry < 0.015
 
 
 def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkeypatch):
