@@ -36,8 +36,10 @@ _DRAWER_LOWEST_HANDLE = 0.35  # the lowest handle height as a fraction of the fr
 _DRAWER_MAX_HEIGHT = 0.40  # the tallest drawer front, m
 _DOOR_GRIP_OFFSET = 0.0575  # a door's grip axis in front of its hinge line, m (door + standoff, mean)
 ENTRY_SIDE_CLEARANCE = 0.13
-"""A closet's turned way in stays this far inside its sides at the front plane, m (half the hand's
-20 cm width across the fingers and 3 cm)."""
+"""A closet's turned way in stays this far inside its sides' inner faces at the front plane, m
+(half the hand's 20 cm width across the fingers and 3 cm; measured from the outer faces, the
+hinge line's, the hand passed a centimetre from a side wall and struck it: closet 1 of capture
+seed 200)."""
 
 
 def _frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, RotationMatrix]:
@@ -132,8 +134,8 @@ def compartment_entry(kt: KeypointTrajectory, q: float, toward: np.ndarray | Non
     its front; a drawer: down), and the goal's depth behind the opening along it, m (a closet: the
     front plane of `compartment_obstacles`; a drawer: the top of its estimated walls). A closet's
     way in is turned toward the horizontal line from `toward` (m, (3,) in W: the robot's base) to
-    the goal, at most as far as keeps the line `ENTRY_SIDE_CLEARANCE` inside its sides at the front
-    plane: an arm beside the front reaches in along its own line."""
+    the goal, at most as far as keeps the line `ENTRY_SIDE_CLEARANCE` inside its sides' inner faces
+    at the front plane: an arm beside the front reaches in along its own line."""
     goal = kt.point("goal", q)
     if kt.category != "closet":
         return -_Z, float(_drawer_tops(kt, q)[0] - goal[2])
@@ -142,7 +144,7 @@ def compartment_entry(kt: KeypointTrajectory, q: float, toward: np.ndarray | Non
     if toward is None:
         return -n, opening
     half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
-    widest = np.arctan2(max(half - ENTRY_SIDE_CLEARANCE, 0.0), max(opening, 1e-3))
+    widest = np.arctan2(max(half - _WALL - ENTRY_SIDE_CLEARANCE, 0.0), max(opening, 1e-3))  # inner faces
     d = (np.asarray(toward) - goal) * [1.0, 1.0, 0.0]
     angle = float(np.clip(np.arctan2(d @ lat, d @ n), -widest, widest))
     return -(np.cos(angle) * n + np.sin(angle) * lat), opening / np.cos(angle)

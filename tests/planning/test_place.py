@@ -114,7 +114,8 @@ def test_bases_in_front_of_an_open_closet_see_past_its_door():
 
 def test_a_closets_way_in_turns_toward_the_base_within_its_sides():
     """Straight in without a base; toward a base turned 40 degrees, the way in turns toward it but
-    the line stays 13 cm inside the sides at the front plane; its depth grows as 1 / cos."""
+    the line stays 13 cm inside the sides' inner faces (2 cm inside the hinge line's half width)
+    at the front plane, and reaches that at the widest turn; its depth grows as 1 / cos."""
     kt = _open_closet()
     straight, opening = compartment_entry(kt, 0.6)
     n = front_normal(kt, 0.6)
@@ -127,9 +128,10 @@ def test_a_closets_way_in_turns_toward_the_base_within_its_sides():
         entry, depth = compartment_entry(kt, 0.6, goal + 0.8 * (np.cos(a) * n + np.sin(a) * lat))
         turned = np.arctan2(-entry @ lat, -entry @ n)
         assert 0.0 < turned <= a + 1e-9
-        assert depth * np.sin(turned) <= half - 0.13 + 1e-9
+        assert depth * np.sin(turned) <= half - 0.02 - 0.13 + 1e-9
         np.testing.assert_allclose(depth, opening / np.cos(turned), rtol=1e-9)
     assert np.degrees(turned) < 80.0  # the widest turn is held
+    assert depth * np.sin(turned) == pytest.approx(half - 0.02 - 0.13)
 
 
 def test_the_table_is_not_set_behind_an_obstacle():
