@@ -8,11 +8,11 @@ has three segments of knots, each knot a chained-IK pose; from knot to knot one
 samples, at rest at both ends:
 1. "to pick": back off the handle along its approach (on the opening's base), to the pre-pick
    pose, to the pick pose;
-2. "carry": lift, up, over to above the pre-place pose outside the compartment (side grasps:
-   clear of everything by `carry_distance`), down to it (a side-held item no further in along
-   the way in than the pre-place: `_short_of`), in along a straight line (the way into the
-   compartment: horizontal through a closet's front, down into a drawer) to the place pose: the
-   item's bottom centre `drop_height` above the goal keypoint, upright;
+2. "carry": lift, up, over to above the pre-place pose outside the compartment, down to it (a
+   side-held item no further in along the way in than the pre-place: `_short_of`), in along a
+   straight line (the way into the compartment: horizontal through a closet's front, down into a
+   drawer) to the place pose: the item's bottom centre `drop_height` above the goal keypoint,
+   upright;
 3. "retreat": back out along the same line (the hand may touch the item it let go of; the
    approach within `approach_cone_deg` of the place's), the item left behind.
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
@@ -115,14 +115,6 @@ class PlaceConfig:
     """... and the tool at most this past it along its approach, m (the open fingers would push the
     item: 12 cm past it on one plan without this, and the item was nudged off its hold)."""
     min_distance: float = 0.01
-    carry_distance: float = 0.025
-    """Side grasps: the held item and the arm clear everything by this much on the carry from the
-    lift to above the pre-place (up and over), m; `min_distance` elsewhere (down to the pre-place
-    the hand is a centimetre over the floor) and for top grasps (a drawer's lift knot lies closer
-    to its carcass). Near a compartment the boxes
-    of the neural field's keypoints are uncertain by about a centimetre and a squeezed item sits up
-    to a centimetre off its planned hold: carried 1 cm clear, items struck the carcass's front
-    edges and were knocked out of the fingers (closets 20 and 24 of capture seed 200)."""
     collision_samples: int = 12
     """Fewest collision samples per piece (knot to knot); at most four times as many."""
     collision_step: float = 0.03
@@ -289,21 +281,15 @@ class _Stage:
     """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
     aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W).
     straight: the piece to it keeps p_W on the tool's axis ahead of the tool (`_straight_in`).
-    clearance: the piece to it and its knot clear the scene by this much, m (None:
-    `PlaceConfig.min_distance`). short_of: (p_GQ, p_W, direction): on the piece to it, the point
-    Q of the tool frame (m) goes no further than `_SHORT_OF_SLACK` past p_W (m, W) along direction
-    (unit, W) (`_short_of`)."""
+    short_of: (p_GQ, p_W, direction): on the piece to it, the point Q of the tool frame (m) goes
+    no further than `_SHORT_OF_SLACK` past p_W (m, W) along direction (unit, W) (`_short_of`)."""
 
     def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints,
-                 approach: np.ndarray | None = None, straight: bool = False, clearance: float | None = None,
+                 approach: np.ndarray | None = None, straight: bool = False,
                  short_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
         self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
-        self.approach, self.straight, self.clearance = approach, straight, clearance
+        self.approach, self.straight = approach, straight
         self.short_of = short_of
-
-    def distance(self, cfg: PlaceConfig) -> float:
-        """The clearance of the piece to this knot, m."""
-        return cfg.min_distance if self.clearance is None else self.clearance
 
 
 def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
@@ -417,7 +403,7 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
         q = ik.q()
         for c in stage.constraints(sc):
             ik.prog().AddConstraint(c, q)
-        ik.AddMinimumDistanceLowerBoundConstraint(stage.distance(cfg) + _KNOT_SLACK, 0.05)
+        ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
         ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
         for seed in _seeds(sc, stage, q_prev):
@@ -469,19 +455,18 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
                     p_from: np.ndarray, cfg: PlaceConfig) -> tuple[BsplineTrajectory | None, list[str]]:
     """One trajectory from q_from (exactly) to the stage's constraints, warm-started from the
     straight line to its IK solution q_to, at rest at both ends; the collision samples clear the
-    stage's scene by its clearance (`_Stage.distance`). A solution is checked four times as
-    densely: where it passes closer than half that, those points become samples too and it is
-    optimised again (`_RESAMPLES` times: a held item swept 4 mm from a closet's side wall between
-    samples and was knocked out of the fingers). Retried once at 1.6 times the duration."""
+    stage's scene. A solution is checked four times as densely: where it passes closer than half
+    `min_distance`, those points become samples too and it is optimised again (`_RESAMPLES`
+    times: a held item swept 4 mm from a closet's side wall between samples and was knocked out
+    of the fingers). Retried once at 1.6 times the duration."""
     sc = scenes[stage.scene]
     plant = sc.plant
     nq = plant.num_positions()
     vmax = cfg.velocity_scale * plant.GetVelocityUpperLimits()
     tau = max(1.5 * float(np.max(np.abs(q_to - q_from)[:NUM_ARM_JOINTS] / vmax[:NUM_ARM_JOINTS])),
               float(np.linalg.norm(stage.p_W - p_from)) / cfg.tool_speed, 0.5)
-    bound = stage.distance(cfg)
-    check = MinimumDistanceLowerBoundConstraint(plant, bound, sc.plant_context, None, 0.05)
-    between = MinimumDistanceLowerBoundConstraint(plant, 0.5 * bound, sc.plant_context, None, 0.05)
+    check = MinimumDistanceLowerBoundConstraint(plant, cfg.min_distance, sc.plant_context, None, 0.05)
+    between = MinimumDistanceLowerBoundConstraint(plant, 0.5 * cfg.min_distance, sc.plant_context, None, 0.05)
     travel = float(np.max(np.abs(q_to - q_from)[:NUM_ARM_JOINTS]))
     samples = int(np.clip(np.ceil(travel / cfg.collision_step), cfg.collision_samples,
                           4 * cfg.collision_samples))
@@ -662,7 +647,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                         approach)]
         short_of = (X_GI.translation(), line[0], pb.entry) if side else None  # out of the front till in
         carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg),
-                         pb.entry if side else -_Z, clearance=cfg.carry_distance if side and k <= 1 else None,
+                         pb.entry if side else -_Z,
                          short_of=short_of if k == 2 else None)
                   for k in keep]
         sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)

@@ -282,12 +282,10 @@ def test_a_carried_item_keeps_its_clearance_between_collision_samples():
 
 
 @pytest.mark.slow
-def test_the_carry_keeps_a_wider_berth_and_out_of_the_front():
-    """Closet 2 of capture seed 200, true keypoints, the door at 0.6: from the lift to above the
-    pre-place the held item and the arm clear the compartment, its door and the table by at least
-    half `carry_distance` (2.5 cm) between samples, more than the 1 cm elsewhere; down to the
-    pre-place the item goes no further in than the pre-place (carried 1 cm clear along the
-    neural field's boxes, items struck closets' front edges and fell)."""
+def test_the_item_goes_down_to_the_pre_place_out_of_the_front():
+    """Closet 2 of capture seed 200, true keypoints, the door at 0.6: down to the pre-place the
+    held item goes no further in along the way in than the pre-place (1 cm slack; the joint-space
+    piece bowed into a closet and set the item on a shelf's front edge)."""
     from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
     from nfr_drake.systems.scenario import Scenario
 
@@ -297,28 +295,15 @@ def test_the_carry_keeps_a_wider_berth_and_out_of_the_front():
     kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
     obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
     plan, table = _place_in_front(kt, 0.6, item, obstacles, PlaceConfig())
-    scene = build_planning_scene(plan.X_WB, [*obstacles[0], *obstacles[1], table], (item, plan.X_GI))
-    query_port = scene.plant.get_geometry_query_input_port()
-    up_and_over = plan.segments[1].pieces[1:-4]  # after the lift, before the pre-place and the way in
-    assert up_and_over
-    closest = np.inf
-    for piece in up_and_over:
-        for t in np.linspace(0.0, piece.end_time(), 200):
-            scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
-            query = query_port.Eval(scene.plant_context)
-            name = query.inspector().GetName
-            pairs = query.ComputeSignedDistancePairwiseClosestPoints(0.05)
-            closest = min([closest, *(p.distance for p in pairs  # the robot and its item to the rest
-                                      if not all(name(g).startswith("panda::") for g in (p.id_A, p.id_B)))])
-    assert closest >= 0.5 * PlaceConfig().carry_distance - 1e-4
+    scene = build_planning_scene(plan.X_WB, [])
     cfg = PlaceConfig()
     problem = place_problem(kt, 0.6, item, plan.X_WI_pick, table, obstacles, cfg, plan.X_WB.translation())
     p_pre = problem.goal + [0.0, 0.0, cfg.drop_height] - problem.entry_depth * problem.entry
-    for piece in plan.segments[1].pieces[-4:-3]:  # down to the pre-place
-        for t in np.linspace(0.0, piece.end_time(), 100):
-            scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
-            X_WI = scene.tool_frame.CalcPoseInWorld(scene.plant_context) @ plan.X_GI
-            assert (X_WI.translation() - p_pre) @ problem.entry < 0.015
+    piece = plan.segments[1].pieces[-4]  # down to the pre-place
+    for t in np.linspace(0.0, piece.end_time(), 100):
+        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+        X_WI = scene.tool_frame.CalcPoseInWorld(scene.plant_context) @ plan.X_GI
+        assert (X_WI.translation() - p_pre) @ problem.entry < 0.015
 
 
 def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkeypatch):
