@@ -28,8 +28,9 @@ Per setting: keypoint RMSE at the observed state and handle error (cm, in W), q 
 handle detector's triangulated handle error (cm; nan when fewer than 3 views agree), the fit's
 seconds. Per object: the detector's handle pixels (p > 0.5) on the raw room photos and the share
 of them off the true (whole) silhouette, and the object's extent in the photos (its silhouette's
-bounding box's longer side over the image side, median over the views). Prints a line per
-setting and object, then medians; `--csv` writes the rows.
+bounding box's longer side over the image side, median over the views). The segmenter's masks and
+the pose from them come from `--segmenter` (a model folder, `models/segmenter` by default). Prints
+a line per setting and object, then medians; `--csv-path` writes the rows.
 """
 
 from __future__ import annotations
@@ -120,10 +121,11 @@ def median(values: list[float]) -> float:
 
 
 def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (0, 3, 8),
-         settings: tuple[str, ...] = SETTINGS, csv_path: Path | None = None, threads: int = 1) -> None:
+         settings: tuple[str, ...] = SETTINGS, segmenter: str = Scenario.segmenter,
+         csv_path: Path | None = None, threads: int = 1) -> None:
     set_torch_threads(threads)
     base = Scenario(category=category, model=f"models/{category}", seed=seed, object_pose="estimated",
-                    perceive="room", fit=FitConfig(preset="fast"), min_confidence=0.0)
+                    perceive="room", segmenter=segmenter, fit=FitConfig(preset="fast"), min_confidence=0.0)
     rows = []
     for index in objects:
         started = time.perf_counter()
@@ -211,7 +213,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
               f"(none {sum(math.isnan(r['sighting_cm']) for r in sub)})")
     if csv_path is not None:
         write_rows_csv(csv_path, rows)
-    print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, torch threads {torch.get_num_threads()}")
+    print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, torch threads {torch.get_num_threads()}, "
+          f"segmenter {segmenter}")
 
 
 if __name__ == "__main__":
