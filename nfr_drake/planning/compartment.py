@@ -5,12 +5,10 @@ The keypoints give the front plane, the hinge line, the goal (a closet's inner f
 drawer's inner floor centre that moves with it) and the handle; the rest comes from the categories'
 layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
 - a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
-  `grasp.carcass_box`, solid from its lowest shelf up: a shelf at the lowest height a closet of
-  that height can have (two shelves: a third of the way up) or, where the free height above the
-  goal was measured (a look into the opened closet, `nfr_drake.systems.interior`), at that
-  height; what lies above that shelf is not seen (a second shelf's front edge stopped a carried
-  item that cut through the space above the first), and its open door (`grasp.door_panel_box`
-  at the target);
+  `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
+  shelves: a third of the way up) or, where the free height above the goal was measured (a look
+  into the opened closet, `nfr_drake.systems.interior`), at that height, and its open door
+  (`grasp.door_panel_box` at the target);
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
   behind the handle, its back as far behind the goal as the front is ahead, side walls at the
   narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`), as high as a front with its handle at
@@ -36,10 +34,8 @@ _DRAWER_LOWEST_HANDLE = 0.35  # the lowest handle height as a fraction of the fr
 _DRAWER_MAX_HEIGHT = 0.40  # the tallest drawer front, m
 _DOOR_GRIP_OFFSET = 0.0575  # a door's grip axis in front of its hinge line, m (door + standoff, mean)
 ENTRY_SIDE_CLEARANCE = 0.13
-"""A closet's turned way in stays this far inside its sides' inner faces at the front plane, m
-(half the hand's 20 cm width across the fingers and 3 cm; measured from the outer faces, the
-hinge line's, the hand passed a centimetre from a side wall and struck it: closet 1 of capture
-seed 200)."""
+"""A closet's turned way in stays this far inside its sides at the front plane, m (half the hand's
+20 cm width across the fingers and 3 cm)."""
 
 
 def _frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, RotationMatrix]:
@@ -101,9 +97,9 @@ def _closet(kt: KeypointTrajectory, q: float, free_height: float | None) -> list
         _box("compartment_side_a", R, axes, [back, y0 - half, 0.0], [front, y0 - half + _WALL, top]),
         _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + half, top]),
     ]
-    if shelf < top - _WALL:  # solid up to the top: the look sees the lowest shelf, not those above
+    if shelf < top - _WALL:
         boxes.append(_box("compartment_shelf", R, axes, [back, y0 - half, shelf],
-                          [front - 0.01, y0 + half, top - _WALL]))
+                          [front - 0.01, y0 + half, shelf + _WALL]))
     door = door_panel_box(kt.with_current(q))
     return boxes, [door] if door is not None else []
 
@@ -134,8 +130,8 @@ def compartment_entry(kt: KeypointTrajectory, q: float, toward: np.ndarray | Non
     its front; a drawer: down), and the goal's depth behind the opening along it, m (a closet: the
     front plane of `compartment_obstacles`; a drawer: the top of its estimated walls). A closet's
     way in is turned toward the horizontal line from `toward` (m, (3,) in W: the robot's base) to
-    the goal, at most as far as keeps the line `ENTRY_SIDE_CLEARANCE` inside its sides' inner faces
-    at the front plane: an arm beside the front reaches in along its own line."""
+    the goal, at most as far as keeps the line `ENTRY_SIDE_CLEARANCE` inside its sides at the front
+    plane: an arm beside the front reaches in along its own line."""
     goal = kt.point("goal", q)
     if kt.category != "closet":
         return -_Z, float(_drawer_tops(kt, q)[0] - goal[2])
@@ -144,7 +140,7 @@ def compartment_entry(kt: KeypointTrajectory, q: float, toward: np.ndarray | Non
     if toward is None:
         return -n, opening
     half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
-    widest = np.arctan2(max(half - _WALL - ENTRY_SIDE_CLEARANCE, 0.0), max(opening, 1e-3))  # inner faces
+    widest = np.arctan2(max(half - ENTRY_SIDE_CLEARANCE, 0.0), max(opening, 1e-3))
     d = (np.asarray(toward) - goal) * [1.0, 1.0, 0.0]
     angle = float(np.clip(np.arctan2(d @ lat, d @ n), -widest, widest))
     return -(np.cos(angle) * n + np.sin(angle) * lat), opening / np.cos(angle)

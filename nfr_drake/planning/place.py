@@ -8,11 +8,10 @@ has three segments of knots, each knot a chained-IK pose; from knot to knot one
 samples, at rest at both ends:
 1. "to pick": back off the handle along its approach (on the opening's base), to the pre-pick
    pose, to the pick pose;
-2. "carry": lift, up, over to above the pre-place pose outside the compartment, down to it (a
-   side-held item no further in along the way in than the pre-place: `_short_of`), in along a
-   straight line (the way into the compartment: horizontal through a closet's front, down into a
-   drawer) to the place pose: the item's bottom centre `drop_height` above the goal keypoint,
-   upright;
+2. "carry": lift, up, over to above the pre-place pose outside the compartment, down to it, in
+   along a straight line (the way into the compartment: horizontal through a closet's front, down
+   into a drawer) to the place pose: the item's bottom centre `drop_height` above the goal
+   keypoint, upright;
 3. "retreat": back out along the same line (the hand may touch the item it let go of; the
    approach within `approach_cone_deg` of the place's), the item left behind.
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
@@ -280,16 +279,12 @@ def grasp_in_item(item: Item, grasp: str, cfg: PlaceConfig, flip: bool = False) 
 class _Stage:
     """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
     aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W).
-    straight: the piece to it keeps p_W on the tool's axis ahead of the tool (`_straight_in`).
-    short_of: (p_GQ, p_W, direction): on the piece to it, the point Q of the tool frame (m) goes
-    no further than `_SHORT_OF_SLACK` past p_W (m, W) along direction (unit, W) (`_short_of`)."""
+    straight: the piece to it keeps p_W on the tool's axis ahead of the tool (`_straight_in`)."""
 
     def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints,
-                 approach: np.ndarray | None = None, straight: bool = False,
-                 short_of: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+                 approach: np.ndarray | None = None, straight: bool = False):
         self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
         self.approach, self.straight = approach, straight
-        self.short_of = short_of
 
 
 def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
@@ -393,7 +388,9 @@ def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray):
 
 def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray,
                  cfg: PlaceConfig) -> tuple[list[np.ndarray] | None, str]:
-    """IK of each stage in turn, seeded by and kept close to the last; fingers fixed."""
+    """IK of each stage in turn, seeded by and kept close to the last; fingers fixed. A seed whose
+    solve raises (FCL's distance query inside SNOPT, on a degenerate pair of capsules: closet 18
+    of capture seed 200 stopped an evaluation so) counts as one that failed."""
     options = SolverOptions()
     options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
     q_prev, sols = q0, []
@@ -407,7 +404,10 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
         ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
         for seed in _seeds(sc, stage, q_prev):
-            result = SnoptSolver().Solve(ik.prog(), seed, options)
+            try:
+                result = SnoptSolver().Solve(ik.prog(), seed, options)
+            except RuntimeError:  # FCL's distance query can fail on a degenerate pair: the next seed
+                continue
             if result.is_success():
                 break
         else:
@@ -428,22 +428,6 @@ def _straight_in(sc: PlanningScene, p_from: np.ndarray, p_to: np.ndarray, cfg: P
                                W, p_to, ctx),
             PositionConstraint(sc.plant, G, [-tol, -tol, -length - 0.01], [tol, tol, cfg.line_overshoot],
                                W, p_from, ctx)]
-
-
-_SHORT_OF_SLACK = 0.01
-"""How far past the pre-place a side-held item may go along the way in before it goes in, m: the
-joint-space piece down to the pre-place bowed into a closet and set the item on a shelf's front
-edge (closet 20 of capture seed 200, the neural field's keypoints)."""
-
-
-def _short_of(sc: PlanningScene, p_GQ: np.ndarray, p_W: np.ndarray, direction: np.ndarray
-              ) -> PositionConstraint:
-    """The point Q of the tool frame (p_GQ, m) at most `_SHORT_OF_SLACK` past p_W (m, (3,) in W)
-    along `direction` (unit, W): a half-space, as a box in a frame at p_W whose x axis is direction."""
-    X_WA = RigidTransform(RotationMatrix.MakeFromOneVector(direction, 0), p_W)
-    far = 10.0
-    return PositionConstraint(sc.plant, sc.plant.world_frame(), X_WA, [-far, -far, -far],
-                              [_SHORT_OF_SLACK, far, far], sc.tool_frame, p_GQ, sc.plant_context)
 
 
 _RESAMPLES = 2
@@ -500,10 +484,6 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
         if stage.straight:
             described += [(f"straight to {stage.name}", trajopt.AddPathPositionConstraint(c, s))
                           for c in _straight_in(sc, p_from, stage.p_W, cfg)
-                          for s in np.linspace(0.0, 1.0, samples + 1)[1:-1]]
-        if stage.short_of is not None:
-            described += [(f"short of the way in, to {stage.name}",
-                           trajopt.AddPathPositionConstraint(_short_of(sc, *stage.short_of), s))
                           for s in np.linspace(0.0, 1.0, samples + 1)[1:-1]]
         for name, binding in described:
             binding.evaluator().set_description(name)
@@ -645,11 +625,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                 if k >= 2 or min(np.linalg.norm(points[k] - p) for p in (p_lift, line[0])) > 1e-2]
         carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg),
                         approach)]
-        short_of = (X_GI.translation(), line[0], pb.entry) if side else None  # out of the front till in
         carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg),
-                         pb.entry if side else -_Z,
-                         short_of=short_of if k == 2 else None)
-                  for k in keep]
+                         pb.entry if side else -_Z) for k in keep]
         sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
         if sols_b is None:
             failures.append(f"IK of {failed}")

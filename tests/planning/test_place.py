@@ -114,8 +114,7 @@ def test_bases_in_front_of_an_open_closet_see_past_its_door():
 
 def test_a_closets_way_in_turns_toward_the_base_within_its_sides():
     """Straight in without a base; toward a base turned 40 degrees, the way in turns toward it but
-    the line stays 13 cm inside the sides' inner faces (2 cm inside the hinge line's half width)
-    at the front plane, and reaches that at the widest turn; its depth grows as 1 / cos."""
+    the line stays 13 cm inside the sides at the front plane; its depth grows as 1 / cos."""
     kt = _open_closet()
     straight, opening = compartment_entry(kt, 0.6)
     n = front_normal(kt, 0.6)
@@ -128,10 +127,9 @@ def test_a_closets_way_in_turns_toward_the_base_within_its_sides():
         entry, depth = compartment_entry(kt, 0.6, goal + 0.8 * (np.cos(a) * n + np.sin(a) * lat))
         turned = np.arctan2(-entry @ lat, -entry @ n)
         assert 0.0 < turned <= a + 1e-9
-        assert depth * np.sin(turned) <= half - 0.02 - 0.13 + 1e-9
+        assert depth * np.sin(turned) <= half - 0.13 + 1e-9
         np.testing.assert_allclose(depth, opening / np.cos(turned), rtol=1e-9)
     assert np.degrees(turned) < 80.0  # the widest turn is held
-    assert depth * np.sin(turned) == pytest.approx(half - 0.02 - 0.13)
 
 
 def test_the_table_is_not_set_behind_an_obstacle():
@@ -183,21 +181,6 @@ def test_a_measured_free_height_replaces_the_assumed_lowest_shelf():
     fixed, _ = compartment_obstacles(kt, 0.6, 1.0)
     assert not [b for b in fixed if "shelf" in b.name]
     assert free_height(fixed, goal) > 0.35  # the top panel
-
-
-def test_the_closet_above_its_lowest_shelf_is_solid():
-    """Keypoint-derived boxes: the look measures the lowest shelf over the goal, not those above
-    it, so the compartment above that shelf is one solid box up to the top (a carried item that
-    cut through the space over the first shelf landed on the second's front edge); under it, and
-    in front of the front plane, free."""
-    kt = KeypointTrajectory.from_articulated_object(_short_closet_with_shelves(0), RigidTransform(), 0.6)
-    goal, n = kt.point("goal", 0.6), front_normal(kt, 0.6)
-    fixed, _ = compartment_obstacles(kt, 0.6, 0.15)
-    depth = compartment_entry(kt, 0.6)[1]
-    inside = [goal + [0.0, 0.0, dz] + f * depth * n for dz in (0.2, 0.3) for f in (0.0, 0.5, 0.8)]
-    assert all(min(distance_to_box(b, np.array([p]))[0] for b in fixed) <= 0.0 for p in inside)
-    free = [goal + [0.0, 0.0, 0.1], goal + [0.0, 0.0, 0.25] + (depth + 0.02) * n]
-    assert all(min(distance_to_box(b, np.array([p]))[0] for b in fixed) > 0.0 for p in free)
 
 
 def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
@@ -281,35 +264,13 @@ def test_a_carried_item_keeps_its_clearance_between_collision_samples():
     assert closest >= 0.5 * PlaceConfig().min_distance - 1e-4
 
 
-@pytest.mark.slow
-def test_the_item_goes_down_to_the_pre_place_out_of_the_front():
-    """Closet 2 of capture seed 200, true keypoints, the door at 0.6: down to the pre-place the
-    held item goes no further in along the way in than the pre-place (1 cm slack; the joint-space
-    piece bowed into a closet and set the item on a shelf's front edge)."""
-    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
-    from nfr_drake.systems.scenario import Scenario
-
-    scenario = Scenario(category="closet", seed=200, index=2, q_target=0.6)
-    obj, _ = scenario.sample_piece()
-    item = scenario.sample_item()
-    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
-    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
-    plan, table = _place_in_front(kt, 0.6, item, obstacles, PlaceConfig())
-    scene = build_planning_scene(plan.X_WB, [])
-    cfg = PlaceConfig()
-    problem = place_problem(kt, 0.6, item, plan.X_WI_pick, table, obstacles, cfg, plan.X_WB.translation())
-    p_pre = problem.goal + [0.0, 0.0, cfg.drop_height] - problem.entry_depth * problem.entry
-    piece = plan.segments[1].pieces[-4]  # down to the pre-place
-    for t in np.linspace(0.0, piece.end_time(), 100):
-        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
-        X_WI = scene.tool_frame.CalcPoseInWorld(scene.plant_context) @ plan.X_GI
-        assert (X_WI.translation() - p_pre) @ problem.entry < 0.015
-
-
-def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkeypatch):
+@pytest.mark.parametrize("program,failure", [("trajectory", "collision query error in the solver"),
+                                              ("IK", "IK of backing off the handle")])
+def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkeypatch, program, failure):
     """FCL's distance query can raise inside SNOPT on a degenerate pair of capsules (drawer 25 of
-    capture seed 201 stopped an evaluation with a traceback): the piece fails, the plan raises a
-    PlanningError naming it."""
+    capture seed 201 in a trajectory, closet 18 of capture seed 200 in an IK, each stopped an
+    evaluation with a traceback): the piece or the knot fails, the plan raises a PlanningError
+    naming it."""
     import nfr_drake.planning.place as place_module
     from nfr_drake.planning.planner import PlanningError
 
@@ -317,7 +278,7 @@ def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkey
 
     class Failing(real):
         def Solve(self, prog, *args):
-            if prog.num_vars() > 50:  # a trajectory's program, not an IK's
+            if (prog.num_vars() > 50) == (program == "trajectory"):  # a trajectory's program has more
                 raise RuntimeError("Exception while evaluating SNOPT costs and constraints: 'Error with "
                                    "configuration\n  Original error message: ...'")
             return super().Solve(prog, *args)
@@ -330,6 +291,6 @@ def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkey
                                 must_reach=place_reach_points(kt, 1.0, item))
     fixed, moving = compartment_obstacles(kt, 1.0)
     table, X_WI = table_beside(opening.X_WB, [*fixed, *moving], ITEM_REACH["top"])
-    with pytest.raises(PlanningError, match="collision query error in the solver"):
+    with pytest.raises(PlanningError, match=failure):
         plan_place(opening.X_WB, opening.trajectory.value(opening.duration).ravel(),
                    place_problem(kt, 1.0, item, X_WI, table), handle=opening.waypoints[-1])
