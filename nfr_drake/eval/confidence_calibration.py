@@ -9,6 +9,12 @@ fits more than 5 cm off are refused), and with `--rooms` on held-out rooms (`con
 their confidence from the segmenter's masks and, to compare, from the border colour. Writes
 OUT/features.csv, OUT/confidence.json, OUT/report.md and OUT/calibration.png, and with
 `--write-models` the calibration into the model folders (`confidence.json`).
+
+With `--scene room` it calibrates the fits in rooms instead, one calibration per model
+(`room_calibration`): fitted on the pipeline's own room fits of a calibration seed
+(`confidence_data.plan_room_cases`), checked on those of the pipeline's evaluation seed, written
+as OUT/<closet|drawer>/confidence_room.json (with `--write-models` into models/closet and
+models/drawer), beside OUT/report.md and OUT/calibration_<closet|drawer>.png.
 """
 
 from __future__ import annotations
@@ -26,17 +32,21 @@ import numpy as np
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.confidence_data import (
+    EVALUATION_SEED,
+    PIPELINE_ROOM,
     ROOM_VARIANTS,
     case_features,
     case_part_features,
     plan_cases,
     plan_furniture_cases,
+    plan_room_cases,
     run_cases,
 )
 from nfr_drake.eval.confidence_rooms import room_captures
 from nfr_drake.inference.confidence import (
     CONFIDENCE_FILE,
     FAR_M,
+    ROOM_CONFIDENCE_FILE,
     SUCCESS_M,
     TRANSFORMS,
     ConfidenceModel,
@@ -60,6 +70,17 @@ FURNITURE_TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_vi
 """The terms of a model with several parts (furniture), per part: the fit's and the part's own
 (`inference.confidence.part_features`; the sighting terms compare the slot's handle with the
 handle detector's, constant while the model ships none)."""
+
+ROOM_TERMS = TERMS + [("silhouette_iou", "one_minus"), ("image_loss", "log10"),
+                      ("start_loss_ratio", "identity")]
+"""The terms a room calibration starts from (`room_calibration`, which keeps as few as its split
+supports): the object-alone terms and the mean view's silhouette IoU and image loss, and the
+best start's loss over the second's (near 1: the starts explain the photos about equally well)."""
+
+CLEAN_VARIANTS = ("clean", PIPELINE_ROOM)
+"""The calibration fits whose successes the threshold must not refuse (`pick_threshold`): the
+training world unchanged, and the room fits of the pipeline (the setting a room calibration is
+for)."""
 
 MAX_THRESHOLD = 0.5
 """The threshold is at most this: a fit more likely right than wrong is never refused."""
@@ -93,7 +114,15 @@ def featurize(lines: list[dict]) -> list[dict]:
     for line in lines:
         if line["handle_error_m"] is None:
             continue
-        fitted = models.setdefault(line["model"], FittedModel(Path(line["model"])))
+        if line["variant"] == PIPELINE_ROOM:  # the features the pipeline's perception computed
+            rows.append({"split": line["split"], "kind": f"rooms of seed {line['seed']}",
+                         "model": line["model"], "capture": line["capture"],
+                         "variant": line["variant"], "handle_error_m": line["handle_error_m"],
+                         **line["features"]})
+            continue
+        if line["model"] not in models:
+            models[line["model"]] = FittedModel(Path(line["model"]))
+        fitted = models[line["model"]]
         if "part_errors" in line:  # a model of several parts: one row per true part
             kind = Path(line["capture"]).parent.name if line["split"] == "evaluation" else line["variant"]
             rows += [{"split": line["split"], "kind": kind, "model": line["model"],
@@ -218,7 +247,7 @@ def calibrate(rows: list[dict], terms: list[tuple[str, str]], source: dict, l2: 
     coef[active], intercept = fit_logistic(X[:, active], y, l2)
     model = ConfidenceModel(terms, mean.tolist(), std.tolist(), coef.tolist(), intercept, 0.0, source)
     p = np.array([model.probability(r) for r in rows])
-    model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] == "clean" for r in rows]))
+    model.threshold = pick_threshold(p, y > 0, np.array([r["variant"] in CLEAN_VARIANTS for r in rows]))
     return model
 
 
@@ -254,10 +283,11 @@ def refusal_table(rows: list[dict], model: ConfidenceModel) -> str:
     return "\n".join(lines)
 
 
-def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> None:
+def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path, title: str = "") -> None:
     """Reliability diagram (predicted P against the observed share within 2 cm, per split),
     refusal curves (share of good in-distribution fits and of far-off fits refused against the
-    threshold) and the handle errors (share of each split's fits within a distance)."""
+    threshold) and the handle errors (share of each split's fits within a distance); `title`
+    above them."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -310,9 +340,72 @@ def plot_calibration(rows: list[dict], model: ConfidenceModel, path: Path) -> No
     cx.set(xscale="log", xlabel="handle error (cm)", ylabel="share of fits within it",
            title="handle errors", ylim=(-0.02, 1.02))
     cx.legend(fontsize=8, loc="lower right")
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def model_report(rows: list[dict], model: ConfidenceModel) -> str:
+    """Markdown: the calibration's threshold and standardised coefficients, each term's rank
+    correlation with the handle error over `rows` and their `refusal_table`."""
+    terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))
+    ranks = ", ".join(f"{t}({n}) {rho:+.2f}" for (n, t), rho in zip(
+        model.terms, rank_correlations(rows, model.terms), strict=True))
+    return (f"threshold {model.threshold:.2f}; standardised coefficients: {terms}; intercept "
+            f"{model.intercept:+.2f}\n\nrank correlation of each term with the handle error "
+            f"over all {len(rows)} rows (more of a term is meant to be worse: > 0): {ranks}\n\n"
+            f"{refusal_table(rows, model)}\n")
+
+
+def failures(failed: list[dict]) -> str:
+    """Markdown: the cases without a fit (`failure` why), or "" when there are none."""
+    if not failed:
+        return ""
+    return (f"\nno fit ({len(failed)}): "
+            + "; ".join(f"{Path(f['capture']).parent.name}/{Path(f['capture']).name} "
+                        f"{f['variant']}: {f['failure']}" for f in failed) + "\n")
+
+
+def room_calibration(out: Path, calibration: int, evaluation: int, seed: int, fit: FitConfig,
+                     write_models: bool, source: dict) -> str:
+    """The room calibration per model (models/closet, models/drawer): the pipeline's room fits
+    (`plan_room_cases`: `calibration` objects of capture seed `seed`, `evaluation` of
+    `EVALUATION_SEED`; kept in OUT/fits.jsonl), a logistic regression on each model's
+    calibration fits from `ROOM_TERMS` cut to as few terms as they support (`calibrate`,
+    `select_terms`; folds of whole objects), with its threshold (`pick_threshold`, every room
+    fit counting as clean), written as OUT/<name>/confidence_room.json (with `write_models` into
+    the model folder too) and plotted as OUT/calibration_<name>.png. Returns the report: per model
+    its `model_report` and that of the object-alone calibration (the folder's confidence.json)
+    on the same fits."""
+    cases = plan_room_cases(calibration, evaluation, seed)
+    keys = {c.key for c in cases}
+    lines = [line for line in run_cases(cases, out / "fits.jsonl", fit) if line["key"] in keys]
+    rows = featurize(lines)
+    write_rows_csv(out / "features.csv", rows)
+    report = ""
+    for folder in ("models/closet", "models/drawer"):
+        name, mine = Path(folder).name, [r for r in rows if r["model"] == folder]
+        fitted_on = [r for r in mine if r["split"] == "calibration"]
+        data = (f"room fits of the pipeline (eval-pipeline --perceive room --object-pose estimated, "
+                f"perception only) with {folder}: objects 0-{calibration - 1} of capture seed {seed}")
+        model = calibrate(fitted_on, ROOM_TERMS, {**source, "data": data, "fits": len(fitted_on)},
+                          select=True)
+        (out / name).mkdir(exist_ok=True)
+        model.write(out / name, ROOM_CONFIDENCE_FILE)
+        if write_models:
+            print(f"room calibration -> {model.write(Path(folder), ROOM_CONFIDENCE_FILE)}")
+        report += f"## {name}: {ROOM_CONFIDENCE_FILE}\n\n{model_report(mine, model)}"
+        alone = ConfidenceModel.read(Path(folder))
+        if alone is not None:
+            report += (f"\nThe object-alone calibration ({folder}/{CONFIDENCE_FILE}) on the same "
+                       f"fits:\n\n{refusal_table(mine, alone)}\n")
+        report += failures([line for line in lines
+                            if line["model"] == folder and line["handle_error_m"] is None]) + "\n"
+        plot_calibration(mine, model, out / f"calibration_{name}.png",
+                         f"{name} in rooms: fitted on seed {seed}, checked on seed {EVALUATION_SEED}")
+    return report
 
 
 def calibrate_confidence_command(data: Path = Path("data/eval"),
@@ -325,6 +418,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  fit: FitConfig = FitConfig(),
                                  category: Literal["closet-drawer", "furniture"] = "closet-drawer",
                                  calibration_captures: Path | None = None,
+                                 scene: Literal["alone", "room"] = "alone", room_seed: int = 300,
                                  threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
@@ -361,6 +455,12 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
             split's capture sets, furniture_000... (capture seed 500; default
             DATA/furniture_calib, 64 px): e.g. data/eval/furniture_calib128, the same pieces
             at 128 px as the handle detector's photos (`nfr-drake captures --size 128`).
+        scene: "alone" (the object before a plain background, `confidence.json`) or "room": one
+            calibration per model (`confidence_room.json`) on the pipeline's room fits
+            (`room_calibration`): `calibration` objects per category of capture seed
+            `room_seed`, checked on `evaluation` objects of the pipeline's evaluation seed 200;
+            the other counts are not used.
+        room_seed: with `--scene room`, the capture seed of the calibration's objects (not 200).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -374,6 +474,17 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     if calibration_captures is not None and not furniture_model:
         raise NfrDrakeError("--calibration-captures: only with --category furniture (closets and "
                             "drawers calibrate on DATA/C_calib)")
+    command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
+    source = {"command": command, "date": datetime.date.today().isoformat(),
+              "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
+    if scene == "room":
+        if furniture_model or check is not None or rooms:
+            raise NfrDrakeError("--scene room: closets and drawers only, without --check and --rooms")
+        report = room_calibration(out, calibration, evaluation, room_seed, fit, write_models, source)
+        (out / "report.md").write_text(report)
+        print(report + f"-> {out}/report.md, {out}/calibration_<model>.png, "
+                       f"{out}/<model>/{ROOM_CONFIDENCE_FILE}")
+        return
     room_sets = {} if rooms == 0 else {
         name: captures for c in ("closet", "drawer")
         for name, captures in room_captures(rooms_data, data / "rooms", c, rooms).items()}
@@ -388,7 +499,6 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     rows = featurize(lines)
     failed = [line for line in lines if line["handle_error_m"] is None]
     write_rows_csv(out / "features.csv", rows)
-    command = "nfr-drake " + " ".join(["calibrate-confidence", *sys.argv[2:]])
     calib_folder = calibration_captures or data / "furniture_calib"
     data_text = (f"calibration split: {calib_folder} (capture seed 500), "
                  f"{calibration} captures, variants by index: clean, clean, few_views, occluded, "
@@ -396,10 +506,8 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                  "calibration split: closet_calib and drawer_calib (capture seed 500), "
                  f"{calibration} captures each, variants by index: clean, clean, few_views, "
                  "occluded, edge_cut; both categories pooled")
-    source = {"data": data_text,
-              "fits": len([r for r in rows if r["split"] == "calibration"]),
-              "command": command, "date": datetime.date.today().isoformat(),
-              "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores"}
+    source = {**source, "data": data_text,
+              "fits": len([r for r in rows if r["split"] == "calibration"])}
     model = checked or calibrate([r for r in rows if r["split"] == "calibration"],
                                  FURNITURE_TERMS if furniture_model else TERMS, source,
                                  select=furniture_model)
@@ -407,18 +515,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     if write_models and checked is None:
         for folder in ("models/furniture",) if furniture_model else ("models/closet", "models/drawer"):
             print(f"calibration -> {model.write(Path(folder))}")
-    table = refusal_table(rows, model)
-    terms = ", ".join(f"{t}({n}) {c:+.2f}" for (n, t), c in zip(model.terms, model.coef, strict=True))
-    ranks = ", ".join(f"{t}({n}) {rho:+.2f}" for (n, t), rho in zip(
-        model.terms, rank_correlations(rows, model.terms), strict=True))
-    report = (f"threshold {model.threshold:.2f}; standardised coefficients: {terms}; intercept "
-              f"{model.intercept:+.2f}\n\nrank correlation of each term with the handle error "
-              f"over all {len(rows)} rows (more of a term is meant to be worse: > 0): {ranks}\n\n"
-              f"{table}\n")
-    if failed:
-        report += (f"\nno fit ({len(failed)}): "
-                   + "; ".join(f"{Path(f['capture']).parent.name}/{Path(f['capture']).name} "
-                               f"{f['variant']}: {f['failure']}" for f in failed) + "\n")
+    report = model_report(rows, model) + failures(failed)
     (out / "report.md").write_text(report)
     plot_calibration(rows, model, out / "calibration.png")
     print(report + f"-> {out}/report.md, {out}/calibration.png, {out}/confidence.json")

@@ -8,7 +8,10 @@ the capture's handle at its q; for a furniture capture (several fronts) the near
 A room capture (`confidence_rooms`) is fitted with the segmenter's masks as `infer --estimate-pose`
 fits it (the pixels off the masks painted in the training background, `infer.paint_background`),
 with the given pose ("room") or the pose estimated from the masks ("room_pose", the line keeps
-X_WO; the handle is compared in the room's frame).
+X_WO; the handle is compared in the room's frame). A room fit of the pipeline (`PIPELINE_ROOM`) is
+made as `eval-pipeline --perceive room --object-pose estimated` makes it, by the pipeline's own
+perception (`systems.pipeline.perceive_scene`), and its line keeps the features that perception
+computed.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from tqdm import tqdm
 
 from nfr_drake.data.capture import CaptureSet, read_capture_set
 from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.capture_variants import apply_variant
+from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.confidence import fit_features, part_features, render_views
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
@@ -36,12 +41,21 @@ from nfr_drake.inference.infer import (
     paint_background,
 )
 from nfr_drake.perception.object_pose import ObjectPoseError
+from nfr_drake.systems.pipeline import perceive_scene
+from nfr_drake.systems.scenario import Scenario
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 SEGMENTER = Path("models/segmenter")
 """The room segmenter whose masks the room fits and their confidence use."""
 
 ROOM_VARIANTS = ("room", "room_pose")
 """Fits of a room capture: with the given pose, and with the pose estimated from the masks."""
+
+PIPELINE_ROOM = "pipeline_room"
+"""The variant of a room fit of the pipeline: the object of a scenario's seed and index in its
+room, perceived as `eval-pipeline --perceive room --object-pose estimated` perceives it
+(`room_scenario`). Its case's capture names the scenario, pipeline_rooms/<category>_<seed>_<index>
+(`pipeline_room_case`)."""
 
 
 @dataclass(frozen=True)
@@ -137,10 +151,51 @@ def case_part_features(line: dict, fitted: FittedModel) -> list[dict]:
             for k, error in line["part_errors"].items()]
 
 
+def room_scenario(category: str, seed: int, index: int, fit: FitConfig) -> Scenario:
+    """The scenario that `eval-pipeline --perceive room --object-pose estimated` runs on object
+    `index` of capture seed `seed` with models/CATEGORY and the fit `fit` (the room, the cameras
+    and the coarse look drawn from the seed and index), never refused."""
+    base = Scenario(category=category, model=f"models/{category}", seed=seed, fit=fit,
+                    min_confidence=0.0, object_pose="estimated", perceive="room")
+    return object_scenario(base, index)
+
+
+def pipeline_room_case(category: str, seed: int, index: int, split: str) -> Case:
+    """The `PIPELINE_ROOM` case of object `index` of capture seed `seed` (`room_scenario`)."""
+    return Case(f"models/{category}", f"pipeline_rooms/{category}_{seed}_{index}", PIPELINE_ROOM,
+                seed, split)
+
+
+def run_pipeline_room_case(case: Case, fit: FitConfig) -> dict:
+    """Perceive a `PIPELINE_ROOM` case's scenario with the pipeline's perception
+    (`perceive_scene`: the segmenter's masks with its close look, the pose from its amodal
+    carcass, the background painted) and return its JSON line: q, the handle's error in W at the
+    observed state (as eval-pipeline's handle_error_cm), the estimated X_WO (4, 4) and the
+    confidence `features` the perception system computed; a scenario whose masks give no object
+    pose, a line without a fit (handle_error_m None, `failure` why)."""
+    category, seed, index = Path(case.capture).name.rsplit("_", 2)
+    scenario = room_scenario(category, int(seed), int(index), fit)
+    obj, part = scenario.sample_piece()
+    truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start, part=part)
+    line = {**asdict(case), "key": case.key, "category": category, "model_category": category}
+    try:
+        predicted, seconds, confidence, X_WO = perceive_scene(scenario, obj)
+    except ObjectPoseError as err:
+        return {**line, "handle_error_m": None, "failure": str(err)}
+    error = np.linalg.norm(predicted.point("handle", predicted.q_current)
+                           - truth.point("handle", truth.q_current))
+    return {**line, "q": predicted.q_current, "q_true": scenario.q_start,
+            "handle_error_m": float(error), "X_WO": X_WO.GetAsMatrix4().tolist(),
+            "features": confidence["features"], "seconds": seconds}
+
+
 def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:
     """Fit `case` and return its JSON line (see module docstring); a room whose masks give no
     object pose returns a line without a fit (handle_error_m None, `failure` why). A model of
-    several parts (furniture) is fitted with the furniture fit's defaults (`run_furniture_case`)."""
+    several parts (furniture) is fitted with the furniture fit's defaults (`run_furniture_case`),
+    a room fit of the pipeline by its perception (`run_pipeline_room_case`)."""
+    if case.variant == PIPELINE_ROOM:
+        return run_pipeline_room_case(case, fit)
     if fitted.num_slots > 1:
         return run_furniture_case(case, fitted, FurnitureFitConfig())
     capture, images = load_case(case)
@@ -224,6 +279,28 @@ def plan_cases(data: Path, calibration: int, evaluation: int, closed: int, shut1
                 category = name.split("_")[0]
                 cases += [Case(f"models/{category}", str(captures[i]), variant, i, "rooms")
                           for variant in ROOM_VARIANTS]
+    return cases
+
+
+EVALUATION_SEED = 200
+"""The capture seed of eval-pipeline's evaluation: a room calibration is checked on it, never
+fitted on it."""
+
+
+def plan_room_cases(calibration: int, evaluation: int, seed: int) -> list[Case]:
+    """The room calibration's cases (`PIPELINE_ROOM`), per category (closet, drawer):
+    objects 0 .. calibration-1 of capture seed `seed` (split "calibration") and objects
+    0 .. evaluation-1 of `EVALUATION_SEED` (split "evaluation"), index by index across the
+    categories and splits, so that a run stopped early leaves them balanced."""
+    if seed == EVALUATION_SEED:
+        raise NfrDrakeError(f"--room-seed {seed}: the pipeline's evaluation seed; calibrate on another")
+    cases = []
+    for i in range(max(calibration, evaluation)):
+        for c in ("closet", "drawer"):
+            if i < calibration:
+                cases.append(pipeline_room_case(c, seed, i, "calibration"))
+            if i < evaluation:
+                cases.append(pipeline_room_case(c, EVALUATION_SEED, i, "evaluation"))
     return cases
 
 

@@ -6,7 +6,9 @@ Features come from what the fit found plus one render pass over a grid of each v
 rendered silhouette with the observed one, the distance between the keypoint head's handle and the
 handle detector's triangulated handle, how clearly the best start won, and how far the fitted
 object code z_obj lies from the training codes. A `ConfidenceModel` (logistic regression on a few
-of them, read from the model folder's `confidence.json`) turns them into P(handle within 2 cm).
+of them, read from the model folder's `confidence.json`) turns them into P(handle within 2 cm); a
+fit in photos of a room is calibrated by the folder's `confidence_room.json` when it has one
+(fitted on the pipeline's room fits, docs/CONFIDENCE.md "In rooms").
 
 The observed silhouette of an object alone before a uniform background (the training world) is
 the pixels off the colour of the image border (`uniform_background_mask`); in photos of a room it
@@ -34,7 +36,12 @@ from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_triangulation import project
 
 CONFIDENCE_FILE = "confidence.json"
-"""The calibration in a model folder."""
+"""The calibration in a model folder (fits of the object alone)."""
+
+ROOM_CONFIDENCE_FILE = "confidence_room.json"
+"""The calibration of the fits in photos of a room (the segmenter's masks) in a model folder; a
+folder without it calibrates those by `CONFIDENCE_FILE`, whose refusals then say that the
+confidence is not calibrated in rooms."""
 
 VIEW_RAYS = 1024
 """Pixels per view rendered for the features: a regular grid over the image."""
@@ -295,15 +302,15 @@ class ConfidenceModel:
                 "coef": self.coef, "intercept": self.intercept, "threshold": self.threshold,
                 "source": self.source}
 
-    def write(self, folder: Path) -> Path:
-        path = Path(folder) / CONFIDENCE_FILE
+    def write(self, folder: Path, name: str = CONFIDENCE_FILE) -> Path:
+        path = Path(folder) / name
         path.write_text(json.dumps(self.to_json(), indent=2) + "\n")
         return path
 
     @classmethod
-    def read(cls, folder: Path) -> ConfidenceModel | None:
-        """The calibration of a model folder, or None when it has none."""
-        path = Path(folder) / CONFIDENCE_FILE
+    def read(cls, folder: Path, name: str = CONFIDENCE_FILE) -> ConfidenceModel | None:
+        """The calibration `name` of a model folder, or None when it has none."""
+        path = Path(folder) / name
         if not path.exists():
             return None
         try:
@@ -340,6 +347,11 @@ def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1.0, iterations: int 
 ADVICE = {
     "views": "too few views: photograph the object from more sides",
     "edge_contact": "the object is cut by the image edge: step back so it is whole in every view",
+    "image_loss": ("the fitted field does not match the photos: check for occlusion, or use a "
+                   "model of this kind of object"),
+    "silhouette_iou": ("the fitted shape covers the object poorly: check for occlusion, or use a "
+                       "model of this kind of object"),
+    "start_loss_ratio": "the fit's starts explain the photos about equally well: take more views, closer",
     "silhouette_iou_worst_view": ("the fitted shape covers the object poorly (silhouette IoU {:.2f} "
                                   "in the worst view): check for occlusion, or use a model of this "
                                   "kind of object"),
@@ -352,9 +364,9 @@ ADVICE = {
     "start_spread_m": "the fit's starts disagree on this part's handle: take more views, closer",
     "part_image_loss": ("the fitted part does not match the photos around its handle: photograph "
                         "this part closer, or use a model of this kind of object"),
-    "room": ("in a room the fit confidence is not calibrated yet (docs/CONFIDENCE.md, \"In rooms\"): "
-             "photograph the object alone before a plain background, or act on the fit at your own "
-             "risk with --min-confidence 0"),
+    "room": ("in a room this model's fit confidence is not calibrated (no confidence_room.json in "
+             "its folder; docs/CONFIDENCE.md, \"In rooms\"): photograph the object alone before a "
+             "plain background, or act on the fit at your own risk with --min-confidence 0"),
     None: "take more views, closer, or use a model of this kind of object",
 }
 """What to do, by the weakest feature of a refused fit (`ConfidenceModel.weakest`)."""
@@ -363,7 +375,8 @@ ADVICE = {
 def refusal(confidence: dict | None, threshold: float | None = None) -> str | None:
     """Why a fit must not be acted on, in one line with what to do, or None when it may be:
     P(handle within 2 cm) of a result's `confidence` (`inference.infer.fit_confidence`) below
-    `threshold` (None: the calibration's own); the advice follows its `weakest` feature. A fit
+    `threshold` (None: the calibration's own); the advice follows its `weakest` feature (a room
+    fit calibrated by the object-alone `CONFIDENCE_FILE`: that rooms are not calibrated). A fit
     without a calibration is never refused."""
     if confidence is None or confidence.get("p_handle_within_2cm") is None:
         return None
@@ -372,9 +385,10 @@ def refusal(confidence: dict | None, threshold: float | None = None) -> str | No
     if p >= threshold:
         return None
     f = confidence["features"]
-    # In a room the calibration does not hold at all; below 3 views the detector cannot
-    # triangulate a handle: those come before the weakest feature.
-    weakest = ("room" if f.get("room") else "views" if f["views"] < 3
+    # In a room the object-alone calibration does not hold at all; below 3 views the detector
+    # cannot triangulate a handle: those come before the weakest feature.
+    uncalibrated_room = f.get("room") and confidence.get("calibration") != ROOM_CONFIDENCE_FILE
+    weakest = ("room" if uncalibrated_room else "views" if f["views"] < 3
                else confidence.get("weakest"))
     advice = ADVICE.get(weakest, ADVICE[None])
     if weakest == "silhouette_iou_worst_view":

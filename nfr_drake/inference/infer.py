@@ -19,6 +19,8 @@ from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.confidence import (
+    CONFIDENCE_FILE,
+    ROOM_CONFIDENCE_FILE,
     ConfidenceModel,
     code_scale,
     fit_features,
@@ -65,7 +67,8 @@ from nfr_drake.perception.object_pose import background_mask, estimate_object_po
 class FittedModel:
     """A loaded model folder: networks, the training codes (N, k) and their mean (the fit's
     start), its metadata, its 2D handle detector (`handle_detector/`) when it ships one, and its
-    fit-confidence calibration (`confidence.json`) when it has one."""
+    fit-confidence calibrations when it has them: `confidence.json` (the object alone) and
+    `confidence_room.json` (photos of a room)."""
 
     def __init__(self, folder: Path, device: str = "cpu"):
         self.folder = Path(folder)
@@ -78,6 +81,8 @@ class FittedModel:
                                                       or self.num_slots > 1):
             self.handle_detector = load_detector(self.folder / DETECTOR_DIR)[0]
         self.confidence: ConfidenceModel | None = ConfidenceModel.read(self.folder)
+        self.room_confidence: ConfidenceModel | None = ConfidenceModel.read(self.folder,
+                                                                            ROOM_CONFIDENCE_FILE)
         self._code_scale: float | None = None
 
     @property
@@ -346,24 +351,31 @@ def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet
                    images: list[np.ndarray], handle: TriangulatedHandle | None,
                    room_masks: list[np.ndarray] | None = None) -> dict | None:
     """The result's `confidence`: {p_handle_within_2cm, threshold and weakest (the feature that
-    lowers p most; all three None without a calibration), features, per_view}
+    lowers p most; all three None without a calibration), calibration, features, per_view}
     (docs/CONVENTIONS.md); None for a model without a handle keypoint. `room_masks`: the object's
-    probability per view in photos of a room (`confidence.fit_features`)."""
+    probability per view in photos of a room (`confidence.fit_features`); p is then the room
+    calibration's (`FittedModel.room_confidence`), or the object-alone one's when the model
+    folder has none."""
     if "handle" not in fitted.keypoint_names:
         return None
     features, per_view = fit_features(
         fitted.model, outcome.z, capture.frames, images, outcome.start_losses, fitted.codes,
         fitted.code_scale, fitted.keypoint_names.index("handle"),
         None if handle is None else handle.p_O, room_masks)
+    if room_masks is not None and fitted.room_confidence is not None:
+        return calibrated(fitted.room_confidence, features, per_view, ROOM_CONFIDENCE_FILE)
     return calibrated(fitted.confidence, features, per_view)
 
 
-def calibrated(calibration: ConfidenceModel | None, features: dict, per_view: list[dict]) -> dict:
-    """A result's `confidence` of a fit's features: {p_handle_within_2cm, threshold, weakest (all
-    three None without a calibration), features, per_view}."""
+def calibrated(calibration: ConfidenceModel | None, features: dict, per_view: list[dict],
+               name: str = CONFIDENCE_FILE) -> dict:
+    """A result's `confidence` of a fit's features: {p_handle_within_2cm, threshold, weakest,
+    calibration (the file `name` of the model folder that calibrated it; all four None without a
+    calibration), features, per_view}."""
     return {"p_handle_within_2cm": None if calibration is None else calibration.probability(features),
             "threshold": None if calibration is None else calibration.threshold,
             "weakest": None if calibration is None else calibration.weakest(features),
+            "calibration": None if calibration is None else name,
             "features": features, "per_view": per_view}
 
 
@@ -398,12 +410,13 @@ def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedH
 
 
 def confidence_line(confidence: dict) -> str:
-    """One line on a result's `confidence`: P(handle within 2 cm) against the threshold, the
-    image loss and the silhouette agreement (worst view)."""
+    """One line on a result's `confidence`: P(handle within 2 cm) against the threshold and the
+    calibration file that gave them, the image loss and the silhouette agreement (worst view)."""
     f = confidence["features"]
     p = confidence["p_handle_within_2cm"]
     head = ("confidence: no calibration (confidence.json) in the model folder" if p is None else
-            f"confidence: P(handle within 2 cm) = {p:.2f} (refused below {confidence['threshold']:.2f})")
+            f"confidence: P(handle within 2 cm) = {p:.2f} (refused below {confidence['threshold']:.2f}; "
+            f"{confidence.get('calibration') or CONFIDENCE_FILE})")
     return (f"{head}; image loss {f['image_loss']:.4f} (worst view {f['image_loss_worst_view']:.4f}), "
             f"silhouette IoU {f['silhouette_iou']:.2f} (worst {f['silhouette_iou_worst_view']:.2f})")
 

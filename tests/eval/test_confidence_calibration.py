@@ -122,3 +122,68 @@ def test_the_furniture_calibration_captures_are_an_option(tmp_path):
     with pytest.raises(NfrDrakeError, match="calibration-captures"):
         calibrate_confidence_command(data=tmp_path, out=tmp_path / "out",
                                      calibration_captures=tmp_path / "furniture_calib128")
+
+
+def test_room_cases_are_the_pipelines_objects_never_calibrated_on_its_evaluation_seed():
+    from nfr_drake.errors import NfrDrakeError
+    from nfr_drake.eval.confidence_data import PIPELINE_ROOM, plan_room_cases
+
+    cases = plan_room_cases(3, 2, 300)
+    assert [(c.model, c.split) for c in cases[:4]] == [
+        ("models/closet", "calibration"), ("models/closet", "evaluation"),
+        ("models/drawer", "calibration"), ("models/drawer", "evaluation")]
+    assert [c.capture for c in cases[:2]] == ["pipeline_rooms/closet_300_0", "pipeline_rooms/closet_200_0"]
+    assert len(cases) == 10 and {c.variant for c in cases} == {PIPELINE_ROOM}
+    assert len({c.key for c in cases}) == 10
+    with pytest.raises(NfrDrakeError, match="evaluation seed"):
+        plan_room_cases(3, 2, 200)
+
+
+def test_each_model_gets_its_own_room_calibration_from_its_calibration_fits(tmp_path, monkeypatch):
+    """Closets whose success follows the worst view's silhouette IoU, drawers whose success
+    follows the handle detector's gap: each model's file keeps its own term."""
+    from nfr_drake.eval import confidence_calibration
+    from nfr_drake.eval.confidence_calibration import ROOM_TERMS, room_calibration
+    from nfr_drake.inference.confidence import ROOM_CONFIDENCE_FILE, ConfidenceModel
+    from nfr_drake.inference.fit import FitConfig
+
+    rng = np.random.default_rng(0)
+
+    made = []
+
+    def fits(cases, out, fit):
+        lines = made
+        for case in cases:
+            iou, gap = rng.uniform(0.2, 1.0), 10 ** rng.uniform(-3, -0.5)
+            decisive = 1 - iou if "closet" in case.model else np.log10(gap) + 1.8
+            success = rng.uniform() < 1 / (1 + np.exp(6 * decisive - 1))
+            features = {"image_loss": 0.02, "image_loss_worst_view": 10 ** rng.uniform(-2, -1),
+                        "silhouette_iou": 0.9, "silhouette_iou_worst_view": iou, "edge_contact": 0.0,
+                        "sighting_missing": 0.0, "sighting_gap_m": gap, "start_loss_ratio": 0.5,
+                        "code_distance": rng.uniform(0.5, 2.0), "views": 10.0, "room": 1.0}
+            lines.append({"key": case.key, "model": case.model, "capture": case.capture,
+                          "variant": case.variant, "split": case.split, "seed": case.seed,
+                          "handle_error_m": 0.01 if success else 0.1, "features": features})
+        return lines
+
+    monkeypatch.setattr(confidence_calibration, "run_cases", fits)
+    report = room_calibration(tmp_path, 300, 20, 300, FitConfig(), False, {"command": "test"})
+    closet = ConfidenceModel.read(tmp_path / "closet", ROOM_CONFIDENCE_FILE)
+    drawer = ConfidenceModel.read(tmp_path / "drawer", ROOM_CONFIDENCE_FILE)
+    names = [n for n, _ in ROOM_TERMS]
+    kept = {m: [n for n, c in zip(names, model.coef, strict=True) if c < 0]
+            for m, model in (("closet", closet), ("drawer", drawer))}
+    assert "silhouette_iou_worst_view" in kept["closet"] and "sighting_gap_m" not in kept["closet"]
+    assert "sighting_gap_m" in kept["drawer"] and "silhouette_iou_worst_view" not in kept["drawer"]
+    assert len(kept["closet"]) <= 3 and len(kept["drawer"]) <= 3  # the noise terms are cut
+    assert closet.source["fits"] == drawer.source["fits"] == 300
+    assert "objects 0-299 of capture seed 300" in closet.source["data"]
+    for name, model in (("closet", closet), ("drawer", drawer)):
+        # every room fit counts as clean: the threshold refuses none of the good calibration fits
+        good = [r for r in confidence_calibration.featurize(made)
+                if r["model"] == f"models/{name}" and r["split"] == "calibration"
+                and r["handle_error_m"] <= 0.02]
+        assert 0 < model.threshold <= 0.5 and len(good) > 20
+        assert min(model.probability(r) for r in good) >= model.threshold
+    assert "## closet: confidence_room.json" in report and "## drawer" in report
+    assert (tmp_path / "calibration_drawer.png").is_file()

@@ -192,3 +192,44 @@ def test_in_a_room_the_silhouette_is_the_mask_and_not_compared_along_the_sides_i
     inner = [v["silhouette_iou"] for v in _room_features(capture, model_folder, room_images, spilled)[1]]
     assert inner != pytest.approx(left)
     assert len(room_views) == len(alone_views) == 4
+
+
+def test_a_fit_in_a_room_is_calibrated_by_the_room_file_when_the_model_has_one(
+        capture, model_folder, tmp_path):
+    from types import SimpleNamespace
+
+    import torch
+
+    from nfr_drake.inference.confidence import ROOM_CONFIDENCE_FILE
+    from nfr_drake.inference.infer import FittedModel, fit_confidence
+    from nfr_drake.nfr.latent import q_to_z_art
+
+    folder = tmp_path / "closet"
+    shutil.copytree(model_folder, folder)
+    alone = _calibration(threshold=0.5)
+    room = ConfidenceModel([("silhouette_iou_worst_view", "one_minus")], [0.3], [0.2], [-0.5], 4.0,
+                           0.97, {"command": "test"})
+    alone.write(folder)
+    room.write(folder, ROOM_CONFIDENCE_FILE)
+    cap = read_capture_set(capture)
+    images = cap.load_images()
+    masks = [(label > 0).astype(np.float32) for label in load_labels(cap)]
+    fitted = FittedModel(folder)
+    outcome = SimpleNamespace(z=torch.cat([q_to_z_art(torch.tensor(0.3)), fitted.z_obj_mean]),
+                              start_losses=np.array([1.0, 2.0]))
+
+    in_room = fit_confidence(fitted, outcome, cap, images, None, masks)
+    assert in_room["calibration"] == ROOM_CONFIDENCE_FILE and in_room["threshold"] == 0.97
+    assert in_room["p_handle_within_2cm"] == pytest.approx(room.probability(in_room["features"]))
+    assert in_room["weakest"] == "silhouette_iou_worst_view"
+    line = refusal(in_room, threshold=1.0)  # refused by the room calibration: its weakest feature
+    assert "covers the object poorly" in line and "not calibrated" not in line
+    plain = fit_confidence(fitted, outcome, cap, images, None)  # the object alone: confidence.json
+    assert plain["calibration"] == CONFIDENCE_FILE and plain["threshold"] == 0.5
+    assert plain["p_handle_within_2cm"] == pytest.approx(alone.probability(plain["features"]))
+
+    (folder / ROOM_CONFIDENCE_FILE).unlink()  # an older model: rooms as before, by confidence.json
+    old = fit_confidence(FittedModel(folder), outcome, cap, images, None, masks)
+    assert old["calibration"] == CONFIDENCE_FILE and old["features"] == in_room["features"]
+    assert old["p_handle_within_2cm"] == pytest.approx(alone.probability(old["features"]))
+    assert "not calibrated" in refusal(old, threshold=1.0)
