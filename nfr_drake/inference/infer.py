@@ -142,21 +142,26 @@ image loss ("masked"; the field may then grow where the mask is not: an open doo
 carcass)."""
 
 
-PAINT_THRESHOLD = 0.5
-"""Object probability above which `paint_background` keeps a pixel of the photo (the segmenter's
-decision threshold, at which its masks' IoU is measured)."""
+PAINT_THRESHOLD = 0.9
+"""Object probability above which `paint_background` keeps a pixel of the photo; the pixels at or
+below it are painted. Above the segmenter's decision threshold (0.5) because the two errors cost
+the fit unequally: a room pixel kept beside the object is fitted as more object (the mask's spill
+onto the floor in front of a shut drawer, at p 0.57-0.98, was fitted as the drawer pulled out),
+while an object pixel painted only trims the silhouette's edge, which the other views and the
+field's shape prior fill in (docs/ROOMS.md, "Shut drawers fitted open")."""
 
 
 def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
-                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
+                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
+                     threshold: float = PAINT_THRESHOLD) -> list[np.ndarray]:
     """Each uint8 RGB image (H, W, 3) with the pixels off its object mask (H, W) in [0, 1] (at
-    most `PAINT_THRESHOLD`) painted in `background_rgb` (in [0, 1]) and those on it kept as they
+    most `threshold`) painted in `background_rgb` (in [0, 1]) and those on it kept as they
     are, so that a photo of a room looks like the training renders of the object alone. Not a
     blend by the mask: an unsure mask's blend leaves floor and wall showing faintly through the
     background, which the field renders as more object (a drawer fitted open) and on which the
     handle detector fires (docs/ROOMS.md, "Why drawers fail in rooms")."""
     background = np.round(255.0 * np.asarray(background_rgb, np.float32)).astype(np.uint8)
-    return [np.where((m > PAINT_THRESHOLD)[..., None], image, background).astype(np.uint8)
+    return [np.where((m > threshold)[..., None], image, background).astype(np.uint8)
             for image, m in zip(images, masks, strict=True)]
 
 
