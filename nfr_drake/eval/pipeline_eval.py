@@ -23,6 +23,7 @@ from tqdm import tqdm
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.pipeline import run_scenario
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.task import OPEN_TARGET
@@ -195,6 +196,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
                           mask_crop: bool = True, objects: tuple[int, ...] = (),
+                          guarded_pull: float = SimulationConfig.guarded_pull,
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
@@ -232,6 +234,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             the training background ("background") or left out of the fit's loss ("masked").
         mask_crop: with `--perceive room`, the segmenter's second, close look at the crop around
             the object's box estimated from its first masks (`Scenario.mask_crop`).
+        guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
+            far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
+            at the plan's end).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -239,7 +244,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     q_target=1.0 if q_target is None else q_target, keypoints=keypoints, fit=fit,
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
-                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop)
+                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop,
+                    simulation=SimulationConfig(guarded_pull=guarded_pull))
     if any(i < 0 for i in objects):
         raise NfrDrakeError(f"--objects: indices must not be negative, got {list(objects)}")
     rows = evaluate_pipeline(base, list(objects) if objects else n, csv_path, part_target=q_target is None)

@@ -14,7 +14,10 @@ a knob has one. All are inactive until the hand rests on the handle; then the gr
 the tool origin is switched on through the context, only if it lies inside the open gripper
 (`capture_half_extents`, in the tool frame). `SimulationConfig.grasp = "contact"` instead closes
 the fingers on the handle with a set force and lets friction hold it (compliant hydroelastic pads
-on a rigid hydroelastic handle), the arm stiff throughout, as on a real robot.
+on a rigid hydroelastic handle), the arm stiff throughout, as on a real robot. A drawer's pull
+planned to the end of travel ends at its stop: by contact, a second pull past the planned end
+(`SecondPull`); with the constraint, a guarded pull along the plan's line that stops when the arm
+senses the stop (`PullToStop`).
 """
 
 from dataclasses import dataclass, field, replace
@@ -131,6 +134,20 @@ class SimulationConfig:
     pull_to_stop_stiffness: float = 0.1
     """Fraction of the arm's PD gains during a pull to the stop (about 600 N/m at the tool: some
     20 N against the stop for 3 cm past it, under the grip's 80 N of friction)."""
+    guarded_pull: float = 0.3
+    """Constraint grasp, a straight pull planned to the end of travel (q 1, a drawer): once the
+    planned pull has settled, the command goes on along the plan's line by at most this (m),
+    the arm compliant (`grasped_stiffness`), until the force its lag implies reaches
+    `guarded_pull_force` (`PullToStop`): the drawer's stop, not the keypoints' predicted travel,
+    ends the pull. 0: none (the pull ends at the plan's end). 0.3 m: a drawer's travel is 0.8 of
+    its box depth, at most about 0.38 m; fits seen short by up to 27 cm."""
+    guarded_pull_speed: float = 0.05
+    """Speed of the guarded pull's command along its line, m/s (ramped in over 0.2 s)."""
+    guarded_pull_force: float = 15.0
+    """The guarded pull stops advancing once the arm's lag behind its command along the line,
+    times the arm's stiffness at the tool along it, reaches this, N; the arm is then commanded
+    where it is. Above a moving drawer's resistance (3 N of runner friction, `JOINT_FRICTION`, and
+    2 N s/m of damping), under the 80 N a contact grip's friction holds (2 x 40 N squeeze, mu 1)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
@@ -144,6 +161,9 @@ class SimulationConfig:
                                 "second_pull_time > 0")
         if self.pull_to_stop < 0.0 or not 0.0 < self.pull_to_stop_stiffness <= 1.0:
             raise NfrDrakeError("simulation: need pull_to_stop >= 0 and pull_to_stop_stiffness in (0, 1]")
+        if self.guarded_pull < 0.0 or self.guarded_pull_speed <= 0.0 or self.guarded_pull_force <= 0.0:
+            raise NfrDrakeError("simulation: need guarded_pull >= 0, guarded_pull_speed > 0 and "
+                                "guarded_pull_force > 0")
 
     @property
     def contact(self) -> bool:
@@ -153,6 +173,16 @@ class SimulationConfig:
         """Whether the run takes `second_pull_time` after the opening to pull again: a contact
         grasp whose planned handle path is straight (`straight_pull`)."""
         return self.contact and self.second_pull and straight_pull(plan) is not None
+
+    def pulls_to_stop(self, plan: PlanResult) -> bool:
+        """Whether the run ends with a guarded pull to the stop (`PullToStop`): a constraint grasp
+        whose plan pulls straight (`straight_pull`) to the end of travel (last waypoint q >= 1)."""
+        return (not self.contact and self.guarded_pull > 0.0 and plan.waypoints[-1].q >= 1.0
+                and straight_pull(plan) is not None)
+
+    def guarded_pull_time(self) -> float:
+        """The longest the guarded pull takes, s: its distance at its speed, the ramp, a settle."""
+        return self.guarded_pull / self.guarded_pull_speed + _GUARD_RAMP + self.settle
 
     def finger_target(self, closed: float) -> float:
         """Each finger's commanded opening when closing on something `closed` m from the centre
@@ -200,6 +230,9 @@ class SimulationResult:
     shortfall: float = float("nan")
     """The pull's shortfall the robot measured before pulling again (`SecondPull`), m; nan when
     it did not measure (no straight pull by contact, or no grasp)."""
+    pulled_past: float = float("nan")
+    """How far the guarded pull to the stop (`PullToStop`) commanded the tool past the plan's end
+    before the force it sensed stopped it, m; nan without one."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -442,6 +475,101 @@ def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp:
     return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], twist, rcond=None)[0], shortfall
 
 
+_GUARD_RAMP = 0.2
+"""Time over which the guarded pull's speed ramps in, s."""
+
+
+class PullToStop(LeafSystem):
+    """A guarded pull, as a robot with joint position sensing makes one: from `start` on, the arm's
+    command moves the tool on along a line at a set speed (ramped in over `_GUARD_RAMP`), the
+    hand's orientation kept (differential inverse kinematics at the command, every `period`),
+    until the force the arm's lag behind the command implies along the line reaches a set force,
+    or the command has gone a set distance; the arm is then commanded where it is (measured) and
+    stays there. The force is the lag of the tool (commanded less measured position by forward
+    kinematics, W) through the arm's translational stiffness at the tool, (J K^-1 J^T)^-1 with J
+    the tool's translational Jacobian at the measured joints and K the scaled PD gains (the hand
+    free to turn on the handle), taken along the line: on a drawer held at its stop it matched
+    the force on the drawer within 10% (a lag along the line alone, times 1 / (u^T J K^-1 J^T u),
+    read 5 times low: the drawer's runners hold the hand sideways). A drawer's stop (or the arm's
+    reach) ends the pull, not a predicted travel, and the pull on the grip stays about that force.
+
+    Input ports "desired_state" and "measured_state", output port "command": [q; v], 2 *
+    num_positions values (arm joints first; the fingers pass through). The settings live in the
+    context (a numeric parameter, `start`), the command's offset from the desired state in its
+    discrete state: [dq (NUM_ARM_JOINTS), its rate, distance gone (m), time it stopped (s, -1
+    while going)]."""
+
+    def __init__(self, robot_plant: MultibodyPlant, stiffness: float, period: float = 0.01):
+        """`robot_plant`: the arm alone (as the controller's; the caller keeps it alive), whose
+        positions are the robot's; `stiffness`: the fraction of the PD gains the arm has during
+        the pull."""
+        super().__init__()
+        self._plant, self._context = robot_plant, robot_plant.CreateDefaultContext()
+        self._n, self._period = robot_plant.num_positions(), period
+        self._tool = robot_plant.GetFrameByName(TOOL_FRAME)
+        self._compliance = 1.0 / (stiffness * _KP[:NUM_ARM_JOINTS])  # rad / N m, per joint
+        # [u (3), t_start, distance, speed, force, active]
+        self.DeclareNumericParameter(BasicVector(np.r_[1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0]))
+        self._state = self.DeclareDiscreteState(np.r_[np.zeros(2 * NUM_ARM_JOINTS + 1), -1.0])
+        self.DeclareVectorInputPort("desired_state", 2 * self._n)
+        self.DeclareVectorInputPort("measured_state", 2 * self._n)
+        self.DeclareVectorOutputPort("command", 2 * self._n, self._calc)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+
+    def start(self, root_context, u: np.ndarray, t: float, distance: float, speed: float,
+              force: float) -> None:
+        """Pull along unit `u` (W, (3,)) from time t, by at most `distance` (m) at `speed` (m/s),
+        until the force the lag implies reaches `force` (N)."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        context.get_mutable_numeric_parameter(0).SetFromVector(np.r_[u, t, distance, speed, force, 1.0])
+
+    def stopped_at(self, root_context) -> tuple[float, float]:
+        """The time the pull stopped (s; nan while it goes on or never started) and the distance
+        its command went along the line (m)."""
+        x = self.GetMyContextFromRoot(root_context).get_discrete_state(self._state).get_value()
+        return (float(x[-1]) if x[-1] >= 0.0 else float("nan")), float(x[-2])
+
+    def _tool_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool's position in W (3,) and spatial velocity Jacobian (6, NUM_ARM_JOINTS) at q."""
+        self._plant.SetPositions(self._context, q)
+        J = self._plant.CalcJacobianSpatialVelocity(self._context, JacobianWrtVariable.kQDot, self._tool,
+                                                    np.zeros(3), self._plant.world_frame(),
+                                                    self._plant.world_frame())
+        return self._tool.CalcPoseInWorld(self._context).translation(), J[:, :NUM_ARM_JOINTS]
+
+    def _update(self, context, state) -> None:
+        settings = context.get_numeric_parameter(0).get_value()
+        u, (t_start, distance, speed, force, active) = settings[:3], settings[3:]
+        x = context.get_discrete_state(self._state).get_value().copy()
+        t = context.get_time()
+        if not active or t < t_start or x[-1] >= 0.0:
+            return
+        n = NUM_ARM_JOINTS
+        q_desired = self.get_input_port(0).Eval(context)[:self._n]
+        q_measured = self.get_input_port(1).Eval(context)[:self._n]
+        q_command = q_desired + np.r_[x[:n], np.zeros(self._n - n)]
+        p_command, J_command = self._tool_jacobian(q_command)
+        p_measured, J_measured = self._tool_jacobian(q_measured)
+        compliance = (J_measured[3:] * self._compliance) @ J_measured[3:].T  # m / N, the hand free to turn
+        pulling = float(np.linalg.solve(compliance, p_command - p_measured) @ u)
+        if pulling >= force or x[-2] >= distance:  # the stop (or the reach): hold where it is
+            x[:n], x[n:2 * n], x[-1] = (q_measured - q_desired)[:n], 0.0, t
+        else:
+            rate = speed * min(1.0, (t - t_start) / _GUARD_RAMP)
+            x[n:2 * n] = np.linalg.lstsq(J_command, np.r_[np.zeros(3), rate * u], rcond=None)[0]
+            x[:n] += self._period * x[n:2 * n]
+            x[-2] += self._period * rate
+        state.get_mutable_vector(self._state).SetFromVector(x)
+
+    def _calc(self, context, output: BasicVector) -> None:
+        command = self.get_input_port(0).Eval(context).copy()
+        x = context.get_discrete_state(self._state).get_value()
+        n = NUM_ARM_JOINTS
+        command[:n] += x[:n]
+        command[self._n:self._n + n] += x[n:2 * n]
+        output.SetFromVector(command)
+
+
 def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0
                               ) -> PiecewisePolynomial:
     """The plan with a dwell at the grasp and the fingers closing during it, held `hold` s longer
@@ -524,16 +652,20 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     add_joint_friction(builder, plant, joint)
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
     again = config.second_pull_time if config.pulls_again(plan) else 0.0
+    to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
     desired = builder.AddNamedSystem("plan", TrajectorySource(
-        _desired_state_trajectory(plan, fingers, again)))
+        _desired_state_trajectory(plan, fingers, again + to_stop)))
     second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
     builder.Connect(desired.get_output_port(), second_pull.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), second_pull.get_input_port(1))
     t_activate = plan.t_grasp + 0.5 * config.dwell
     stiffness = 1.0 if config.contact else config.grasped_stiffness
+    pull_to_stop = builder.AddNamedSystem("pull_to_stop", PullToStop(controller_plant, stiffness))
+    builder.Connect(second_pull.get_output_port(), pull_to_stop.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), pull_to_stop.get_input_port(1))
     command = builder.AddNamedSystem("compliance", CompliantCommand(
         plant.num_positions(robot), NUM_ARM_JOINTS, t_activate, stiffness))
-    builder.Connect(second_pull.get_output_port(), command.get_input_port(0))
+    builder.Connect(pull_to_stop.get_output_port(), command.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
     builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
     shut, opened = obj.shut_and_open(joint)
@@ -558,7 +690,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
     t_pulled = plan.duration + config.dwell + config.settle  # the plan's pull has settled
-    end, t_held = t_pulled + again, t_pulled + 0.8 * again
+    end, t_held = t_pulled + again + to_stop, t_pulled + 0.8 * again
     t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
@@ -574,6 +706,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         if t == t_held and again and grasped:
             second_pull.hold(context, plant.GetPositions(plant_context, robot),
                              plan.trajectory.value(plan.trajectory.end_time()).ravel())
+        if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop
+            pull_to_stop.start(context, straight_pull(plan) / np.linalg.norm(straight_pull(plan)), t,
+                               config.guarded_pull, config.guarded_pull_speed, config.guarded_pull_force)
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
         if not grasped:  # until the grasp: the grip point nearest the tool
@@ -592,6 +727,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         p_held.append(X_WT.inverse() @ p_WH)
         if grasped and t >= t_pull:
             forces.append(_force_on_moving_part(plant, plant_context, moving_bodies, joint))
+        if to_stop and pull_to_stop.stopped_at(context)[0] + config.settle <= t:
+            break  # the guarded pull stopped and settled
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
@@ -609,7 +746,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     return SimulationResult(success, grasped, "revolute" if revolute else "prismatic", q_target,
                             float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
-                            config.grasp, shortfall)
+                            config.grasp, shortfall,
+                            pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"))
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:
