@@ -1,5 +1,7 @@
 """The guarded pull to a drawer's stop (constraint grasp): the stop, not the keypoints' travel, ends it."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform
@@ -8,7 +10,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.systems.articulation import _KP, PullToStop, SimulationConfig
+from nfr_drake.systems.articulation import _KP, _STOP_LINE, PullToStop, SimulationConfig, straight_pull
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import read_keypoints, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -87,6 +89,18 @@ def test_a_held_tool_stops_the_pull_at_the_set_force(panda):
     assert stiff.stopped_at(stiff_context)[1] == pytest.approx(0.1 * gone, rel=0.2)
     far, far_context, _ = _guarded(panda, q, 0.05, 1e6)
     assert far.stopped_at(far_context)[1] == pytest.approx(0.05, abs=0.001)
+
+
+def test_a_pull_to_the_stop_needs_a_line_a_fitted_drawer_bows_from_but_no_door_arc():
+    """A drawer path bowing 6 mm over 18 cm (a fit in a room) is no straight pull for the second
+    pull, but its line serves the pull to the stop; a door's arc opened 45 degrees serves neither."""
+    bowed = [[0.5 + 0.02 * k, 0.1 + 0.006 * np.sin(np.pi * k / 9), 0.4] for k in range(10)]
+    plan = SimpleNamespace(waypoints=[SimpleNamespace(p_WH=np.array(p)) for p in bowed])
+    assert straight_pull(plan) is None
+    np.testing.assert_allclose(straight_pull(plan, _STOP_LINE), [0.18, 0.0, 0.0], atol=1e-12)
+    arc = [[0.5 + 0.4 * np.sin(a), 0.4 * (1 - np.cos(a)), 0.4] for a in np.radians(np.linspace(0, 46, 10))]
+    assert straight_pull(SimpleNamespace(waypoints=[SimpleNamespace(p_WH=np.array(p)) for p in arc]),
+                         _STOP_LINE) is None
 
 
 def _training_drawer():
