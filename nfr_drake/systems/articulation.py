@@ -495,10 +495,13 @@ class PullToStop(LeafSystem):
     stays there. The force is the lag of the tool (commanded less measured position by forward
     kinematics, W) through the arm's translational stiffness at the tool, (J K^-1 J^T)^-1 with J
     the tool's translational Jacobian at the measured joints and K the scaled PD gains (the hand
-    free to turn on the handle), taken along the line: on a drawer held at its stop it matched
-    the force on the drawer within 10% (a lag along the line alone, times 1 / (u^T J K^-1 J^T u),
-    read 5 times low: the drawer's runners hold the hand sideways). A drawer's stop (or the arm's
-    reach) ends the pull, not a predicted travel, and the pull on the grip stays about that force.
+    free to turn on the handle), taken along the line; the lag includes the PD's damping term,
+    J K_p^-1 K_d (v_command - v), the commanded rate pushing on a tool held still. On a drawer
+    held at its stop the position term matched the force on the drawer within 10% (a lag along
+    the line alone, times 1 / (u^T J K^-1 J^T u), read 5 times low: the drawer's runners hold the
+    hand sideways), and without the damping term the pull stopped at 31 N of a set 15 N. A
+    drawer's stop (or the arm's reach) ends the pull, not a predicted travel, and the pull on the
+    grip stays about that force.
 
     Input ports "desired_state" and "measured_state", output port "command": [q; v], 2 *
     num_positions values (arm joints first; the fingers pass through). The settings live in the
@@ -552,13 +555,16 @@ class PullToStop(LeafSystem):
         if not active or t < t_start or x[-1] >= 0.0:
             return
         n = NUM_ARM_JOINTS
-        q_desired = self.get_input_port(0).Eval(context)[:self._n]
-        q_measured = self.get_input_port(1).Eval(context)[:self._n]
+        desired, measured = self.get_input_port(0).Eval(context), self.get_input_port(1).Eval(context)
+        q_desired, q_measured = desired[:self._n], measured[:self._n]
         q_command = q_desired + np.r_[x[:n], np.zeros(self._n - n)]
         p_command, J_command = self._tool_jacobian(q_command)
         p_measured, J_measured = self._tool_jacobian(q_measured)
-        compliance = (J_measured[3:] * self._compliance) @ J_measured[3:].T  # m / N, the hand free to turn
-        pulling = float(np.linalg.solve(compliance, p_command - p_measured) @ u)
+        J = J_measured[3:]
+        v_lag = desired[self._n:self._n + n] + x[n:2 * n] - measured[self._n:self._n + n]
+        compliance = (J * self._compliance) @ J.T  # m / N, the hand free to turn
+        lag = p_command - p_measured + J @ (_KD[:n] / _KP[:n] * v_lag)  # the PD's damping term too
+        pulling = float(np.linalg.solve(compliance, lag) @ u)
         if pulling >= force or x[-2] >= distance:  # the stop (or the reach): hold where it is
             x[:n], x[n:2 * n], x[-1] = (q_measured - q_desired)[:n], 0.0, t
         else:
