@@ -1,6 +1,8 @@
 """Which stage loses an object's fit in a room: the pipeline's room photos fitted stage by stage.
 
     OMP_NUM_THREADS=1 python scripts/room_fit_ablation.py --category drawer --seed 200 --objects 0 3 8
+    OMP_NUM_THREADS=1 python scripts/room_fit_ablation.py --category drawer --seed 901 --objects 7 \
+        --settings pipeline_p50 pipeline --figure docs/images/room_drawer_paint.png
 
 For each object of the seed, the perception diagram of `nfr-drake eval-pipeline --perceive room
 --object-pose estimated` (`pipeline.perception_simulator`: ten 128 px cameras around a coarse
@@ -55,10 +57,12 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.rooms import Room
+from nfr_drake.data.visualize import image_grid
 from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import infer, paint_background
 from nfr_drake.jsonio import write_rows_csv
+from nfr_drake.nfr.render import render_images
 from nfr_drake.perception.handle_triangulation import locate_handle
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
 from nfr_drake.systems.pipeline import perception_simulator
@@ -125,13 +129,39 @@ def median(values: list[float]) -> float:
     return float(np.median(kept)) if kept else math.nan
 
 
+def rendered(fitted, z: torch.Tensor, frame: CaptureFrame) -> np.ndarray:
+    """The field of code z (D,) rendered in a view, uint8 RGB (H, W, 3)."""
+    cam = frame.camera
+    with torch.no_grad():
+        images = render_images(fitted.model, z[None].float(), torch.from_numpy(cam.K)[None].float(),
+                               torch.from_numpy(frame.X_OC)[None].float(), cam.height, cam.width)
+    return np.round(255 * images.rgb[0].numpy()).astype(np.uint8)
+
+
+def outlined(image: np.ndarray, mask: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+    """The photo (H, W, 3) tinted magenta where the segmenter's mask (H, W) exceeds 0.5, the
+    object's true silhouette (H, W) bool outlined in green."""
+    out = image.copy()
+    on = mask > 0.5
+    out[on] = (0.5 * out[on] + 0.5 * np.array([255, 0, 255])).astype(np.uint8)
+    contours, _ = cv2.findContours(silhouette.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return cv2.drawContours(out, contours, -1, (0, 255, 0), 1)
+
+
 def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (0, 3, 8),
          settings: tuple[str, ...] = SETTINGS, segmenter: str = Scenario.segmenter,
-         csv_path: Path | None = None, threads: int = 1) -> None:
+         csv_path: Path | None = None, threads: int = 1, q_start: float = 0.0,
+         figure: Path | None = None, figure_views: tuple[int, ...] = (0, 3, 6, 9)) -> None:
+    """`q_start`: the objects' articulation when photographed (0: shut, as in eval-pipeline).
+    `figure`: a PNG of the first object, one row per view of `figure_views`: the room photo with
+    the segmenter's mask (magenta, p > 0.5) and the true silhouette (green), then per setting the
+    photo the fit gets and the fitted field rendered in the view."""
     set_torch_threads(threads)
     base = Scenario(category=category, model=f"models/{category}", seed=seed, object_pose="estimated",
-                    perceive="room", segmenter=segmenter, fit=FitConfig(preset="fast"), min_confidence=0.0)
+                    perceive="room", segmenter=segmenter, fit=FitConfig(preset="fast"), min_confidence=0.0,
+                    q_start=q_start)
     rows = []
+    panels = None
     for index in objects:
         started = time.perf_counter()
         scenario = object_scenario(base, index)
@@ -184,9 +214,14 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             cap = capture_in(X, perception.camera_poses, perception.cameras)
             t0 = time.perf_counter()
             config = replace(scenario.fit, handle_detector=use_detector)
-            result, _ = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
-                              masked_loss=masked, room=masks is not None)
+            result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
+                                    masked_loss=masked, room=masks is not None)
             seconds = time.perf_counter() - t0
+            if figure is not None and index == objects[0]:
+                if panels is None:
+                    panels = [[outlined(room[v], seg[v], whole[v])] for v in figure_views]
+                for panel, v in zip(panels, figure_views, strict=True):
+                    panel += [images[v], rendered(fitted, outcome.z, cap.frames[v])]
             R, t = X.rotation().matrix(), X.translation()
             names = [n for n in truth.names if n in result.keypoints]
             predicted = np.stack([R @ result.keypoints[n] + t for n in names])
@@ -221,6 +256,9 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
               f"(none {sum(math.isnan(r['sighting_cm']) for r in sub)})")
     if csv_path is not None:
         write_rows_csv(csv_path, rows)
+    if panels is not None:
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(figure), image_grid(panels)[..., ::-1])
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, torch threads {torch.get_num_threads()}, "
           f"segmenter {segmenter}")
 
