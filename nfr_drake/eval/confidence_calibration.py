@@ -368,10 +368,10 @@ def failures(failed: list[dict]) -> str:
                         f"{f['variant']}: {f['failure']}" for f in failed) + "\n")
 
 
-def room_calibration(out: Path, calibration: int, evaluation: int, seed: int, fit: FitConfig,
+def room_calibration(out: Path, calibration: range, evaluation: range, seed: int, fit: FitConfig,
                      write_models: bool, source: dict) -> str:
     """The room calibration per model (models/closet, models/drawer): the pipeline's room fits
-    (`plan_room_cases`: `calibration` objects of capture seed `seed`, `evaluation` of
+    (`plan_room_cases`: the objects `calibration` of capture seed `seed`, `evaluation` of
     `EVALUATION_SEED`; kept in OUT/fits.jsonl), a logistic regression on each model's
     calibration fits from `ROOM_TERMS` cut to as few terms as they support (`calibrate`,
     `select_terms`; folds of whole objects), with its threshold (`pick_threshold`, every room
@@ -389,7 +389,8 @@ def room_calibration(out: Path, calibration: int, evaluation: int, seed: int, fi
         name, mine = Path(folder).name, [r for r in rows if r["model"] == folder]
         fitted_on = [r for r in mine if r["split"] == "calibration"]
         data = (f"room fits of the pipeline (eval-pipeline --perceive room --object-pose estimated, "
-                f"perception only) with {folder}: objects 0-{calibration - 1} of capture seed {seed}")
+                f"perception only) with {folder}: objects {calibration.start}-{calibration.stop - 1} "
+                f"of capture seed {seed}")
         model = calibrate(fitted_on, ROOM_TERMS, {**source, "data": data, "fits": len(fitted_on)},
                           select=True)
         (out / name).mkdir(exist_ok=True)
@@ -419,6 +420,7 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
                                  category: Literal["closet-drawer", "furniture"] = "closet-drawer",
                                  calibration_captures: Path | None = None,
                                  scene: Literal["alone", "room"] = "alone", room_seed: int = 300,
+                                 calibration_from: int = 0, evaluation_from: int = 0,
                                  threads: int | None = None) -> None:
     """Fit the confidence cases, calibrate P(handle within 2 cm) and report (module docstring).
 
@@ -458,9 +460,12 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
         scene: "alone" (the object before a plain background, `confidence.json`) or "room": one
             calibration per model (`confidence_room.json`) on the pipeline's room fits
             (`room_calibration`): `calibration` objects per category of capture seed
-            `room_seed`, checked on `evaluation` objects of the pipeline's evaluation seed 200;
-            the other counts are not used.
+            `room_seed` from index `calibration_from`, checked on `evaluation` objects of the
+            pipeline's evaluation seed 200 from index `evaluation_from`; the other counts are
+            not used.
         room_seed: with `--scene room`, the capture seed of the calibration's objects (not 200).
+        calibration_from: with `--scene room`, the first calibration object's index.
+        evaluation_from: with `--scene room`, the first evaluation object's index.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -480,7 +485,9 @@ def calibrate_confidence_command(data: Path = Path("data/eval"),
     if scene == "room":
         if furniture_model or check is not None or rooms:
             raise NfrDrakeError("--scene room: closets and drawers only, without --check and --rooms")
-        report = room_calibration(out, calibration, evaluation, room_seed, fit, write_models, source)
+        report = room_calibration(out, range(calibration_from, calibration_from + calibration),
+                                  range(evaluation_from, evaluation_from + evaluation), room_seed, fit,
+                                  write_models, source)
         (out / "report.md").write_text(report)
         print(report + f"-> {out}/report.md, {out}/calibration_<model>.png, "
                        f"{out}/<model>/{ROOM_CONFIDENCE_FILE}")

@@ -288,19 +288,19 @@ EVALUATION_SEED = 200
 fitted on it."""
 
 
-def plan_room_cases(calibration: int, evaluation: int, seed: int) -> list[Case]:
-    """The room calibration's cases (`PIPELINE_ROOM`), per category (closet, drawer):
-    objects 0 .. calibration-1 of capture seed `seed` (split "calibration") and objects
-    0 .. evaluation-1 of `EVALUATION_SEED` (split "evaluation"), index by index across the
-    categories and splits, so that a run stopped early leaves them balanced."""
+def plan_room_cases(calibration: range, evaluation: range, seed: int) -> list[Case]:
+    """The room calibration's cases (`PIPELINE_ROOM`), per category (closet, drawer): the
+    objects `calibration` of capture seed `seed` (split "calibration") and `evaluation` of
+    `EVALUATION_SEED` (split "evaluation"), index by index across the categories and splits, so
+    that a run stopped early leaves them balanced."""
     if seed == EVALUATION_SEED:
         raise NfrDrakeError(f"--room-seed {seed}: the pipeline's evaluation seed; calibrate on another")
     cases = []
-    for i in range(max(calibration, evaluation)):
+    for i in sorted(set(calibration) | set(evaluation)):
         for c in ("closet", "drawer"):
-            if i < calibration:
+            if i in calibration:
                 cases.append(pipeline_room_case(c, seed, i, "calibration"))
-            if i < evaluation:
+            if i in evaluation:
                 cases.append(pipeline_room_case(c, EVALUATION_SEED, i, "evaluation"))
     return cases
 

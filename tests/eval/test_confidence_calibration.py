@@ -128,15 +128,19 @@ def test_room_cases_are_the_pipelines_objects_never_calibrated_on_its_evaluation
     from nfr_drake.errors import NfrDrakeError
     from nfr_drake.eval.confidence_data import PIPELINE_ROOM, plan_room_cases
 
-    cases = plan_room_cases(3, 2, 300)
+    cases = plan_room_cases(range(3), range(2), 300)
     assert [(c.model, c.split) for c in cases[:4]] == [
         ("models/closet", "calibration"), ("models/closet", "evaluation"),
         ("models/drawer", "calibration"), ("models/drawer", "evaluation")]
     assert [c.capture for c in cases[:2]] == ["pipeline_rooms/closet_300_0", "pipeline_rooms/closet_200_0"]
     assert len(cases) == 10 and {c.variant for c in cases} == {PIPELINE_ROOM}
     assert len({c.key for c in cases}) == 10
+    later = plan_room_cases(range(5, 7), range(2, 4), 301)  # the objects asked for, by index
+    assert [c.capture for c in later if "closet" in c.model] == [
+        "pipeline_rooms/closet_200_2", "pipeline_rooms/closet_200_3", "pipeline_rooms/closet_301_5",
+        "pipeline_rooms/closet_301_6"]
     with pytest.raises(NfrDrakeError, match="evaluation seed"):
-        plan_room_cases(3, 2, 200)
+        plan_room_cases(range(3), range(2), 200)
 
 
 def test_each_model_gets_its_own_room_calibration_from_its_calibration_fits(tmp_path, monkeypatch):
@@ -167,7 +171,8 @@ def test_each_model_gets_its_own_room_calibration_from_its_calibration_fits(tmp_
         return lines
 
     monkeypatch.setattr(confidence_calibration, "run_cases", fits)
-    report = room_calibration(tmp_path, 300, 20, 300, FitConfig(), False, {"command": "test"})
+    report = room_calibration(tmp_path, range(10, 310), range(20), 300, FitConfig(), False,
+                              {"command": "test"})
     closet = ConfidenceModel.read(tmp_path / "closet", ROOM_CONFIDENCE_FILE)
     drawer = ConfidenceModel.read(tmp_path / "drawer", ROOM_CONFIDENCE_FILE)
     names = [n for n, _ in ROOM_TERMS]
@@ -177,7 +182,7 @@ def test_each_model_gets_its_own_room_calibration_from_its_calibration_fits(tmp_
     assert "sighting_gap_m" in kept["drawer"] and "silhouette_iou_worst_view" not in kept["drawer"]
     assert len(kept["closet"]) <= 3 and len(kept["drawer"]) <= 3  # the noise terms are cut
     assert closet.source["fits"] == drawer.source["fits"] == 300
-    assert "objects 0-299 of capture seed 300" in closet.source["data"]
+    assert "objects 10-309 of capture seed 300" in closet.source["data"]
     for name, model in (("closet", closet), ("drawer", drawer)):
         # every room fit counts as clean: the threshold refuses none of the good calibration fits
         good = [r for r in confidence_calibration.featurize(made)
