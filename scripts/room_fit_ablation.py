@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 python scripts/room_fit_ablation.py --category drawer --seed 200 --objects 0 3 8
     OMP_NUM_THREADS=1 python scripts/room_fit_ablation.py --category drawer --seed 901 --objects 7 \
-        --settings pipeline_p50 pipeline --figure docs/images/room_drawer_paint.png
+        --settings pipeline pipeline_p90 --figure docs/images/room_drawer_paint.png
 
 For each object of the seed, the perception diagram of `nfr-drake eval-pipeline --perceive room
 --object-pose estimated` (`pipeline.perception_simulator`: ten 128 px cameras around a coarse
@@ -21,8 +21,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
 - ``seg_mask_nodet``: ``seg_mask`` without the handle detector's sighting;
 - ``seg_mask_masked``: ``seg_mask`` with the pixels off the mask left out of the loss instead;
 - ``pipeline``: ``seg_mask`` in the pose the pipeline estimates (the amodal carcass);
-- ``seg_mask_p50``, ``pipeline_p50``: ``seg_mask`` and ``pipeline`` painted at p <= 0.5, the
-  segmenter's decision threshold (the painting before `PAINT_THRESHOLD` 0.9);
+- ``seg_mask_p90``, ``pipeline_p90``: ``seg_mask`` and ``pipeline`` painted at p <= 0.9, so that
+  only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
   into the background by the mask's probability (m photo + (1 - m) background, the painting
   before commit f4d43af); ``seg_mask_blend_nodet``: ``seg_mask_blend`` without the handle
@@ -70,10 +70,10 @@ from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
-            "pipeline", "seg_mask_p50", "pipeline_p50", "seg_mask_blend", "seg_mask_blend_nodet",
+            "pipeline", "seg_mask_p90", "pipeline_p90", "seg_mask_blend", "seg_mask_blend_nodet",
             "pipeline_blend")
-DECISION_THRESHOLD = 0.5
-"""The segmenter's decision threshold, at which the pipeline painted before `PAINT_THRESHOLD`."""
+SURE_THRESHOLD = 0.9
+"""Object probability above which the ``_p90`` settings keep a pixel (only the sure ones)."""
 VISIBLE_DEPTH_M = 0.02
 """A silhouette pixel is visible in the room when the room's depth there is within this of the
 object's alone."""
@@ -181,15 +181,15 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             X_WO_hat, pose = None, {"amodal": None}
         truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
         handle_W = truth.point("handle", truth.q_current)
-        decided = paint_background(room, seg, threshold=DECISION_THRESHOLD)
+        sure = paint_background(room, seg, threshold=SURE_THRESHOLD)
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
                 "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
                 "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
                 "seg_mask_nodet": (paint_background(room, seg), seg, X_WO, False, False),
                 "seg_mask_masked": (room, seg, X_WO, True, True),
                 "pipeline": (paint_background(room, seg), seg, X_WO_hat, False, True),
-                "seg_mask_p50": (decided, seg, X_WO, False, True),
-                "pipeline_p50": (decided, seg, X_WO_hat, False, True),
+                "seg_mask_p90": (sure, seg, X_WO, False, True),
+                "pipeline_p90": (sure, seg, X_WO_hat, False, True),
                 "seg_mask_blend": (blend(room, seg), seg, X_WO, False, True),
                 "seg_mask_blend_nodet": (blend(room, seg), seg, X_WO, False, False),
                 "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True)}

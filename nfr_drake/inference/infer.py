@@ -142,13 +142,12 @@ image loss ("masked"; the field may then grow where the mask is not: an open doo
 carcass)."""
 
 
-PAINT_THRESHOLD = 0.9
-"""Object probability above which `paint_background` keeps a pixel of the photo; the pixels at or
-below it are painted. Above the segmenter's decision threshold (0.5) because the two errors cost
-the fit unequally: a room pixel kept beside the object is fitted as more object (the mask's spill
-onto the floor in front of a shut drawer, at p 0.57-0.98, was fitted as the drawer pulled out),
-while an object pixel painted only trims the silhouette's edge, which the other views and the
-field's shape prior fill in (docs/ROOMS.md, "Shut drawers fitted open")."""
+PAINT_THRESHOLD = 0.5
+"""Object probability above which `paint_background` keeps a pixel of the photo (the segmenter's
+decision threshold, at which its masks' IoU is measured). Keeping only the pixels it is sure of
+(0.9) paints its spill beside the object, which the field fits as a drawer pulled out, but trims
+the object's edges, which moves a door's hinge inwards: on seed 200 in rooms the drawers' fits
+gained and the closets' doors ended short (docs/ROOMS.md, "Shut drawers fitted open")."""
 
 
 def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
