@@ -242,6 +242,9 @@ def estimate_object_pose(masks: list[np.ndarray], X_WCs: list[np.ndarray],
     fine_hi = lo + (index.max(0) + 2) * config.coarse_voxel_m
     step = config.voxel_m
     fine = _hull(fine_lo, fine_hi, step, masks, X_WCs, cameras, config)
+    if not fine.any():  # the coarse cells' centres agree, no fine cell's does (a sliver)
+        raise ObjectPoseError("object pose: the masks agree on no object at the fine voxel size "
+                              f"({step * 100:.1f} cm): a sliver where the views barely overlap")
     area = fine.sum((0, 1))
     typical = np.median(area[area > 0])
     top_slice = int(np.nonzero(area >= 0.5 * typical)[0].max())

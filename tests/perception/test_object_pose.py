@@ -9,6 +9,7 @@ import pytest
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
+from nfr_drake.perception import object_pose
 from nfr_drake.perception.object_pose import (
     HullConfig,
     ObjectPoseError,
@@ -89,6 +90,25 @@ def test_empty_masks_are_refused():
     masks, X_WCs = _box_views(rng, _pose(0.0, 0.0, 0.0), (0.4, 0.5, 0.6))
     with pytest.raises(ObjectPoseError, match="no object"):
         estimate_object_pose([np.zeros_like(m) for m in masks], X_WCs, [CAMERA] * 9)
+
+
+def test_a_hull_only_the_coarse_grid_finds_is_refused(monkeypatch):
+    """Masks whose views overlap in a sliver: the coarse voxels' centres agree, no fine voxel's
+    does (a closet of a room the pipeline photographed); an ObjectPoseError, not a crash."""
+    hull = object_pose._hull
+    calls = []
+
+    def coarse_only(lo, hi, step, *args):
+        grid = hull(lo, hi, step, *args)
+        calls.append(step)
+        return grid if len(calls) == 1 else np.zeros_like(grid)
+
+    monkeypatch.setattr(object_pose, "_hull", coarse_only)
+    rng = np.random.default_rng(5)
+    masks, X_WCs = _box_views(rng, _pose(0.0, 0.0, 0.0), (0.4, 0.5, 0.6))
+    with pytest.raises(ObjectPoseError, match="fine voxel size"):
+        estimate_object_pose(masks, X_WCs, [CAMERA] * 9)
+    assert len(calls) == 2 and calls[1] < calls[0]
 
 
 @pytest.mark.parametrize("index", [0, 1])
