@@ -1,9 +1,10 @@
-"""Shared fixtures of the simulation tests: one planned and simulated drawer opening, and a tiny
-closet model for the perception system."""
+"""Shared fixtures of the simulation tests: one planned and simulated drawer opening, the Panda
+alone with its tool's pose, and a tiny closet model for the perception system."""
 
 import pytest
 import torch
 from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
 
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.nfr.checkpoint import write_model_folder
@@ -12,6 +13,28 @@ from nfr_drake.nfr.model import NFRAutoDecoder
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import run_task
+from nfr_drake.world.robot import TOOL_FRAME, add_panda
+
+
+@pytest.fixture(scope="session")
+def panda():
+    """The Panda arm and hand alone (as the controller's plant), finalized."""
+    plant = MultibodyPlant(0.0)
+    add_panda(plant)
+    plant.Finalize()
+    return plant
+
+
+@pytest.fixture(scope="session")
+def tool_pose(panda):
+    """The tool frame's pose in W (RigidTransform) at the Panda's positions q (9,)."""
+    context = panda.CreateDefaultContext()
+    tool = panda.GetFrameByName(TOOL_FRAME)
+
+    def pose(q):
+        panda.SetPositions(context, q)
+        return tool.CalcPoseInWorld(context)
+    return pose
 
 
 @pytest.fixture(scope="session")

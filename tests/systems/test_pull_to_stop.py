@@ -5,7 +5,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
@@ -14,21 +13,7 @@ from nfr_drake.systems.articulation import _KD, _KP, _STOP_LINE, PullToStop, Sim
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import read_keypoints, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
-from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME, TOOL_FRAME, add_panda
-
-
-@pytest.fixture(scope="module")
-def panda():
-    plant = MultibodyPlant(0.0)
-    add_panda(plant)
-    plant.Finalize()
-    return plant
-
-
-def _tool(plant, q):
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q)
-    return plant.GetFrameByName(TOOL_FRAME).CalcPoseInWorld(context)
+from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME, TOOL_FRAME
 
 
 def _guarded(panda, measured, distance, force, stiffness=0.1):
@@ -45,7 +30,7 @@ def _guarded(panda, measured, distance, force, stiffness=0.1):
     return system, context, system.get_output_port().Eval(context)
 
 
-def test_a_free_pull_goes_its_distance_along_the_line_the_hand_turned_no_more(panda):
+def test_a_free_pull_goes_its_distance_along_the_line_the_hand_turned_no_more(panda, tool_pose):
     """The arm follows (measured = command, no lag): the command goes the whole distance along
     the line, at the set speed, and stops there."""
     q = np.r_[Q_HOME, FINGER_OPEN, FINGER_OPEN]
@@ -61,7 +46,7 @@ def test_a_free_pull_goes_its_distance_along_the_line_the_hand_turned_no_more(pa
     assert gone == pytest.approx(0.12, abs=0.002)
     assert t_stop == pytest.approx(0.1 + 0.12 / 0.05 + 0.1, abs=0.05)  # the ramp costs half its time
     command = system.get_output_port().Eval(context)
-    X_a, X_b = _tool(panda, q), _tool(panda, command[:9])
+    X_a, X_b = tool_pose(q), tool_pose(command[:9])
     np.testing.assert_allclose(X_b.translation() - X_a.translation(), [-0.12, 0.0, 0.0], atol=2e-3)
     assert X_a.rotation().inverse().multiply(X_b.rotation()).ToAngleAxis().angle() < np.radians(1.0)
     np.testing.assert_array_equal(command[7:9], q[7:9])  # the fingers pass through

@@ -5,7 +5,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
@@ -20,7 +19,7 @@ from nfr_drake.systems.articulation import (
 )
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import run_task
-from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda
+from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME
 
 
 def _plan(points):
@@ -41,20 +40,6 @@ def test_a_straight_handle_path_is_a_pull_and_an_arc_is_not():
     assert straight_pull(_plan(swung)) is None
 
 
-@pytest.fixture(scope="module")
-def panda():
-    plant = MultibodyPlant(0.0)
-    add_panda(plant)
-    plant.Finalize()
-    return plant
-
-
-def _tool(plant, q):
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q)
-    return plant.GetFrameByName(TOOL_FRAME).CalcPoseInWorld(context)
-
-
 def _moved(plant, q, d_W):
     """q with the arm stepped (least squares) to move the tool by d_W, m."""
     context = plant.CreateDefaultContext()
@@ -66,29 +51,29 @@ def _moved(plant, q, d_W):
     return q + np.r_[step, 0.0, 0.0]
 
 
-def test_the_offset_moves_the_tool_by_the_measured_shortfall_along_the_pull(panda):
+def test_the_offset_moves_the_tool_by_the_measured_shortfall_along_the_pull(panda, tool_pose):
     u = np.array([-1.0, 0.0, 0.0])  # the handle comes towards the robot
     q_grasp = np.r_[Q_HOME, FINGER_OPEN, FINGER_OPEN]
     q_end = _moved(panda, q_grasp, 0.05 * u)  # the tool came 5 cm of a planned 6.2 cm
     q_command = _moved(panda, q_grasp, 0.062 * u)
-    measured = (_tool(panda, q_end).translation() - _tool(panda, q_grasp).translation()) @ u
+    measured = (tool_pose(q_end).translation() - tool_pose(q_grasp).translation()) @ u
     cfg = SimulationConfig(grasp="contact")
     dq, shortfall = second_pull_offset(panda, 0.062 * u, q_grasp, q_end, q_command, cfg)
     assert shortfall == pytest.approx(0.062 - measured, abs=1e-9) and 0.01 < shortfall < 0.014
-    X_a, X_b = _tool(panda, q_command), _tool(panda, q_command + np.r_[dq, 0.0, 0.0])
+    X_a, X_b = tool_pose(q_command), tool_pose(q_command + np.r_[dq, 0.0, 0.0])
     np.testing.assert_allclose(X_b.translation() - X_a.translation(), shortfall * u, atol=1e-3)
     assert X_a.rotation().inverse().multiply(X_b.rotation()).ToAngleAxis().angle() < np.radians(0.5)
     # Clipped at second_pull_max; nothing below second_pull_min; nothing when it came too far.
     dq, _ = second_pull_offset(panda, 0.062 * u, q_grasp, q_end, q_command,
                                SimulationConfig(grasp="contact", second_pull_max=0.005))
-    moved = _tool(panda, q_command + np.r_[dq, 0.0, 0.0]).translation() - X_a.translation()
+    moved = tool_pose(q_command + np.r_[dq, 0.0, 0.0]).translation() - X_a.translation()
     np.testing.assert_allclose(moved, 0.005 * u, atol=5e-4)
     for travel in (measured + 0.001, measured - 0.01):
         dq, short = second_pull_offset(panda, travel * u, q_grasp, q_end, q_command, cfg)
         assert not np.any(dq) and short < cfg.second_pull_min
         # A pull to the stop goes `past` the planned end whatever the shortfall.
         dq, _ = second_pull_offset(panda, travel * u, q_grasp, q_end, q_command, cfg, past=0.03)
-        moved = _tool(panda, q_command + np.r_[dq, 0.0, 0.0]).translation() - X_a.translation()
+        moved = tool_pose(q_command + np.r_[dq, 0.0, 0.0]).translation() - X_a.translation()
         np.testing.assert_allclose(moved, 0.03 * u, atol=2e-3)  # a linear step
 
 
