@@ -172,8 +172,7 @@ def run_pipeline_room_case(case: Case, fit: FitConfig) -> dict:
     carcass, the background painted) and return its JSON line: q, the handle's error in W at the
     observed state (as eval-pipeline's handle_error_cm), the estimated X_WO (4, 4) and the
     confidence `features` the perception system computed; a scenario whose masks give no object
-    pose, or whose pose estimate raises ValueError (`estimate_object_pose` on masks with no
-    slice of the object's size), a line without a fit (handle_error_m None, `failure` why)."""
+    pose (ObjectPoseError), a line without a fit (handle_error_m None, `failure` why)."""
     category, seed, index = Path(case.capture).name.rsplit("_", 2)
     scenario = room_scenario(category, int(seed), int(index), fit)
     obj, part = scenario.sample_piece()
@@ -181,7 +180,7 @@ def run_pipeline_room_case(case: Case, fit: FitConfig) -> dict:
     line = {**asdict(case), "key": case.key, "category": category, "model_category": category}
     try:
         predicted, seconds, confidence, X_WO = perceive_scene(scenario, obj)
-    except (ObjectPoseError, ValueError) as err:
+    except ObjectPoseError as err:
         return {**line, "handle_error_m": None, "failure": f"{type(err).__name__}: {err}"}
     error = np.linalg.norm(predicted.point("handle", predicted.q_current)
                            - truth.point("handle", truth.q_current))
