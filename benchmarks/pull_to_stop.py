@@ -3,9 +3,9 @@ and plan: each drawer goes through the pipeline once (`run_scenario`, the guarde
 plan is simulated again without the guarded pull, so the two outcomes differ by the pull alone.
 
     python benchmarks/pull_to_stop.py --seed 200 --objects $(seq 0 39) --perceive room \
-        --csv out/pull_to_stop_room.csv
+        --csv-path out/pull_to_stop_room.csv
     python benchmarks/pull_to_stop.py --seed 200 --objects $(seq 0 39) --perceive alone \
-        --csv out/pull_to_stop_alone.csv
+        --csv-path out/pull_to_stop_alone.csv
 
 Both with the estimated pose and the fast fit, as `eval-pipeline` runs them in docs/ROOMS.md (in a
 room never refused, alone the model's calibrated threshold). Resumable (indices already in the CSV
