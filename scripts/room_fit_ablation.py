@@ -21,6 +21,9 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
 - ``seg_mask_nodet``: ``seg_mask`` without the handle detector's sighting;
 - ``seg_mask_masked``: ``seg_mask`` with the pixels off the mask left out of the loss instead;
 - ``pipeline``: ``seg_mask`` in the pose the pipeline estimates (the amodal carcass);
+- ``pipeline_refined``: ``pipeline`` with that pose refined with the fitted field after the fit
+  (`inference.pose_refine`, as `eval-pipeline` does by default); its pose columns are the
+  refined pose's;
 - ``seg_mask_p90``, ``pipeline_p90``: ``seg_mask`` and ``pipeline`` painted at p <= 0.9, so that
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
@@ -70,7 +73,8 @@ from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
-            "pipeline", "seg_mask_p90", "pipeline_p90", "seg_mask_blend", "seg_mask_blend_nodet",
+            "pipeline", "pipeline_refined", "seg_mask_p90", "pipeline_p90", "seg_mask_blend",
+            "seg_mask_blend_nodet",
             "pipeline_blend")
 SURE_THRESHOLD = 0.9
 """Object probability above which the ``_p90`` settings keep a pixel (only the sure ones)."""
@@ -188,6 +192,7 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                 "seg_mask_nodet": (paint_background(room, seg), seg, X_WO, False, False),
                 "seg_mask_masked": (room, seg, X_WO, True, True),
                 "pipeline": (paint_background(room, seg), seg, X_WO_hat, False, True),
+                "pipeline_refined": (paint_background(room, seg), seg, X_WO_hat, False, True),
                 "seg_mask_p90": (sure, seg, X_WO, False, True),
                 "pipeline_p90": (sure, seg, X_WO_hat, False, True),
                 "seg_mask_blend": (blend(room, seg), seg, X_WO, False, True),
@@ -215,20 +220,24 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             t0 = time.perf_counter()
             config = replace(scenario.fit, handle_detector=use_detector)
             result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
-                                    masked_loss=masked, room=masks is not None)
+                                    masked_loss=masked, room=masks is not None,
+                                    refine_pose=name == "pipeline_refined")
             seconds = time.perf_counter() - t0
             if figure is not None and index == objects[0]:
                 if panels is None:
                     panels = [[outlined(room[v], seg[v], whole[v])] for v in figure_views]
                 for panel, v in zip(panels, figure_views, strict=True):
                     panel += [images[v], rendered(fitted, outcome.z, cap.frames[v])]
-            R, t = X.rotation().matrix(), X.translation()
+            X_fit = X if outcome.X_OP is None else X @ RigidTransform(outcome.X_OP)  # refined
+            R, t = X_fit.rotation().matrix(), X_fit.translation()
             names = [n for n in truth.names if n in result.keypoints]
             predicted = np.stack([R @ result.keypoints[n] + t for n in names])
             true_now = np.stack([truth.point(n, truth.q_current) for n in names])
             X_OW = X.inverse()
             sighted = locate_handle(detector.detect(images), cap.frames) if use_detector else None
-            row = {**common, "setting": name, "q_true": scenario.q_start, "q": result.q,
+            fit_cm, fit_deg = pose_error(X_WO, X_fit)
+            row = {**common, "pose_cm": fit_cm, "pose_deg": fit_deg, "setting": name,
+                   "q_true": scenario.q_start, "q": result.q,
                    "q_error": abs(result.q - scenario.q_start),
                    "keypoint_rmse_cm": 100 * float(np.sqrt(np.mean(np.sum((predicted - true_now) ** 2, -1)))),
                    "handle_cm": 100 * float(np.linalg.norm(predicted[names.index("handle")] - handle_W)),
@@ -248,7 +257,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
     for name in settings:
         sub = [r for r in rows if r["setting"] == name]
         med = lambda key, sub=sub: median([r[key] for r in sub])  # noqa: E731
-        print(f"  {name:16s} keypoints {med('keypoint_rmse_cm'):.2f} cm, handle {med('handle_cm'):.2f} cm, "
+        print(f"  {name:16s} pose {med('pose_cm'):.2f} cm {med('pose_deg'):.2f} deg, keypoints "
+              f"{med('keypoint_rmse_cm'):.2f} cm, handle {med('handle_cm'):.2f} cm, "
               f"q error {med('q_error'):.3f}, detector's handle {med('sighting_cm'):.1f} cm, "
               f"handle within 2 cm {sum(r['handle_cm'] <= 2 for r in sub)} / {len(sub)}, q error above 0.1 "
               f"{sum(r['q_error'] > 0.1 for r in sub)}, detector's handle within 2 cm "

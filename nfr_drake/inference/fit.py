@@ -197,6 +197,28 @@ class FitConfig:
     training z_obj whose part the head puts nearest the sighting (0: none): among the lookup's
     candidates, or (start "spread") a second start at the exploration's winner's q that the two
     explore for half of `explore_steps` (within `max_steps`)."""
+    refine_pose: bool = True
+    """Where the object's pose is estimated (`infer --estimate-pose`, `eval-pipeline
+    --object-pose estimated`, `NfrPerceptionSystem` without X_WO), refine it with the fitted
+    field after the fit: (x, y, yaw) on the floor, z held, by `pose_steps` Adam steps on the
+    fit's loss with the code refined too (`inference.pose_refine`). A given pose is never moved."""
+    pose_steps: int = 60
+    """Adam steps of the pose refinement (their learning rates fall linearly to 0)."""
+    pose_rays: int = 256
+    """Random pixels per pose refinement step (drawn like the fit's, `detail_fraction`)."""
+    pose_held_rays: int = 1024
+    """Fixed rays on which the pose refinement's loss is compared before and after: a move that
+    does not lower it is refused."""
+    pose_lr_m: float = 3e-3
+    """Adam learning rate of the pose refinement's dx and dy, m per step."""
+    pose_lr_deg: float = 0.4
+    """Adam learning rate of the pose refinement's dyaw, degrees per step."""
+    pose_z_lr: float = 2e-3
+    """Adam learning rate of the code in the pose refinement (0: the code held)."""
+    pose_max_shift_m: float = 0.05
+    """The pose refinement refuses a move farther than this on the floor, m."""
+    pose_max_yaw_deg: float = 8.0
+    """The pose refinement refuses a turn larger than this, degrees."""
 
     PRESETS: ClassVar[dict[str, dict]] = {
         "thorough": dict(start="spread", explore_steps=120, max_steps=400, explore_rays=128,
@@ -257,6 +279,12 @@ class FitConfig:
                               "valley_span in (0, 1]")
         if self.valley_lr < 0:
             raise ConfigError("FitConfig.valley_lr must be >= 0")
+        if self.pose_steps < 0 or min(self.pose_rays, self.pose_held_rays) < 1 or min(
+                self.pose_lr_m, self.pose_lr_deg, self.pose_max_shift_m, self.pose_max_yaw_deg) <= 0 \
+                or self.pose_z_lr < 0:
+            raise ConfigError("FitConfig: pose_steps and pose_z_lr must be >= 0, pose_rays and "
+                              "pose_held_rays >= 1; pose_lr_m, pose_lr_deg, pose_max_shift_m and "
+                              "pose_max_yaw_deg > 0")
         if self.focus_steps < 0 or min(self.focus_radius_m, self.focus_lr,
                                        self.focus_agreement_m) <= 0:
             raise ConfigError("FitConfig: focus_steps must be >= 0; focus_radius_m, focus_lr and "
@@ -388,7 +416,8 @@ class FitOutcome:
     detail_fraction > 0) and start_q (S,) of every start after exploration; steps
     run in all; seconds of wall time; focus what became of the close look ("kept", "off", or
     why it was discarded); sighted_start whether the winning start came from the codes near the
-    sighting (`FitConfig.sighting_codes`)."""
+    sighting (`FitConfig.sighting_codes`); X_OP (4, 4) the object frame P that z and q are
+    in, in the frame O of the rays, when a pose refinement moved it (`pose_refine`), else None."""
 
     z: torch.Tensor
     q: float
@@ -399,9 +428,10 @@ class FitOutcome:
     seconds: float
     focus: str = "off"
     sighted_start: bool = False
+    X_OP: np.ndarray | None = None
 
 
-def _per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Tensor,
+def per_code_mse(model: NFRModel, z: torch.Tensor, rays: Rays, target: torch.Tensor,
                   chunk: int = 4096) -> torch.Tensor:
     """Image MSE (S,) of each code z (S, D) on the same rays (S, R, 3), target (R, 3)."""
     losses = []
@@ -438,7 +468,7 @@ def fit_latent(model: NFRModel, rays: ObservedRays, config: FitConfig = FitConfi
             p.requires_grad_(flag)
 
 
-def _sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | None,
+def sighting_loss(model: NFRModel, z: torch.Tensor, sighting: PartSighting | None,
                    config: FitConfig) -> torch.Tensor:
     """The sighting term (S,) of codes z (S, D) (`FitConfig.sighting_weight`); 0 without one."""
     if sighting is None or config.sighting_weight == 0:
@@ -487,7 +517,7 @@ def _adam(model: NFRModel, z: torch.Tensor, rays: ObservedRays, config: FitConfi
         rgb = model.render(code, batch_rays, logits=False).rgb
         image = ((rgb - target) ** 2).mean(dim=(-1, -2)).sum()  # summed over starts
         loss = (image + config.latent_weight * S * latent_loss(code[:, 2:])
-                + _sighting_loss(model, code, sighting, config).sum())
+                + sighting_loss(model, code, sighting, config).sum())
         optimiser.zero_grad()
         loss.backward()
         if hold_q:
@@ -633,7 +663,7 @@ def _sighted_start(model: NFRModel, rays: ObservedRays, config: FitConfig,
     _adam(model, z, rays, config, generator, steps, config.explore_rays, stop_early=False,
           sighting=sighting)
     with torch.no_grad():
-        losses = select_losses(z) + _sighting_loss(model, z, sighting, config).cpu()
+        losses = select_losses(z) + sighting_loss(model, z, sighting, config).cpu()
     best = int(torch.argmin(losses))
     return z.detach()[best:best + 1].clone(), best == 1
 
@@ -668,7 +698,7 @@ def _lookup_starts(model: NFRModel, rays: ObservedRays, config: FitConfig,
     index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
     with torch.no_grad():
         batch_rays, target = rays.take(index, len(z))
-        losses = _per_code_mse(model, z, batch_rays, target) + _sighting_loss(model, z, sighting,
+        losses = per_code_mse(model, z, batch_rays, target) + sighting_loss(model, z, sighting,
                                                                                config)
     losses = losses.view(len(candidates), len(q))
     band = torch.arange(len(q)) * config.restarts // len(q)
@@ -706,13 +736,13 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
     def eval_losses(candidates: torch.Tensor, index: torch.Tensor = eval_index) -> torch.Tensor:
         with torch.no_grad():
             eval_rays, eval_target = rays.take(index.to(device), candidates.shape[0])
-            return _per_code_mse(model, candidates.detach(), eval_rays, eval_target).cpu()
+            return per_code_mse(model, candidates.detach(), eval_rays, eval_target).cpu()
 
     explore = replace(config, lr=config.explore_lr)
     steps = _adam(model, z, rays, explore, generator, config.explore_steps, config.explore_rays,
                   stop_early=False, sighting=sighting)
     with torch.no_grad():
-        start_losses = eval_losses(z, select_index) + _sighting_loss(model, z, sighting, config).cpu()
+        start_losses = eval_losses(z, select_index) + sighting_loss(model, z, sighting, config).cpu()
     start_q = z_art_to_q(z.detach()[:, :2]).cpu().numpy()
     winner = int(torch.argmin(start_losses))
     z_best = z.detach()[winner:winner + 1].clone()
@@ -732,7 +762,7 @@ def _fit(model: NFRModel, rays: ObservedRays, config: FitConfig, z_obj_init: tor
         valley_index = rays.sample(config.valley_held_rays, config.detail_fraction, generator)
 
         def valley_losses(c: torch.Tensor) -> torch.Tensor:
-            return eval_losses(c, valley_index) + _sighting_loss(model, c, sighting, config).cpu()
+            return eval_losses(c, valley_index) + sighting_loss(model, c, sighting, config).cpu()
 
         return _valley_scan(model, rays, config, generator, z, focus.keypoint, sighting,
                             valley_losses)

@@ -48,6 +48,7 @@ from nfr_drake.inference.furniture_fit import (
     part_json,
     parts_json,
 )
+from nfr_drake.inference.pose_refine import in_refined_frame, refine_object_pose
 from nfr_drake.inference.result import FitResult
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
@@ -174,8 +175,8 @@ rendered geometry where it shows them (`forward.geometric_keypoints`)."""
 
 def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
           images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head",
-          masks: list[np.ndarray] | None = None, masked_loss: bool = True, room: bool = True
-          ) -> tuple[FitResult, FitOutcome]:
+          masks: list[np.ndarray] | None = None, masked_loss: bool = True, room: bool = True,
+          refine_pose: bool = False) -> tuple[FitResult, FitOutcome]:
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
@@ -183,6 +184,10 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     count in the image loss (`observed_rays`); with `room` (photos of a room, the segmenter's
     masks) they are the fit confidence's observed silhouette (`confidence.fit_features`), else
     that is the pixels off the image border's colour (an object alone).
+    `refine_pose` (the capture's O an estimate, `FitConfig.refine_pose`): the fit is followed by
+    the pose refinement (`pose_refine`); kept, the result's positions, the fitted code and the
+    confidence are in its frame P, `outcome.X_OP` is P in O; `extra["pose_refinement"]` says what
+    it did.
     The result's `extra["warnings"]` lists what makes it doubtful (too few views); its
     `confidence` holds the fit's confidence features and, when the model folder has a calibration,
     P(handle within 2 cm) (`fit_confidence`).
@@ -201,6 +206,12 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
                          fitted.codes)
+    refinement = None
+    if refine_pose and fit_config.refine_pose and fit_config.pose_steps > 0:
+        refinement = refine_object_pose(fitted.model, outcome.z, rays, fit_config, sighting)
+        capture, outcome = in_refined_frame(refinement, capture, outcome)
+        if handle is not None and refinement.kept:
+            handle = replace(handle, p_O=np.linalg.inv(refinement.X_OP)[:3] @ np.append(handle.p_O, 1.0))
     confidence = fit_confidence(fitted, outcome, capture, images, handle,
                                 masks if room else None)
     names = fitted.keypoint_names
@@ -224,6 +235,8 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
                "keypoint_source": keypoint_source,
                "start_q": outcome.start_q.tolist(), "start_losses": outcome.start_losses.tolist(),
                "warnings": warnings})
+    if refinement is not None:
+        result.extra["pose_refinement"] = refinement.to_json()
     return result, outcome
 
 
@@ -237,26 +250,37 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     when they give no pose, from `masks`, with a warning), the
     fit runs in that O (the pixels off the masks painted in the training background or left out of
     the image loss, `room_loss`; `room`: the masks are a room segmenter's, the confidence's
-    silhouette, see `infer`), and the result's
-    positions are moved into W (`extra["object_pose"]`: X_WO, the carcass size; a size outside
+    silhouette, see `infer`; the pose then refined with the fitted field, `FitConfig.refine_pose`),
+    and the result's positions are moved into W (`extra["object_pose"]`: X_WO, the estimate before
+    the refinement X_WO_estimated, the refinement's report or None, the carcass size; a size outside
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
     with its poses in O (for reports). ObjectPoseError when the masks give no object."""
     images = capture.load_images()
     estimate, amodal, warnings = estimate_object_pose_carcass_first(
         [shrunk(m) for m in masks], None if carcass is None else [shrunk(m) for m in carcass],
         [f.X_OC for f in capture.frames], [f.camera for f in capture.frames], category=fitted.category)
-    X_OW = np.linalg.inv(estimate.X_WO)
-    in_O = CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
-                      capture.gt, capture.extra)
+
+    def in_frame(X_WO: np.ndarray) -> CaptureSet:
+        """The capture with its poses in the object frame at X_WO."""
+        X_OW = np.linalg.inv(X_WO)
+        return CaptureSet(capture.root, [replace(f, X_OC=X_OW @ f.X_OC) for f in capture.frames],
+                          capture.gt, capture.extra)
+
+    in_O = in_frame(estimate.X_WO)
     if room_loss == "background":
         images = paint_background(images, masks)
     result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
-                            room_loss == "masked", room)
-    R, t = estimate.X_WO[:3, :3], estimate.X_WO[:3, 3]
+                            room_loss == "masked", room, refine_pose=True)
+    X_WO = estimate.X_WO if outcome.X_OP is None else estimate.X_WO @ outcome.X_OP
+    if outcome.X_OP is not None:  # the fit ended in the refined frame
+        in_O = in_frame(X_WO)
+    R, t = X_WO[:3, :3], X_WO[:3, 3]
     result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
     result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
-    result.extra["object_pose"] = {"X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
-                                   "room_loss": room_loss, "amodal": amodal}
+    result.extra["object_pose"] = {"X_WO": X_WO.tolist(), "X_WO_estimated": estimate.X_WO.tolist(),
+                                   "refinement": result.extra.pop("pose_refinement", None),
+                                   "size": estimate.size.tolist(), "room_loss": room_loss,
+                                   "amodal": amodal}
     problem = estimate.size_problem(fitted.category)
     result.extra["warnings"] += warnings + ([problem] if problem else [])
     return result, outcome, in_O

@@ -112,9 +112,10 @@ class NfrPerceptionSystem(LeafSystem):
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
     only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
     object alone), every pixel counting in the loss.
-    X_WO None: the pose is estimated at each fit from the masks, the result's
-    `extra["object_pose"]` says how (and `extra["warnings"]` names a size outside the model's
-    category). The fit runs in an initialisation event and whenever
+    X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
+    (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate
+    before the refinement X_WO_estimated, the refinement's report; `extra["warnings"]` names a
+    size outside the model's category). The fit runs in an initialisation event and whenever
     `refit` is called; outputs read the stored result. `fit_count` counts fits.
     `keypoint_source` picks the keypoint head or the fitted geometry (see
     `nfr_drake.inference.infer.KeypointSource`).
@@ -271,9 +272,15 @@ class NfrPerceptionSystem(LeafSystem):
             result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
                                     self._part(context), masks if masked else None)
         else:
-            result, _ = infer(self._model, capture, self._fit_config, self._q_grid, images,
-                              self._keypoint_source, masks=masks if self._segmenter else None,
-                              masked_loss=masked)
+            result, outcome = infer(self._model, capture, self._fit_config, self._q_grid, images,
+                                    self._keypoint_source, masks=masks if self._segmenter else None,
+                                    masked_loss=masked, refine_pose=self._X_WO is None)
+            if self._X_WO is None:  # the estimate, and the field's refinement of it
+                pose["X_WO_estimated"] = pose["X_WO"]
+                pose["refinement"] = result.extra.pop("pose_refinement", None)
+                if outcome.X_OP is not None:
+                    X_WO = X_WO @ RigidTransform(outcome.X_OP)
+                    pose["X_WO"] = X_WO.GetAsMatrix4().tolist()
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1

@@ -111,7 +111,8 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
     estimate = type("Estimate", (), {"X_WO": np.eye(4)})()
     monkeypatch.setattr(object_pose, "estimate_object_pose", lambda *args, **kwargs: estimate)
 
-    def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room):
+    def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room,
+                   refine_pose=False):
         seen.update(images=images, masked_loss=masked_loss)
         raise Stop
 
