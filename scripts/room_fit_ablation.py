@@ -26,6 +26,11 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   refined pose's;
 - ``seg_mask_p90``, ``pipeline_p90``: ``seg_mask`` and ``pipeline`` painted at p <= 0.9, so that
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
+- ``pipeline_region``: ``pipeline`` painted at p <= 0.9 off the region the shut object can occupy
+  in the estimated pose (its carcass box and fronts grown by a margin) and at p <= 0.5 on it
+  (`paint_thresholds`); ``pipeline_region_reach``: that region grown toward the cameras by the
+  fronts' reach (the carcass's larger side: a drawer pulls out by less than its depth, a door
+  swings out by its width);
 - ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
   into the background by the mask's probability (m photo + (1 - m) background, the painting
   before commit f4d43af); ``seg_mask_blend_nodet``: ``seg_mask_blend`` without the handle
@@ -63,7 +68,7 @@ from nfr_drake.data.rooms import Room
 from nfr_drake.data.visualize import image_grid
 from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import infer, paint_background
+from nfr_drake.inference.infer import SURE_THRESHOLD, infer, paint_background, paint_thresholds
 from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.nfr.render import render_images
 from nfr_drake.perception.handle_triangulation import locate_handle
@@ -75,9 +80,7 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
             "pipeline", "pipeline_refined", "seg_mask_p90", "pipeline_p90", "seg_mask_blend",
             "seg_mask_blend_nodet",
-            "pipeline_blend")
-SURE_THRESHOLD = 0.9
-"""Object probability above which the ``_p90`` settings keep a pixel (only the sure ones)."""
+            "pipeline_blend", "pipeline_region", "pipeline_region_reach")
 VISIBLE_DEPTH_M = 0.02
 """A silhouette pixel is visible in the room when the room's depth there is within this of the
 object's alone."""
@@ -103,6 +106,19 @@ def blend(images: list[np.ndarray], masks: list[np.ndarray]) -> list[np.ndarray]
     background = 255.0 * np.asarray(DEFAULT_BACKGROUND_RGB, np.float32)
     return [np.clip(m[..., None] * image + (1.0 - m[..., None]) * background, 0, 255).round().astype(np.uint8)
             for image, m in zip(images, masks, strict=True)]
+
+
+def painted_in_region(images: list[np.ndarray], masks: list[np.ndarray], X_WO: RigidTransform, size: list,
+                      perception, reach: bool) -> list[np.ndarray]:
+    """The photos painted at p <= 0.5 where the object of carcass `size` (depth, width, height, m) at
+    X_WO can lie, at p <= 0.9 elsewhere (`paint_thresholds`); `reach`: that region grown along +x by
+    the carcass's larger side (where its fronts reach when open)."""
+    size = np.asarray(size, float)
+    X_WCs = [X.GetAsMatrix4() for X in perception.camera_poses]
+    thresholds = paint_thresholds(X_WO.GetAsMatrix4(), size, X_WCs, perception.cameras,
+                                  [image.shape[:2] for image in images],
+                                  reach_m=float(max(size[:2])) if reach else 0.0)
+    return paint_background(images, masks, threshold=thresholds)
 
 
 def handle_error_cm(handle_O, p_O: np.ndarray) -> float:
@@ -186,6 +202,10 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
         truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
         handle_W = truth.point("handle", truth.q_current)
         sure = paint_background(room, seg, threshold=SURE_THRESHOLD)
+        region = region_reach = None
+        if X_WO_hat is not None:
+            region = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=False)
+            region_reach = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=True)
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
                 "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
                 "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
@@ -197,7 +217,9 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                 "pipeline_p90": (sure, seg, X_WO_hat, False, True),
                 "seg_mask_blend": (blend(room, seg), seg, X_WO, False, True),
                 "seg_mask_blend_nodet": (blend(room, seg), seg, X_WO, False, False),
-                "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True)}
+                "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True),
+                "pipeline_region": (region, seg, X_WO_hat, False, True),
+                "pipeline_region_reach": (region_reach, seg, X_WO_hat, False, True)}
         detector = fitted.handle_detector
         maps = detector.detect(room)
         fired = [m.probability > 0.5 for m in maps]

@@ -14,6 +14,7 @@ import torch
 import tyro
 
 from nfr_drake.cpu import set_torch_threads
+from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
@@ -62,7 +63,12 @@ from nfr_drake.perception.handle_triangulation import (
     locate_handles,
     project,
 )
-from nfr_drake.perception.object_pose import background_mask, estimate_object_pose_carcass_first
+from nfr_drake.perception.object_pose import (
+    HullConfig,
+    background_mask,
+    box_silhouette,
+    estimate_object_pose_carcass_first,
+)
 
 
 class FittedModel:
@@ -145,24 +151,57 @@ carcass)."""
 
 PAINT_THRESHOLD = 0.5
 """Object probability above which `paint_background` keeps a pixel of the photo (the segmenter's
-decision threshold, at which its masks' IoU is measured). Keeping only the pixels it is sure of
-(0.9) paints its spill beside the object, which the field fits as a drawer pulled out, but trims
-the object's edges, which moves a door's hinge inwards: on seed 200 in rooms the drawers' fits
-gained and the closets' doors ended short (docs/ROOMS.md, "Shut drawers fitted open")."""
+decision threshold, at which its masks' IoU is measured) where the object can lie
+(`paint_thresholds`). Keeping only the pixels it is sure of (`SURE_THRESHOLD`) there as well trims
+the object's edges, which moves a door's hinge inwards: on seed 200 in rooms the closets' doors
+ended short (docs/ROOMS.md, "Shut drawers fitted open")."""
+
+SURE_THRESHOLD = 0.9
+"""Object probability above which `paint_background` keeps a pixel off the region the object can
+occupy (`paint_thresholds`): the segmenter's spill onto the floor and the neighbours beside an
+object has p 0.56-0.98 (median 0.82), the object's own pixels a median of 0.95-0.995; kept, the
+spill is fitted as a drawer pulled out (docs/ROOMS.md, "Shut drawers fitted open")."""
+
+PAINT_MARGIN_M = 0.03
+"""How far beyond the estimated carcass box and its fronts the object's pixels may lie, m, in
+`paint_thresholds`: the pose's error (median 1.4-2.3 cm in rooms) and the masks' soft edges."""
 
 
 def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
-                     threshold: float = PAINT_THRESHOLD) -> list[np.ndarray]:
+                     threshold: float | list[np.ndarray] = PAINT_THRESHOLD) -> list[np.ndarray]:
     """Each uint8 RGB image (H, W, 3) with the pixels off its object mask (H, W) in [0, 1] (at
-    most `threshold`) painted in `background_rgb` (in [0, 1]) and those on it kept as they
-    are, so that a photo of a room looks like the training renders of the object alone. Not a
-    blend by the mask: an unsure mask's blend leaves floor and wall showing faintly through the
-    background, which the field renders as more object (a drawer fitted open) and on which the
-    handle detector fires (docs/ROOMS.md, "Why drawers fail in rooms")."""
+    most `threshold`: one for all pixels, or one (H, W) map per image, `paint_thresholds`)
+    painted in `background_rgb` (in [0, 1]) and those on it kept as they are, so that a photo of
+    a room looks like the training renders of the object alone. Not a blend by the mask: an
+    unsure mask's blend leaves floor and wall showing faintly through the background, which the
+    field renders as more object (a drawer fitted open) and on which the handle detector fires
+    (docs/ROOMS.md, "Why drawers fail in rooms")."""
     background = np.round(255.0 * np.asarray(background_rgb, np.float32)).astype(np.uint8)
-    return [np.where((m > threshold)[..., None], image, background).astype(np.uint8)
-            for image, m in zip(images, masks, strict=True)]
+    thresholds = threshold if isinstance(threshold, list) else [threshold] * len(images)
+    return [np.where((m > t)[..., None], image, background).astype(np.uint8)
+            for image, m, t in zip(images, masks, thresholds, strict=True)]
+
+
+def paint_thresholds(X_WO: np.ndarray, size: np.ndarray, X_WCs: list[np.ndarray],
+                     cameras: list[PinholeCamera], shapes: list[tuple[int, int]],
+                     reach_m: float = 0.0) -> list[np.ndarray]:
+    """`paint_background`'s threshold (H, W) float32 per view (camera at X_WC (4, 4), image of
+    shape (H, W)): `PAINT_THRESHOLD` where the object can lie, `SURE_THRESHOLD` elsewhere, so that
+    the segmenter's unsure spill beside the object is painted and the object's own edges are kept.
+    Where it can lie: the estimated carcass (X_WO (4, 4): O on the floor under the carcass's
+    centre, +x out of the front; size (3,): depth, width, height, m) with its fronts
+    (`HullConfig.front_thickness_m`), grown by `PAINT_MARGIN_M` on every side but the floor and by
+    `reach_m` more along +x (where open fronts reach)."""
+    depth, width, height = np.asarray(size, float)
+    x0 = -depth / 2 - PAINT_MARGIN_M
+    x1 = depth / 2 + HullConfig.front_thickness_m + PAINT_MARGIN_M + reach_m
+    centre_W = X_WO[:3, :3] @ np.array([(x0 + x1) / 2, 0.0, 0.0]) + X_WO[:3, 3]
+    box = np.array([centre_W[0], centre_W[1], np.arctan2(X_WO[1, 0], X_WO[0, 0]), x1 - x0,
+                    width + 2 * PAINT_MARGIN_M, height + PAINT_MARGIN_M])
+    return [np.where(box_silhouette(box, X_WC, camera, shape) > 0.5, PAINT_THRESHOLD,
+                     SURE_THRESHOLD).astype(np.float32)
+            for X_WC, camera, shape in zip(X_WCs, cameras, shapes, strict=True)]
 
 
 MIN_FIT_VIEWS = 3

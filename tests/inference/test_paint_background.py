@@ -1,10 +1,12 @@
 """`paint_background`: a room photo's pixels off the object's mask become the training background,
-those on it keep their colour; an unsure mask does not blend the room into the background."""
+those on it keep their colour; an unsure mask does not blend the room into the background.
+`paint_thresholds`: the decision threshold where the object can lie, only the sure pixels kept off it."""
 
 import numpy as np
 
+from nfr_drake.data.camera import PinholeCamera, project_points
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
-from nfr_drake.inference.infer import PAINT_THRESHOLD, paint_background
+from nfr_drake.inference.infer import PAINT_THRESHOLD, SURE_THRESHOLD, paint_background, paint_thresholds
 
 
 def test_pixels_are_kept_or_painted_never_blended():
@@ -38,3 +40,53 @@ def test_threshold_asked_for():
     np.testing.assert_array_equal(default[0, 1:], photo[0, 1:])
     np.testing.assert_array_equal(sure[0, :2], np.broadcast_to(background, (2, 3)))
     np.testing.assert_array_equal(sure[0, 2], photo[0, 2])
+
+
+def _camera_before_object():
+    """A 64 px camera 2 m in front of O's origin (+x), 0.5 m up, looking along -x; (X_WC, camera)."""
+    X_WC = np.eye(4)
+    X_WC[:3, :3] = np.column_stack([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])  # x_C y_C z_C
+    X_WC[:3, 3] = [2.0, 0.0, 0.5]
+    return X_WC, PinholeCamera.from_fov(64, 64, 1.0)
+
+
+def _pixel(p_W, X_WC, camera) -> tuple[int, int]:
+    uv = project_points(np.array([p_W], float), X_WC, camera)[0][0]
+    return int(uv[1]), int(uv[0])  # row, column
+
+
+def test_thresholds_keep_the_object_region_at_the_decision_threshold():
+    """The carcass (0.4 x 0.5 x 0.3 m at O = W) and its edge are at PAINT_THRESHOLD; the floor beside
+    it and in front of it (a neighbour, the spill under a front) at SURE_THRESHOLD; grown by the
+    fronts' reach, the floor in front joins the object's region."""
+    X_WC, camera = _camera_before_object()
+    size = np.array([0.4, 0.5, 0.3])
+    front = _pixel([0.2, 0.0, 0.15], X_WC, camera)
+    edge = _pixel([0.2, 0.24, 0.15], X_WC, camera)
+    beside = _pixel([0.2, 0.45, 0.0], X_WC, camera)
+    ahead = _pixel([0.5, 0.0, 0.0], X_WC, camera)
+    near = paint_thresholds(np.eye(4), size, [X_WC], [camera], [(64, 64)])[0]
+    assert near.shape == (64, 64) and near.dtype == np.float32
+    assert near[front] == near[edge] == PAINT_THRESHOLD
+    assert near[beside] == near[ahead] == SURE_THRESHOLD
+    reach = paint_thresholds(np.eye(4), size, [X_WC], [camera], [(64, 64)], reach_m=0.5)[0]
+    assert reach[ahead] == PAINT_THRESHOLD and reach[beside] == SURE_THRESHOLD
+
+
+def test_spill_off_the_region_is_painted_and_the_edge_on_it_kept():
+    """A mask at p 0.7 on the object's edge and on its spill beside it: with the region's thresholds
+    the edge is kept and the spill painted; a sure pixel off the region (p 0.95) is kept."""
+    X_WC, camera = _camera_before_object()
+    edge = _pixel([0.2, 0.24, 0.15], X_WC, camera)
+    spill = _pixel([0.2, 0.45, 0.0], X_WC, camera)
+    sure = _pixel([0.2, -0.45, 0.0], X_WC, camera)
+    mask = np.zeros((64, 64), np.float32)
+    mask[edge] = mask[spill] = 0.7
+    mask[sure] = 0.95
+    photo = np.full((64, 64, 3), 40, np.uint8)
+    thresholds = paint_thresholds(np.eye(4), np.array([0.4, 0.5, 0.3]), [X_WC], [camera], [(64, 64)])
+    painted = paint_background([photo], [mask], threshold=thresholds)[0]
+    background = np.round(255 * np.asarray(DEFAULT_BACKGROUND_RGB)).astype(np.uint8)
+    np.testing.assert_array_equal(painted[edge], photo[edge])
+    np.testing.assert_array_equal(painted[sure], photo[sure])
+    np.testing.assert_array_equal(painted[spill], background)
