@@ -287,8 +287,9 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), or
     from the carcass's amodal masks `carcass` when given (`carcass_masks`: the box is the carcass;
     when they give no pose, from `masks`, with a warning), the
-    fit runs in that O (the pixels off the masks painted in the training background or left out of
-    the image loss, `room_loss`; `room`: the masks are a room segmenter's, the confidence's
+    fit runs in that O (the pixels off the masks painted in the training background, at the
+    thresholds of the estimated carcass's region, `paint_thresholds`, or left out of the image loss,
+    `room_loss`; `room`: the masks are a room segmenter's, the confidence's
     silhouette, see `infer`; the pose then refined with the fitted field, `FitConfig.refine_pose`),
     and the result's positions are moved into W (`extra["object_pose"]`: X_WO, the estimate before
     the refinement X_WO_estimated, the refinement's report or None, the carcass size; a size outside
@@ -307,7 +308,9 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 
     in_O = in_frame(estimate.X_WO)
     if room_loss == "background":
-        images = paint_background(images, masks)
+        images = paint_background(images, masks, threshold=paint_thresholds(
+            estimate.X_WO, estimate.size, [f.X_OC for f in capture.frames],
+            [f.camera for f in capture.frames], [image.shape[:2] for image in images]))
     result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
                             room_loss == "masked", room, refine_pose=True)
     X_WO = estimate.X_WO if outcome.X_OP is None else estimate.X_WO @ outcome.X_OP

@@ -15,8 +15,9 @@ geometry of the plant (floor, walls, other furniture, clutter, the robot) under 
 a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo (with
 `mask_crop`, a second look at the crop around the object's box estimated from the first masks,
 `segmentation.crop.posed_close_look`), and the fit sees the photos with everything off the
-object's mask painted in the training background (`paint_background`; or, `room_loss` "masked",
-only the pixels on the mask count in its loss).
+object's mask painted in the training background (`paint_background`; off the region where the
+estimated carcass can lie, only the pixels the segmenter is sure of kept, `paint_thresholds`; or,
+`room_loss` "masked", only the pixels on the mask count in its loss).
 Frame O of the model is the object's frame. Its pose X_WO in the world is estimated from the views
 (W's floor at z = 0, z up): the object's masks give a visual hull and a floor box
 (`perception.object_pose`), and the fit runs in that O. The paper's setting passes a known X_WO
@@ -53,12 +54,14 @@ from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, dr
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
+    PAINT_THRESHOLD,
     FittedModel,
     KeypointSource,
     RoomLoss,
     infer,
     infer_parts,
     paint_background,
+    paint_thresholds,
 )
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import (
@@ -266,8 +269,11 @@ class NfrPerceptionSystem(LeafSystem):
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
         masked = self._segmenter is not None and self._room_loss == "masked"
-        if self._segmenter is not None and not masked:
-            images = paint_background(images, masks, self._background_rgb)
+        if self._segmenter is not None and not masked:  # a given pose comes without a carcass size
+            threshold = PAINT_THRESHOLD if "size" not in pose else paint_thresholds(
+                X_WO.GetAsMatrix4(), pose["size"], [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
+                [image.shape[:2] for image in images])
+            images = paint_background(images, masks, self._background_rgb, threshold)
         if self._model.num_slots > 1:
             result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
                                     self._part(context), masks if masked else None)

@@ -108,7 +108,7 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
     class Stop(Exception):
         pass
 
-    estimate = type("Estimate", (), {"X_WO": np.eye(4)})()
+    estimate = type("Estimate", (), {"X_WO": np.eye(4), "size": np.array([0.4, 0.5, 0.6])})()
     monkeypatch.setattr(object_pose, "estimate_object_pose", lambda *args, **kwargs: estimate)
 
     def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room,
