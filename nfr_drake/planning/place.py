@@ -51,10 +51,7 @@ from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
 from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME
 
 _Z = np.array([0.0, 0.0, 1.0])
-_IK_ITERATIONS = 200
-"""SNOPT's major iterations per IK seed: at 80 the pick's and the pre-pick's knots failed from every
-seed on bases where IK without the clearance bound finds postures 2 cm clear of everything
-(closets 6, 10 and 26 of capture seed 200)."""
+_IK_ITERATIONS = 80
 _KNOT_SLACK = 0.003  # knots clear obstacles by this much more than the trajectories between them, m
 GRASP_OF = {"closet": "side", "drawer": "top"}
 """The grasp of the item by the category it is placed in (module docstring)."""
