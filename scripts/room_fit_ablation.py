@@ -17,7 +17,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
 - ``true_mask``: the room photos painted in the training background off the true visible mask, the
   true pose;
 - ``seg_mask``: painted off the segmenter's masks as the pipeline makes them (crop stage;
-  `paint_background`: the pixels at p <= `PAINT_THRESHOLD` painted, the rest kept), the true pose;
+  `paint_background`: the pixels at p <= `PAINT_THRESHOLD` painted, the rest kept, the pipeline's
+  painting before commit d55c294), the true pose;
 - ``seg_mask_nodet``: ``seg_mask`` without the handle detector's sighting;
 - ``seg_mask_masked``: ``seg_mask`` with the pixels off the mask left out of the loss instead;
 - ``pipeline``: ``seg_mask`` in the pose the pipeline estimates (the amodal carcass);
@@ -28,9 +29,9 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``pipeline_region``: ``pipeline`` painted at p <= 0.9 off the region the shut object can occupy
   in the estimated pose (its carcass box and fronts grown by a margin) and at p <= 0.5 on it
-  (`paint_thresholds`); ``pipeline_region_reach``: that region grown toward the cameras by the
-  fronts' reach (the carcass's larger side: a drawer pulls out by less than its depth, a door
-  swings out by its width);
+  (`paint_thresholds`, the pipeline's painting since commit d55c294); ``pipeline_region_reach``:
+  that region grown toward the cameras by the fronts' reach (the carcass's larger side: a drawer
+  pulls out by less than its depth, a door swings out by its width);
 - ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
   into the background by the mask's probability (m photo + (1 - m) background, the painting
   before commit f4d43af); ``seg_mask_blend_nodet``: ``seg_mask_blend`` without the handle
