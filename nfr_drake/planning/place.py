@@ -564,23 +564,15 @@ def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
     return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
 
 
-_LEADING_IN = {"to pick": 1, "carry": 3, "retreat": 0}
-"""The knots before a segment's last that lead straight into it, by segment (the pre-pick; the
-pre-place and the two knots on the line in): where its pieces find no trajectory, these are solved
-again backwards from the last knot's posture (`plan_place`)."""
-
-
 def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, config: PlaceConfig | None = None,
                handle: HandleWaypoint | None = None) -> PlacePlan:
     """Plan the pick and place (module docstring) for the arm at base X_WB, from its positions q0
     (9,): the end of the opening plan, the hand on `handle` (it backs off the handle first), or,
     with `handle` None, a base re-placed after the opening (`place_bases`, `ready_posture`).
-    Where the pieces to the pick (the last one straight, `_straight_in`) or those of the carry find
-    no trajectory, the knots leading straight into the last (`_LEADING_IN`: the pre-pick; the
-    pre-place and the line in) are re-solved backwards from its posture (the arm on one branch: an
-    IK from the previous knot may jump to another, which no short piece joins: closet 10 of capture
-    seed 200, joint 1 at -1.99 rad 10 cm before the place and 0.83 at it) and the pieces are
-    optimised again, their bounds unchanged.
+    Where the pieces to the pick (the last one straight, `_straight_in`) find no trajectory, the
+    pre-pick is re-solved from the pick's posture (the arm on one branch: an IK from the previous
+    knot may jump to another, which no straight piece joins) and they are optimised again, the
+    straight bound unchanged.
     Raises PlanningError when a side-held item has too little room over the goal
     (`side_room_needed`), else naming the stage or the constraints that failed, for each grasp tried
     (the hand either way round about its approach)."""
@@ -655,12 +647,11 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         for name, stages, sols in (("to pick", to_pick, sols_a), ("carry", carry, sols_b),
                                    ("retreat", retreat, sols_c)):
             pieces, failed = _pieces(scenes, stages, sols, q, p, cfg)
-            if pieces is None and (n := _LEADING_IN[name]):  # the way in on its deepest knot's branch
-                back, _ = _solve_chain(scenes, stages[-1 - n:-1][::-1], sols[-1], cfg)
-                if back is not None and not np.allclose(back[::-1], sols[-1 - n:-1], atol=1e-3):
+            if pieces is None and name == "to pick":  # the straight pick: pre-pick on the pick's branch
+                pre, _ = _solve_chain(scenes, stages[-2:-1], sols[-1], cfg)
+                if pre is not None and not np.allclose(pre[0], sols[-2], atol=1e-3):
                     failures.append(failed)
-                    sols = [*sols[:-1 - n], *back[::-1], sols[-1]]
-                    pieces, failed = _pieces(scenes, stages, sols, q, p, cfg)
+                    pieces, failed = _pieces(scenes, stages, [*sols[:-2], pre[0], sols[-1]], q, p, cfg)
             if pieces is None:
                 failures.append(failed)
                 break
