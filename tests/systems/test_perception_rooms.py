@@ -77,7 +77,7 @@ def test_a_room_placed_at_X_PW_is_the_same_room_moved():
                                        atol=1e-12)
 
 
-def _perception_scene(model_dir, scene, X_WO, known=True):
+def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT):
     obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
     scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
                         object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
@@ -94,7 +94,7 @@ def _perception_scene(model_dir, scene, X_WO, known=True):
     plant.Finalize()
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
-                              X_WCs, camera, TINY_FIT, lighting, scene=scene, segmenter=SEGMENTER)
+                              X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER)
     return builder.Build(), system
 
 
@@ -137,6 +137,7 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
     images, kwargs = calls[0]
     masks = kwargs["masks"]
     assert kwargs["masked_loss"] is False
+    assert kwargs["refine_pose"] is False  # a given pose is never moved
     assert masks is not None and len(masks) == 3 and all(m.shape == (32, 32) for m in masks)
     assert all(0.0 <= m.min() and m.max() <= 1.0 for m in masks)
     for image, mask in zip(images, masks, strict=True):
@@ -169,13 +170,35 @@ def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, mon
         return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.02, 1, np.zeros(6))
 
     monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
-    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False)
+    fit = replace(TINY_FIT, pose_max_shift_m=0.5)  # the tiny model's move is kept, not refused
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False, fit=fit)
     simulator = Simulator(diagram)
     simulator.Initialize()
     assert system.fit_count == 1 and len(poses_from) == 2 and poses_from[0] == 0.0 and poses_from[1] > 0.5
     result = system.get_fit_result_output_port().Eval(system.GetMyContextFromRoot(simulator.get_context()))
     assert any("first look" in w for w in result.extra["warnings"])
     assert result.extra["object_pose"]["estimated"] is True
+
+
+def test_an_estimated_pose_is_refined_and_the_port_gives_the_refined_one(model_dir):
+    """Without X_WO the fit refines the masks' pose with the field; the result keeps the estimate
+    and the refinement's report, and the X_WO port gives the estimate moved by the kept
+    refinement's X_OP."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    fit = replace(TINY_FIT, pose_max_shift_m=0.5)  # the tiny model's move is kept, not refused
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False, fit=fit)
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    context = system.GetMyContextFromRoot(simulator.get_context())
+    pose = system.get_fit_result_output_port().Eval(context).extra["object_pose"]
+    refinement = pose["refinement"]
+    assert refinement is not None and refinement["steps"] == fit.pose_steps
+    assert refinement["status"] == "kept", refinement["status"]
+    expected = np.array(pose["X_WO_estimated"]) @ np.array(refinement["X_OP"])
+    assert not np.allclose(expected, pose["X_WO_estimated"])  # it moved
+    assert np.allclose(pose["X_WO"], expected, atol=1e-9)
+    assert np.allclose(system.get_X_WO_output_port().Eval(context).GetAsMatrix4(), expected, atol=1e-9)
 
 
 @pytest.mark.parametrize("carcass_gives_a_pose", [True, False])
