@@ -204,6 +204,28 @@ def paint_thresholds(X_WO: np.ndarray, size: np.ndarray, X_WCs: list[np.ndarray]
             for X_WC, camera, shape in zip(X_WCs, cameras, shapes, strict=True)]
 
 
+def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
+                     cameras: list[PinholeCamera], X_WO: np.ndarray, size: np.ndarray | None,
+                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
+    """`paint_background` at the thresholds of the estimated carcass's region (`paint_thresholds`;
+    X_WO (4, 4), size (3,) m) or, for a pose given without a size (None), at `PAINT_THRESHOLD`
+    everywhere."""
+    threshold = PAINT_THRESHOLD if size is None else paint_thresholds(
+        X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images])
+    return paint_background(images, masks, background_rgb, threshold)
+
+
+def refined_object_pose(X_WO_estimated: np.ndarray, result: FitResult,
+                        outcome: FitOutcome) -> tuple[np.ndarray, dict]:
+    """X_WO (4, 4) after the fit's pose refinement (the estimate moved by the kept refinement's
+    X_OP, `FitConfig.refine_pose`; the estimate itself when none was kept) and the entries of
+    `extra["object_pose"]` that say so: X_WO, X_WO_estimated and the refinement's report (taken
+    out of `result.extra["pose_refinement"]`; None when the fit did not refine)."""
+    X_WO = X_WO_estimated if outcome.X_OP is None else X_WO_estimated @ outcome.X_OP
+    return X_WO, {"X_WO": X_WO.tolist(), "X_WO_estimated": X_WO_estimated.tolist(),
+                  "refinement": result.extra.pop("pose_refinement", None)}
+
+
 MIN_FIT_VIEWS = 3
 """Fewer views than this leave q and the object's shape poorly constrained: the fit warns."""
 
@@ -308,20 +330,17 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 
     in_O = in_frame(estimate.X_WO)
     if room_loss == "background":
-        images = paint_background(images, masks, threshold=paint_thresholds(
-            estimate.X_WO, estimate.size, [f.X_OC for f in capture.frames],
-            [f.camera for f in capture.frames], [image.shape[:2] for image in images]))
+        images = paint_off_object(images, masks, [f.X_OC for f in capture.frames],
+                                  [f.camera for f in capture.frames], estimate.X_WO, estimate.size)
     result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
                             room_loss == "masked", room, refine_pose=True)
-    X_WO = estimate.X_WO if outcome.X_OP is None else estimate.X_WO @ outcome.X_OP
+    X_WO, pose = refined_object_pose(estimate.X_WO, result, outcome)
     if outcome.X_OP is not None:  # the fit ended in the refined frame
         in_O = in_frame(X_WO)
     R, t = X_WO[:3, :3], X_WO[:3, 3]
     result.keypoints = {n: R @ p + t for n, p in result.keypoints.items()}
     result.trajectory = {n: p @ R.T + t for n, p in result.trajectory.items()}
-    result.extra["object_pose"] = {"X_WO": X_WO.tolist(), "X_WO_estimated": estimate.X_WO.tolist(),
-                                   "refinement": result.extra.pop("pose_refinement", None),
-                                   "size": estimate.size.tolist(), "room_loss": room_loss,
+    result.extra["object_pose"] = {**pose, "size": estimate.size.tolist(), "room_loss": room_loss,
                                    "amodal": amodal}
     problem = estimate.size_problem(fitted.category)
     result.extra["warnings"] += warnings + ([problem] if problem else [])

@@ -54,14 +54,13 @@ from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, dr
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
-    PAINT_THRESHOLD,
     FittedModel,
     KeypointSource,
     RoomLoss,
     infer,
     infer_parts,
-    paint_background,
-    paint_thresholds,
+    paint_off_object,
+    refined_object_pose,
 )
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import (
@@ -270,10 +269,8 @@ class NfrPerceptionSystem(LeafSystem):
         capture = CaptureSet(Path("drake_cameras"), frames)
         masked = self._segmenter is not None and self._room_loss == "masked"
         if self._segmenter is not None and not masked:  # a given pose comes without a carcass size
-            threshold = PAINT_THRESHOLD if "size" not in pose else paint_thresholds(
-                X_WO.GetAsMatrix4(), pose["size"], [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
-                [image.shape[:2] for image in images])
-            images = paint_background(images, masks, self._background_rgb, threshold)
+            images = paint_off_object(images, masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
+                                      X_WO.GetAsMatrix4(), pose.get("size"), self._background_rgb)
         if self._model.num_slots > 1:
             result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
                                     self._part(context), masks if masked else None)
@@ -282,11 +279,9 @@ class NfrPerceptionSystem(LeafSystem):
                                     self._keypoint_source, masks=masks if self._segmenter else None,
                                     masked_loss=masked, refine_pose=self._X_WO is None)
             if self._X_WO is None:  # the estimate, and the field's refinement of it
-                pose["X_WO_estimated"] = pose["X_WO"]
-                pose["refinement"] = result.extra.pop("pose_refinement", None)
-                if outcome.X_OP is not None:
-                    X_WO = X_WO @ RigidTransform(outcome.X_OP)
-                    pose["X_WO"] = X_WO.GetAsMatrix4().tolist()
+                X_WO_refined, refined = refined_object_pose(X_WO.GetAsMatrix4(), result, outcome)
+                X_WO = RigidTransform(X_WO_refined)
+                pose.update(refined)
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
         self.fit_count += 1
