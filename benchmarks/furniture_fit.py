@@ -13,8 +13,11 @@ Handles (`--handles`): "detector", those triangulated from the 2D handle detecto
 `--baseline` (default MODEL/baseline) finds, in their place (its prediction as the fit's start);
 "none", the fit without them; "true", gt.json's handles (the ceiling of what sightings can give,
 for diagnosis only). The handle count and the time to sight them are in each row.
+On captures of the model's own training objects (`nfr-drake captures --training-objects`) each
+part also gets the keypoint RMSE of the head at the object's training code and the true q
+(`own_code_keypoint_rmse_cm`): what a fit that found the training code again would give.
 
-    python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json]
+    python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json] [--starts S]
         [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR]
 """
 
@@ -27,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from nfr_drake.baseline.predict import predict_capture
 from nfr_drake.baseline.train import load_baseline
@@ -38,6 +42,7 @@ from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture,
 from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
 from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
+from nfr_drake.nfr.latent import slots_q_to_z_art
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handles
 
@@ -61,10 +66,12 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
         handles_O = None
     sight_seconds = time.perf_counter() - started
     fit = fit_furniture(model, observed_rays(capture), codes, config, handles_O)
+    own = own_code_keypoints(model, codes, gt)
     parts = []
     for part in gt["parts"]:
         k, names = part["index"], PART_KEYPOINTS[part["type"]]
-        pred = fit.keypoints[k, [SLOT_KEYPOINTS.index(n) for n in names]]
+        pick = [SLOT_KEYPOINTS.index(n) for n in names]
+        pred = fit.keypoints[k, pick]
         true = np.array([part["keypoints"][names[n]] for n in names])
         traj_q = np.asarray(part["trajectory"]["q"])
         path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
@@ -75,11 +82,27 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
                                                      part["joint_upper"]),
             "keypoint_rmse_cm": keypoint_rmse_cm(pred, true),
             "trajectory_rmse_cm": trajectory_rmse_cm(
-                path, np.asarray(part["trajectory"]["keypoints"]["handle"]))})
+                path, np.asarray(part["trajectory"]["keypoints"]["handle"])),
+            **({} if own is None else {"own_code_keypoint_rmse_cm": keypoint_rmse_cm(own[k, pick], true)})})
     return {"capture": capture_dir.name, "fronts": len(gt["parts"]),
             "found": int(fit.exists.sum()), "count_right": int(fit.exists.sum()) == len(gt["parts"]),
             "handles": len(fit.handles), "sight_seconds": sight_seconds, "seconds": fit.seconds,
             "image_loss": fit.image_loss, "parts": parts}
+
+
+@torch.no_grad()
+def own_code_keypoints(model, codes, gt: dict) -> np.ndarray | None:
+    """The head's keypoints (S, 4, 3) at the training code of the capture's object and its true q
+    per front, when the object is training object i (named `<category>_<i:06d>` as `generate`
+    names it and i within the code table); else None."""
+    prefix, _, index = gt["object"]["name"].rpartition("_")
+    if prefix != gt["category"] or len(index) != 6 or not index.isdigit() or int(index) >= len(codes):
+        return None
+    S = model.config.num_slots
+    q = torch.zeros(1, S)
+    q[0, :len(gt["parts"])] = torch.tensor([p["q"] for p in gt["parts"]])
+    z = torch.cat([slots_q_to_z_art(q, S), codes[int(index)][None]], -1)
+    return model.keypoints(z)[0].view(S, len(SLOT_KEYPOINTS), 3).double().numpy()
 
 
 def summary(rows: list[dict]) -> dict:
@@ -95,6 +118,8 @@ def summary(rows: list[dict]) -> dict:
                                        if p["type"] == "drawer"]),
         "keypoint_rmse_cm_median": med([p["keypoint_rmse_cm"] for p in parts]),
         "trajectory_rmse_cm_median": med([p["trajectory_rmse_cm"] for p in parts]),
+        "own_code_keypoint_rmse_cm_median": med([p["own_code_keypoint_rmse_cm"] for p in parts
+                                                 if "own_code_keypoint_rmse_cm" in p]),
         "fit_seconds_median": med([r["seconds"] for r in rows]),
         "handle_count_right": float(np.mean([r["handles"] == r["fronts"] for r in rows])),
         "sight_seconds_median": med([r["sight_seconds"] for r in rows])}
@@ -106,6 +131,8 @@ def main() -> None:
     parser.add_argument("--captures", type=Path, required=True)
     parser.add_argument("--n", type=int, default=10)
     parser.add_argument("--steps", type=int, default=FurnitureFitConfig.steps)
+    parser.add_argument("--starts", type=int, default=FurnitureFitConfig.starts,
+                        help="training codes looked up as starts (the code table's size: all of them)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path)
     parser.add_argument("--handles", choices=("detector", "encoder", "none", "true"), default="detector")
@@ -122,7 +149,7 @@ def main() -> None:
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
         p.requires_grad_(False)
-    config = FurnitureFitConfig(steps=args.steps)
+    config = FurnitureFitConfig(steps=args.steps, starts=args.starts)
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:

@@ -29,7 +29,9 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``pipeline_region``: ``pipeline`` painted at p <= 0.9 off the region the shut object can occupy
   in the estimated pose (its carcass box and fronts grown by a margin) and at p <= 0.5 on it
-  (`paint_thresholds`, the pipeline's painting since commit d55c294); ``pipeline_region_reach``:
+  (`paint_thresholds`, the pipeline's painting since commit d55c294); ``pipeline_region_refined``:
+  that, the pose then refined (the pipeline of `eval-pipeline --perceive room` now);
+  ``pipeline_region_reach``:
   that region grown toward the cameras by the fronts' reach (the carcass's larger side: a drawer
   pulls out by less than its depth, a door swings out by its width);
 - ``seg_mask_blend``, ``pipeline_blend``: ``seg_mask`` and ``pipeline`` with the photo blended
@@ -37,7 +39,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   before commit f4d43af); ``seg_mask_blend_nodet``: ``seg_mask_blend`` without the handle
   detector's sighting.
 
-Per setting: keypoint RMSE at the observed state and handle error (cm, in W), q error, the
+Per setting: keypoint RMSE at the observed state and handle error (cm, in W; and the handle's
+error along the true object's axes, `handle_d{x,y,z}_cm`: x out of the front, z up), q error, the
 handle detector's triangulated handle error (cm; nan when fewer than 3 views agree), the fit's
 seconds. Per object: the detector's handle pixels (p > 0.5) on the raw room photos and the share
 of them off the true (whole) silhouette, and the object's extent in the photos (its silhouette's
@@ -81,7 +84,7 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
             "pipeline", "pipeline_refined", "seg_mask_p90", "pipeline_p90", "seg_mask_blend",
             "seg_mask_blend_nodet",
-            "pipeline_blend", "pipeline_region", "pipeline_region_reach")
+            "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined")
 VISIBLE_DEPTH_M = 0.02
 """A silhouette pixel is visible in the room when the room's depth there is within this of the
 object's alone."""
@@ -220,7 +223,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                 "seg_mask_blend_nodet": (blend(room, seg), seg, X_WO, False, False),
                 "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True),
                 "pipeline_region": (region, seg, X_WO_hat, False, True),
-                "pipeline_region_reach": (region_reach, seg, X_WO_hat, False, True)}
+                "pipeline_region_reach": (region_reach, seg, X_WO_hat, False, True),
+                "pipeline_region_refined": (region, seg, X_WO_hat, False, True)}
         detector = fitted.handle_detector
         maps = detector.detect(room)
         fired = [m.probability > 0.5 for m in maps]
@@ -244,7 +248,7 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             config = replace(scenario.fit, handle_detector=use_detector)
             result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
                                     masked_loss=masked, room=masks is not None,
-                                    refine_pose=name == "pipeline_refined")
+                                    refine_pose=name.endswith("_refined"))
             seconds = time.perf_counter() - t0
             if figure is not None and index == objects[0]:
                 if panels is None:
@@ -264,6 +268,9 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                    "q_error": abs(result.q - scenario.q_start),
                    "keypoint_rmse_cm": 100 * float(np.sqrt(np.mean(np.sum((predicted - true_now) ** 2, -1)))),
                    "handle_cm": 100 * float(np.linalg.norm(predicted[names.index("handle")] - handle_W)),
+                   **dict(zip(("handle_dx_cm", "handle_dy_cm", "handle_dz_cm"),
+                              100 * X_WO.rotation().matrix().T
+                              @ (predicted[names.index("handle")] - handle_W), strict=True)),
                    "sighting_cm": handle_error_cm(sighted, X_OW.multiply(handle_W)),
                    "sighting_views": 0 if sighted is None else len(sighted.views), "seconds": seconds}
             rows.append(row)

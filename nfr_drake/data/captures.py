@@ -5,7 +5,8 @@ Each capture is a capture-set folder (transforms.json + images; docs/DATASET_FOR
 for planning and simulation, with the textures it names under `textures/`) and `labels/` (semantic
 label images, for evaluation). Furniture captures have a q per front, per-part ground truth and
 `parts/` (part-index images). Objects come from the capture seed domain, so they never coincide
-with training objects of any seed.
+with training objects of any seed; `--training-objects` photographs a dataset's own objects
+instead (a diagnosis: is a miss the fit's or the field's reach beyond its training codes?).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from nfr_drake.data.shards import PART_CATEGORIES, process_alive
 from nfr_drake.errors import ConfigError
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
+    SEED_DOMAIN_TRAIN,
     ArticulatedObject,
     object_rng,
     sample_object,
@@ -123,6 +125,7 @@ def captures_command(
     framing: Literal["auto", "distance", "bounds"] = "auto",
     margin: tuple[float, float] = (0.05, 0.25),
     shard: str = "0/1",
+    training_objects: bool = False,
 ) -> None:
     """Render `n` capture sets of unseen objects into OUT/<category>_<i>, each at a random q
     (furniture: a q per front, drawn as `nfr-drake generate` draws them).
@@ -146,6 +149,9 @@ def captures_command(
             (the whole piece in view at every q), "distance" for closets and drawers.
         margin: framing "bounds": free border around the bounds, a fraction of the image's half-size.
         shard: i/n renders the capture sets with index % n == i.
+        training_objects: photograph objects 0..n-1 of the training dataset of seed `seed`
+            (`nfr-drake generate --seed`; the same shapes, colours and textures, named as there),
+            each at a q, lighting and cameras drawn anew, instead of unseen objects.
     """
     if q is not None and not 0.0 <= q <= 1.0:
         raise ConfigError(f"--q must lie in [0, 1], got {q}")
@@ -168,7 +174,10 @@ def captures_command(
         if target.exists():
             continue
         rng = object_rng(SEED_DOMAIN_CAPTURE, seed, i)
-        obj = sample_object(category, rng, name=f"{category}_capture_{i:03d}")
+        if training_objects:  # object i as `generate` draws it; q, lighting and cameras from rng
+            obj = sample_object(category, object_rng(SEED_DOMAIN_TRAIN, seed, i), name=f"{category}_{i:06d}")
+        else:
+            obj = sample_object(category, rng, name=f"{category}_capture_{i:03d}")
         if category in PART_CATEGORIES:
             q_drawn = part_articulations(rng, 1, obj.num_fronts)[0]
         else:
