@@ -133,7 +133,6 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=FurnitureFitConfig.steps)
     parser.add_argument("--starts", type=int, default=FurnitureFitConfig.starts,
                         help="training codes looked up as starts (the code table's size: all of them)")
-    parser.add_argument("--code-blend", type=int, default=0, help="FurnitureFitConfig.code_blend")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path)
     parser.add_argument("--handles", choices=("detector", "encoder", "none", "true"), default="detector")
@@ -150,7 +149,7 @@ def main() -> None:
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
         p.requires_grad_(False)
-    config = FurnitureFitConfig(steps=args.steps, starts=args.starts, code_blend=args.code_blend)
+    config = FurnitureFitConfig(steps=args.steps, starts=args.starts)
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:

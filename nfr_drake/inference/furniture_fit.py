@@ -57,10 +57,6 @@ class FurnitureFitConfig:
     """SRN's prior on z_obj (mean of squares), as in training."""
     seed: int = 0
     """Seed of the ray draws."""
-    code_blend: int = 0
-    """0: z_obj moves freely. K >= 2: z_obj stays a convex combination of the K training codes
-    the lookup scores best (softmax weights fitted in its place, starting on the start's own code),
-    so that the fit cannot leave the codes the keypoint head was trained on."""
     handle_weight: float = 2e-3
     """Weight w of the handle term (module docstring; 0: the sighted handles are not in the loss
     nor in the choice of starts)."""
@@ -72,9 +68,6 @@ class FurnitureFitConfig:
     """Sight the handles with the model's 2D handle detector when it ships one (`infer_parts`)."""
 
     def __post_init__(self):
-        if self.code_blend == 1 or self.code_blend < 0:
-            raise ConfigError(f"FurnitureFitConfig: code_blend must be 0 (free) or at least 2, "
-                              f"got {self.code_blend}")
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
             raise ConfigError("FurnitureFitConfig: starts, lookup_rays, keep, steps and "
                               "rays_per_step must be at least 1")
@@ -142,42 +135,6 @@ def _start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:
                                  z_obj], -1) for q in (0.0, 0.5)])
 
 
-class BlendedCodes:
-    """Codes (B, 2 S + k) whose z_obj is a convex combination of `basis` (K, k) training codes:
-    the free variables are z_art (B, 2 S) and the weights' logits (B, K), the start's own code
-    (`own` (B,) index into basis) first weighted OWN_WEIGHT."""
-
-    OWN_WEIGHT = 0.9
-
-    def __init__(self, starts: torch.Tensor, basis: torch.Tensor, own: torch.Tensor, S: int):
-        self.basis, self.S = basis, S
-        K = len(basis)
-        logits = torch.zeros(len(starts), K, dtype=basis.dtype)
-        own_logit = np.log(self.OWN_WEIGHT * (K - 1) / (1 - self.OWN_WEIGHT))  # softmax -> OWN_WEIGHT
-        logits[torch.arange(len(starts)), own] = float(own_logit)
-        self.z_art = starts[:, :2 * S].clone().requires_grad_(True)
-        self.logits = logits.requires_grad_(True)
-
-    def parameters(self) -> list[torch.Tensor]:
-        return [self.z_art, self.logits]
-
-    def __call__(self) -> torch.Tensor:
-        return torch.cat([self.z_art, self.logits.softmax(-1) @ self.basis], -1)
-
-
-class FreeCodes:
-    """Codes (B, 2 S + k) moved freely: z itself is the variable."""
-
-    def __init__(self, starts: torch.Tensor):
-        self.z = starts.clone().requires_grad_(True)
-
-    def parameters(self) -> list[torch.Tensor]:
-        return [self.z]
-
-    def __call__(self) -> torch.Tensor:
-        return self.z
-
-
 def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                   config: FurnitureFitConfig = FurnitureFitConfig(),
                   handles_O: np.ndarray | None = None) -> FurnitureFit:
@@ -191,30 +148,20 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     generator = torch.Generator().manual_seed(config.seed)
     handles = np.zeros((0, 3)) if handles_O is None else np.asarray(handles_O, float).reshape(-1, 3)[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m)
-    codes = codes.to(rays.rgb)
-    every = torch.arange(len(codes)).repeat(2)  # the code of each start of _start_codes(codes)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
         with torch.no_grad():
-            pick = term(_start_codes(codes, S)).argsort()[:2 * config.starts]
+            every = _start_codes(codes.to(rays.rgb), S)
+            cands = every[term(every).argsort()[:2 * config.starts]]
     else:
-        spaced = torch.linspace(0, len(codes) - 1, min(config.starts, len(codes))).round().long()
-        pick = torch.cat([spaced, spaced + len(codes)])
-    cands = _start_codes(codes, S)[pick]
+        pick = torch.linspace(0, len(codes) - 1, min(config.starts, len(codes))).round().long()
+        cands = _start_codes(codes[pick].to(rays.rgb), S)
     with torch.no_grad():
         index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
-        order = (_mse(model, cands, rays, index) + term(cands)).argsort()
-    starts = cands[order[:config.keep]]
-    if config.code_blend:
-        ranked = every[pick[order]]
-        basis_index = ranked[np.sort(np.unique(ranked.numpy(), return_index=True)[1])][:config.code_blend]
-        own = (basis_index[None] == ranked[:config.keep, None]).int().argmax(-1)
-        variables = BlendedCodes(starts, codes[basis_index], own, S)
-    else:
-        variables = FreeCodes(starts)
-    optimiser = torch.optim.Adam(variables.parameters(), lr=config.lr)
+        loss = _mse(model, cands, rays, index) + term(cands)
+    z = cands[loss.argsort()[:config.keep]].clone().requires_grad_(True)
+    optimiser = torch.optim.Adam([z], lr=config.lr)
     for _ in range(config.steps):
         index = rays.sample(config.rays_per_step, config.detail_fraction, generator)
-        z = variables()
         per_code = _mse(model, z, rays, index)
         total = (per_code.sum() + term(z).sum()
                  + config.latent_weight * latent_loss(split_z(z, S)[1]) * len(z))
@@ -222,7 +169,6 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         total.backward()
         optimiser.step()
     with torch.no_grad():
-        z = variables()  # after the last step; per_code is of the step before it, as the choice's
         best = int((per_code + term(z)).argmin())
         z_best = z[best].detach()
         logits = model.slot_logits(z_best[None])[0]
