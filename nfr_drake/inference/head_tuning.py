@@ -8,7 +8,10 @@ evaluation (`nfr-drake captures` with a seed of its own) with the default fit, t
 head alone on (fitted z_obj, z_art(q)) -> the true keypoints along q, while keeping its answers
 on the training codes (a distillation term), and writes a model folder in which only the head
 differs. The fits are kept as OUT/fits/<capture>.json, so a killed run resumes without fitting
-again.
+again. A model with several part slots (furniture) is fitted as `infer_parts` fits it (the
+furniture fit's defaults, with the model's handle detector); its pairs are each part's sweep
+with the other parts held at their true q, the targets every existing slot's keypoints that the
+ground truth names (`PART_KEYPOINTS`), and the distillation keeps the slots' logits too.
 """
 
 from __future__ import annotations
@@ -29,13 +32,16 @@ from tqdm import tqdm
 
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import capture_dirs, read_capture_set
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
+from nfr_drake.inference.infer import FittedModel, infer, infer_parts
 from nfr_drake.inference.metrics import keypoint_rmse_cm
+from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.jsonio import read_json
 from nfr_drake.nfr.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_model_config, read_tensors
-from nfr_drake.nfr.latent import compose_z, q_to_z_art
+from nfr_drake.nfr.latent import slots_q_to_z_art
 
 FITS_DIR = "fits"
 _HEAD_PREFIX = "keypoint_head."
@@ -76,11 +82,14 @@ def _start_worker(model_dir: Path, threads: int, fit: FitConfig) -> None:
 
 
 def _fit_one(job: tuple[Path, Path]) -> str:
-    """Fit one capture in a worker; writes OUT/fits/<capture>.json: z (2 + k,), q."""
+    """Fit one capture in a worker; writes OUT/fits/<capture>.json: z (2 S + k,), q."""
     capture_dir, out_file = job
     capture = read_capture_set(capture_dir)
     _worker_model.check_capture(capture)
-    result, _ = infer(_worker_model, capture, _worker_fit, np.array([0.0]))
+    if _worker_model.num_slots > 1:
+        result, _ = infer_parts(_worker_model, capture, FurnitureFitConfig(), np.array([0.0]))
+    else:
+        result, _ = infer(_worker_model, capture, _worker_fit, np.array([0.0]))
     tmp = out_file.with_suffix(".tmp")
     tmp.write_text(json.dumps({"capture": capture_dir.name, "q": result.q, "z": result.z.tolist()}))
     tmp.replace(out_file)
@@ -110,21 +119,67 @@ def fit_captures(model_dir: Path, captures: Path, out: Path, workers: int = 1, f
 
 
 def _pairs(fitted: FittedModel, dirs: list[Path], out: Path):
-    """(z (P, 2 + k), true keypoints (P, K, 3), capture index (P,)) along each capture's q grid,
-    and per capture the fitted code and the true keypoints at the observed state."""
-    names = fitted.keypoint_names
-    zs, kps, owner, observed = [], [], [], []
+    """Training pairs and held-out checks of the fits in OUT/fits: (z (P, 2 S + k), true keypoints
+    (P, K, 3) as the head lays them out (K = S x 4 for slots), mask (P, K) of those the ground truth
+    gives, capture index (P,)) along each part's q grid (the other parts held at their true q), and
+    per capture the fitted code and its parts at the observed state, [(keypoint indices into K,
+    true keypoints (n, 3))]."""
+    zs, kps, masks, owner, observed = [], [], [], [], []
     for i, d in enumerate(dirs):
         fit = read_json(out / FITS_DIR / f"{d.name}.json", NfrDrakeError, "fit")
         gt = read_json(d / "gt.json", NfrDrakeError, "ground truth")
         z = torch.tensor(fit["z"], dtype=torch.float32)
-        grid = torch.tensor(gt["trajectory"]["q"], dtype=torch.float32)
+        for grid, z_art, target, known in _sweeps(fitted, gt):
+            zs.append(torch.cat([z_art, z[z_art.shape[1]:].expand(len(grid), -1)], -1))
+            kps.append(torch.tensor(target, dtype=torch.float32))
+            masks.append(torch.tensor(known))
+            owner.append(torch.full((len(grid),), i))
+        observed.append((z, _observed_parts(fitted, gt)))
+    return torch.cat(zs), torch.cat(kps), torch.cat(masks), torch.cat(owner), observed
+
+
+def _slot_layout(fitted: FittedModel, part: dict) -> tuple[list[int], list[str]]:
+    """Indices into the head's K keypoints of a furniture part (slot `index`) and their gt names."""
+    names = PART_KEYPOINTS[part["type"]]
+    return ([part["index"] * len(SLOT_KEYPOINTS) + SLOT_KEYPOINTS.index(n) for n in names],
+            [names[n] for n in names])
+
+
+def _observed_parts(fitted: FittedModel, gt: dict) -> list[tuple[list[int], np.ndarray]]:
+    """Per part of gt (one for a one-part model): its keypoint indices into K and the true keypoints
+    (n, 3) at the observed state."""
+    if fitted.num_slots == 1:
+        names = fitted.keypoint_names
+        return [(list(range(len(names))), np.array([gt["keypoints"][n] for n in names]))]
+    return [(index, np.array([p["keypoints"][n] for n in gt_names]))
+            for p in gt["parts"] for index, gt_names in [_slot_layout(fitted, p)]]
+
+
+def _sweeps(fitted: FittedModel, gt: dict):
+    """Per swept part: q grid (N,), z_art (N, 2 S), true keypoints (N, K, 3), known (N, K) bool."""
+    S = fitted.num_slots
+    if S == 1:
+        names = fitted.keypoint_names
+        grid = np.asarray(gt["trajectory"]["q"], float)
         along = np.stack([np.asarray(gt["trajectory"]["keypoints"][n]) for n in names], 1)
-        zs.append(torch.cat([q_to_z_art(grid), z[2:].expand(len(grid), -1)], -1))
-        kps.append(torch.tensor(along, dtype=torch.float32))
-        owner.append(torch.full((len(grid),), i))
-        observed.append((z, np.array([gt["keypoints"][n] for n in names])))
-    return torch.cat(zs), torch.cat(kps), torch.cat(owner), observed
+        yield grid, slots_q_to_z_art(torch.tensor(grid, dtype=torch.float32), 1), along, \
+            np.ones(along.shape[:2], bool)
+        return
+    K = S * len(SLOT_KEYPOINTS)
+    held = np.zeros(S)
+    held[[p["index"] for p in gt["parts"]]] = [p["q"] for p in gt["parts"]]
+    for part in gt["parts"]:
+        grid = np.asarray(part["trajectory"]["q"], float)
+        q = np.tile(held, (len(grid), 1))
+        q[:, part["index"]] = grid
+        target, known = np.zeros((len(grid), K, 3)), np.zeros((len(grid), K), bool)
+        for other in gt["parts"]:
+            index, gt_names = _slot_layout(fitted, other)
+            known[:, index] = True
+            along = part["trajectory"]["keypoints"]
+            target[:, index] = (np.stack([np.asarray(along[n]) for n in gt_names], 1) if other is part
+                                else np.array([other["keypoints"][n] for n in gt_names]))
+        yield grid, slots_q_to_z_art(torch.tensor(q, dtype=torch.float32), S), target, known
 
 
 def tune_head(fitted: FittedModel, dirs: list[Path], out: Path, config: HeadTuningConfig) -> dict:
@@ -134,21 +189,22 @@ def tune_head(fitted: FittedModel, dirs: list[Path], out: Path, config: HeadTuni
     if len(dirs) < 10:
         raise NfrDrakeError(f"head tuning needs at least 10 fitted captures, got {len(dirs)}")
     torch.manual_seed(config.seed)
-    model = fitted.model
-    z_all, kp_all, owner, observed = _pairs(fitted, dirs, out)
+    model, S = fitted.model, fitted.num_slots
+    z_all, kp_all, known, owner, observed = _pairs(fitted, dirs, out)
     n_val = max(1, int(round(config.holdout * len(dirs))))
     train = owner < len(dirs) - n_val
+    z_train_pairs, kp_train, known_train = z_all[train], kp_all[train], known[train]
     val = observed[-n_val:]
     head = model.keypoint_head
-    old_head = copy.deepcopy(head).requires_grad_(False)
+    old_model = copy.deepcopy(model).requires_grad_(False)
     head.requires_grad_(True)
     codes = fitted.codes.float()
 
     def held_out_rmse() -> float:
         with torch.no_grad():
             pred = model.keypoints(torch.stack([z for z, _ in val])).numpy()
-        return float(np.median([keypoint_rmse_cm(p, t) for p, (_, t) in zip(pred, val,
-                                                                               strict=True)]))
+        return float(np.median([keypoint_rmse_cm(p[index], t)
+                                for p, (_, parts) in zip(pred, val, strict=True) for index, t in parts]))
 
     before = best = held_out_rmse()
     best_state, best_step, curve, fit_curve = copy.deepcopy(head.state_dict()), 0, [], []
@@ -156,12 +212,14 @@ def tune_head(fitted: FittedModel, dirs: list[Path], out: Path, config: HeadTuni
     generator = torch.Generator().manual_seed(config.seed)
     for step in tqdm(range(1, config.steps + 1), desc="tune keypoint head", mininterval=5.0):
         pick = torch.randint(len(codes), (config.distill_samples,), generator=generator)
-        q = torch.rand(config.distill_samples, generator=generator)
-        z_train = torch.cat([q_to_z_art(q), codes[pick]], -1)
+        q = torch.rand(config.distill_samples, S, generator=generator)
+        z_train = torch.cat([slots_q_to_z_art(q, S), codes[pick]], -1)
         with torch.no_grad():
-            keep = old_head(compose_z(z_train[:, :2], z_train[:, 2:]))[0]
-        fit_term = ((model.keypoints(z_all[train]) - kp_all[train]) ** 2).sum(-1).mean()
+            keep, keep_logits = old_model.keypoints(z_train), old_model.slot_logits(z_train)
+        fit_term = ((model.keypoints(z_train_pairs) - kp_train) ** 2).sum(-1)[known_train].mean()
         distill = ((model.keypoints(z_train) - keep) ** 2).sum(-1).mean()
+        if S > 1:  # the slots' existence and type logits kept too
+            distill = distill + ((model.slot_logits(z_train) - keep_logits) ** 2).mean()
         loss = fit_term + config.distill_weight * distill
         fit_curve.append(fit_term.item())
         opt.zero_grad()

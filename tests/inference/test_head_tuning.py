@@ -44,8 +44,8 @@ def test_fits_are_kept_and_not_redone(model_folder, fitted_run):
 def test_the_head_learns_the_pairs_and_only_the_head_changes(model_folder, fitted_run, tmp_path):
     root, dirs = fitted_run
     fitted = FittedModel(model_folder)
-    z, true, owner, observed = _pairs(fitted, dirs, root / "run")
-    assert z.shape[0] == true.shape[0] == owner.shape[0] and true.shape[1:] == (4, 3)
+    z, true, known, owner, observed = _pairs(fitted, dirs, root / "run")
+    assert z.shape[0] == true.shape[0] == owner.shape[0] and true.shape[1:] == (4, 3) and known.all()
     assert len(observed) == 12
     record = tune_head(fitted, dirs, root / "run",
                        HeadTuningConfig(steps=300, lr=3e-3, distill_weight=0.0, holdout=0.2))
@@ -79,3 +79,26 @@ def test_bad_options_and_too_few_captures(model_folder, fitted_run, tmp_path):
         HeadTuningConfig(steps=0)
     with pytest.raises(NfrDrakeError, match="at least 10"):
         tune_head(FittedModel(model_folder), dirs[:5], root / "run", HeadTuningConfig())
+
+
+def test_a_slot_model_learns_every_parts_keypoints_where_gt_names_them(furniture_model_folder, tmp_path):
+    captures_command("furniture", n=10, out=tmp_path / "caps", views=2, size=16, seed=7)
+    dirs = fit_captures(furniture_model_folder, tmp_path / "caps", tmp_path / "run")
+    fitted = FittedModel(furniture_model_folder)
+    S = fitted.num_slots
+    fit = json.loads((tmp_path / "run" / FITS_DIR / f"{dirs[0].name}.json").read_text())
+    assert len(fit["z"]) == 2 * S + fitted.codes.shape[1]
+    z, true, known, owner, observed = _pairs(fitted, dirs, tmp_path / "run")
+    assert true.shape[1:] == (4 * S, 3) and known.shape == true.shape[:2] == (len(z), 4 * S)
+    for i, d in enumerate(dirs):  # each part's handle and goal known, a door's hinge too, nothing else
+        parts = json.loads((d / "gt.json").read_text())["parts"]
+        expected = {4 * p["index"] + j for p in parts
+                    for j in ((0, 1, 2, 3) if p["type"] == "door" else (0, 1))}
+        rows = known[owner == i]
+        assert {int(k) for k in torch.nonzero(rows.any(0)).ravel()} == expected
+        assert bool(rows.all(0)[list(expected)].all())
+        assert len(observed[i][1]) == len(parts)
+    record = tune_head(fitted, dirs, tmp_path / "run",
+                       HeadTuningConfig(steps=200, lr=3e-3, distill_weight=0.0, holdout=0.2))
+    assert record["train_fit_m2"]["last"] < 0.5 * record["train_fit_m2"]["first"]
+    assert record["held_out_keypoint_rmse_cm"]["after"] <= record["held_out_keypoint_rmse_cm"]["before"]
