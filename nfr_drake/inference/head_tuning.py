@@ -138,7 +138,7 @@ def _pairs(fitted: FittedModel, dirs: list[Path], out: Path):
     return torch.cat(zs), torch.cat(kps), torch.cat(masks), torch.cat(owner), observed
 
 
-def _slot_layout(fitted: FittedModel, part: dict) -> tuple[list[int], list[str]]:
+def _slot_layout(part: dict) -> tuple[list[int], list[str]]:
     """Indices into the head's K keypoints of a furniture part (slot `index`) and their gt names."""
     names = PART_KEYPOINTS[part["type"]]
     return ([part["index"] * len(SLOT_KEYPOINTS) + SLOT_KEYPOINTS.index(n) for n in names],
@@ -152,7 +152,7 @@ def _observed_parts(fitted: FittedModel, gt: dict) -> list[tuple[list[int], np.n
         names = fitted.keypoint_names
         return [(list(range(len(names))), np.array([gt["keypoints"][n] for n in names]))]
     return [(index, np.array([p["keypoints"][n] for n in gt_names]))
-            for p in gt["parts"] for index, gt_names in [_slot_layout(fitted, p)]]
+            for p in gt["parts"] for index, gt_names in [_slot_layout(p)]]
 
 
 def _sweeps(fitted: FittedModel, gt: dict):
@@ -173,10 +173,10 @@ def _sweeps(fitted: FittedModel, gt: dict):
         q = np.tile(held, (len(grid), 1))
         q[:, part["index"]] = grid
         target, known = np.zeros((len(grid), K, 3)), np.zeros((len(grid), K), bool)
+        along = part["trajectory"]["keypoints"]
         for other in gt["parts"]:
-            index, gt_names = _slot_layout(fitted, other)
+            index, gt_names = _slot_layout(other)
             known[:, index] = True
-            along = part["trajectory"]["keypoints"]
             target[:, index] = (np.stack([np.asarray(along[n]) for n in gt_names], 1) if other is part
                                 else np.array([other["keypoints"][n] for n in gt_names]))
         yield grid, slots_q_to_z_art(torch.tensor(q, dtype=torch.float32), S), target, known
@@ -272,7 +272,8 @@ def tune_head_command(model: Path, captures: Path, out: Path,
         steps: Adam steps of the head.
         lr: learning rate.
         distill_weight: weight of keeping the head's keypoints on the training codes.
-        fit: options of the fits of the captures (fits already in OUT/fits are kept as they are).
+        fit: options of the fits of the captures (fits already in OUT/fits are kept as they are);
+            a model with several part slots is fitted with the furniture fit's defaults.
         workers: fitting processes.
         threads: torch threads per fitting process (default: their share of the free cores,
             `nfr_drake.cpu.free_cores`).
