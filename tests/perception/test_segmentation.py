@@ -132,6 +132,20 @@ def test_training_lowers_the_loss_round_trips_and_refuses_a_second_run(rooms, tm
                         SMALL, resume=True)
 
 
+def test_a_fine_tune_starts_from_the_given_segmenters_weights_and_architecture(rooms, tmp_path):
+    torch.manual_seed(0)
+    train_segmenter([rooms], tmp_path / "first", SegmenterTrainConfig(steps=20, batch=4, crop=24, threads=1),
+                    SMALL)
+    start, _ = load_segmenter(tmp_path / "first")
+    config = SegmenterTrainConfig(steps=1, batch=4, crop=24, lr=1e-9, threads=1)
+    record = train_segmenter([rooms], tmp_path / "tuned", config, init_from=tmp_path / "first")
+    tuned, saved = load_segmenter(tmp_path / "tuned")
+    assert saved["model"]["channels"] == SMALL.channels != SegmenterConfig().channels
+    assert record["init_from"] == str(tmp_path / "first")
+    for a, b in zip(start.state_dict().values(), tuned.state_dict().values(), strict=True):
+        assert torch.allclose(a.float(), b.float(), atol=1e-6)  # one step at lr 1e-9 moves nothing
+
+
 def test_resume_continues_where_the_killed_run_left_off(rooms, tmp_path, monkeypatch):
     """A run killed at step 15 (checkpoint at 10) and resumed ends with the weights of a run that
     was never killed: weights, Adam moments, scheduler and both RNGs come back."""

@@ -18,7 +18,8 @@ def train_segmenter_command(data: list[Path], out: Path,
                             lr: float = SegmenterTrainConfig.lr,
                             channels: int = SegmenterConfig.channels,
                             checkpoint_every: int = SegmenterTrainConfig.checkpoint_every,
-                            threads: int | None = None, resume: bool = False) -> None:
+                            threads: int | None = None, resume: bool = False,
+                            init_from: Path | None = None) -> None:
     """Train the 2D object segmenter on room datasets (`nfr-drake generate-rooms`).
 
     Args:
@@ -32,6 +33,8 @@ def train_segmenter_command(data: list[Path], out: Path,
         checkpoint_every: steps between checkpoints.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a stopped run from OUT/checkpoint/.
+        init_from: a segmenter folder (`models/segmenter`) to start from, its architecture
+            (`--channels` unused): a fine-tune.
     """
     from nfr_drake.perception.segmentation.training import train_segmenter
 
@@ -39,7 +42,7 @@ def train_segmenter_command(data: list[Path], out: Path,
                                   checkpoint_every=checkpoint_every, threads=threads)
     command = "nfr-drake train-segmenter " + " ".join(sys.argv[2:])
     record = train_segmenter(list(data), out, config, SegmenterConfig(channels=channels), resume=resume,
-                             command=command)
+                             command=command, init_from=init_from)
     print(f"segmenter written to {out}: {record['images']} images, {config.steps} steps in "
           f"{record['seconds'] / 60:.1f} min, final loss {record['final_loss']:.3f}")
 

@@ -23,6 +23,7 @@ from nfr_drake.perception.segmentation.model import (
     NUM_CLASSES,
     Segmenter,
     SegmenterConfig,
+    load_segmenter,
     save_segmenter,
 )
 
@@ -75,11 +76,12 @@ def segmentation_loss(logits: torch.Tensor, labels: torch.Tensor, dice_weight: f
 
 def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConfig,
                     model: SegmenterConfig | None = None, resume: bool = False,
-                    command: str = "") -> dict:
+                    command: str = "", init_from: Path | None = None) -> dict:
     """Train a segmenter on room datasets (any categories and image sizes); writes OUT/.
 
-    `model` is the architecture (default `SegmenterConfig()`). Returns the training record
-    written into OUT/config.json; OUT/model.safetensors holds the weights (`load_segmenter`).
+    `model` is the architecture (default `SegmenterConfig()`; with `init_from`, a segmenter
+    folder whose weights the run starts from, that folder's architecture). Returns the training
+    record written into OUT/config.json; OUT/model.safetensors holds the weights (`load_segmenter`).
     """
     if not data_dirs:
         raise ConfigError("train-segmenter: give at least one --data folder")
@@ -91,11 +93,14 @@ def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConf
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     data = RoomImages(list(data_dirs))
-    model = model or SegmenterConfig()
+    start = None if init_from is None else load_segmenter(Path(init_from))[0]
+    model = start.config if start is not None else model or SegmenterConfig()
     if model.amodal and not data.has_amodal:
         raise ConfigError("train-segmenter: a room of the data has no amodal carcass labels; run "
                           "`nfr-drake label-amodal --data ...` first (or train without the amodal output)")
     net = Segmenter(model)
+    if start is not None:  # a checkpoint of this run, when resumed, replaces these weights
+        net.load_state_dict(start.state_dict())
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
@@ -110,6 +115,7 @@ def train_segmenter(data_dirs: list[Path], out: Path, config: SegmenterTrainConf
     net.train()
     run.train(config.steps, config.checkpoint_every, loss, "train segmenter")
     record = {"data": [str(d) for d in data_dirs], "images": len(data), "train": asdict(config),
-              "command": command, "seconds": run.seconds, "final_loss": float(np.mean(run.losses[-100:]))}
+              "init_from": None if init_from is None else str(init_from), "command": command,
+              "seconds": run.seconds, "final_loss": float(np.mean(run.losses[-100:]))}
     save_segmenter(out, net, record)
     return record
