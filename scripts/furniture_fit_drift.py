@@ -25,7 +25,7 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.inference.fit import observed_rays
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, _mse, _start_codes, fit_furniture
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture, image_mse, start_codes
 from nfr_drake.inference.metrics import keypoint_rmse_cm
 from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
@@ -47,14 +47,14 @@ def main() -> None:
     S = model.config.num_slots
     index = rays.sample(args.rays, 0.5, torch.Generator().manual_seed(0))
     with torch.no_grad():
-        starts = _start_codes(codes, S)
-        mse = torch.cat([_mse(model, starts[j:j + 64], rays, index) for j in range(0, len(starts), 64)])
+        starts = start_codes(codes, S)
+        mse = torch.cat([image_mse(model, starts[j:j + 64], rays, index) for j in range(0, len(starts), 64)])
     rank = int((mse.argsort() == own).nonzero())
     print(f"object {own}: its own code (all shut) ranks {rank + 1} of {len(starts)} starts, image MSE "
           f"{mse[own]:.4f} (best {mse.min():.4f})")
     fit = fit_furniture(model, rays, codes, FurnitureFitConfig(starts=len(codes)))
     with torch.no_grad():
-        fitted_mse = float(_mse(model, fit.z[None], rays, index))
+        fitted_mse = float(image_mse(model, fit.z[None], rays, index))
         z_obj = fit.z[2 * S:]
         between = torch.cdist(codes, codes).fill_diagonal_(float("inf")).min(1).values.median()
     print(f"fit (no handles, every code a start): image MSE {fitted_mse:.4f}; z_obj moved "

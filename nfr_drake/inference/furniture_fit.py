@@ -123,13 +123,13 @@ class HandleTerm:
         return self.weight * torch.log1p(matched / self.scale ** 2).mean(-1)
 
 
-def _mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tensor) -> torch.Tensor:
+def image_mse(model: NFRModel, z: torch.Tensor, rays: ObservedRays, index: torch.Tensor) -> torch.Tensor:
     """Image MSE (B,) of codes z (B, D) on the rays `index`."""
     r, rgb = rays.take(index, z.shape[0])
     return ((model.render(z, r, logits=False).rgb - rgb) ** 2).mean(dim=(1, 2))
 
 
-def _start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:
+def start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:
     """Codes (2 N, D) of z_obj (N, k) with every slot shut, then every slot half open."""
     return torch.cat([torch.cat([slots_q_to_z_art(torch.full((len(z_obj), S), q), S).to(z_obj),
                                  z_obj], -1) for q in (0.0, 0.5)])
@@ -150,19 +150,19 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
         with torch.no_grad():
-            every = _start_codes(codes.to(rays.rgb), S)
+            every = start_codes(codes.to(rays.rgb), S)
             cands = every[term(every).argsort()[:2 * config.starts]]
     else:
         pick = torch.linspace(0, len(codes) - 1, min(config.starts, len(codes))).round().long()
-        cands = _start_codes(codes[pick].to(rays.rgb), S)
+        cands = start_codes(codes[pick].to(rays.rgb), S)
     with torch.no_grad():
         index = rays.sample(config.lookup_rays, config.detail_fraction, generator)
-        loss = _mse(model, cands, rays, index) + term(cands)
+        loss = image_mse(model, cands, rays, index) + term(cands)
     z = cands[loss.argsort()[:config.keep]].clone().requires_grad_(True)
     optimiser = torch.optim.Adam([z], lr=config.lr)
     for _ in range(config.steps):
         index = rays.sample(config.rays_per_step, config.detail_fraction, generator)
-        per_code = _mse(model, z, rays, index)
+        per_code = image_mse(model, z, rays, index)
         total = (per_code.sum() + term(z).sum()
                  + config.latent_weight * latent_loss(split_z(z, S)[1]) * len(z))
         optimiser.zero_grad(set_to_none=True)
