@@ -40,6 +40,8 @@ class PipelineRow:
     fit's confidence (nan without a calibration); refused: the fit was not planned on (`failure`
     says why); planned, grasped and success are then False. pose_error_cm (xy) and
     pose_error_deg (yaw): the estimated object pose's errors (nan when the pose was given).
+    grasp_tries: how many times the fingers closed on the handle (`SimulationConfig.regrasps`; 0
+    when nothing was simulated).
     """
 
     category: str
@@ -63,6 +65,7 @@ class PipelineRow:
     failure: str
     pose_error_cm: float
     pose_error_deg: float
+    grasp_tries: int
 
 
 @dataclass
@@ -124,7 +127,8 @@ def _row(scenario: Scenario) -> PipelineRow:
         planning_seconds=task.planning_seconds if task is not None else 0.0,
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
-        pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"))
+        pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"),
+        grasp_tries=sim.tries if sim else 0)
     if scenario.category == "furniture":
         return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":
@@ -197,6 +201,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           room_loss: Literal["background", "masked"] = "background",
                           mask_crop: bool = True, objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
+                          regrasps: int = SimulationConfig.regrasps,
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
@@ -237,6 +242,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
+        regrasps: how many times the hand tries again, 2 cm further along the approach, after
+            its fingers closed on nothing (`SimulationConfig.regrasps`; 0: one close).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -245,7 +252,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop,
-                    simulation=SimulationConfig(guarded_pull=guarded_pull))
+                    simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps))
     if any(i < 0 for i in objects):
         raise NfrDrakeError(f"--objects: indices must not be negative, got {list(objects)}")
     rows = evaluate_pipeline(base, list(objects) if objects else n, csv_path, part_target=q_target is None)

@@ -44,7 +44,6 @@ from pydrake.multibody.tree import JacobianWrtVariable, JointActuatorIndex, PdCo
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
@@ -149,6 +148,21 @@ class SimulationConfig:
     where it is. Above a moving drawer's resistance (3 N of runner friction, `JOINT_FRICTION`, and
     2 N s/m of damping), under the 80 N a contact grip's friction holds (2 x 40 N squeeze, mu 1)."""
 
+    regrasps: int = 1
+    """How many times the robot tries again when its fingers close on nothing (a gripper senses
+    it from their closed width; here the grip point outside `capture_half_extents` at the close):
+    it opens them (`regrasp_open`), moves the tool `regrasp_step` further along the approach
+    (`regrasp_move`) and closes them again; the rest of the plan follows shifted by that joint
+    step. 0: one close only. The handle of a fit in a room lay 1.6-3.2 cm off, mostly beyond the
+    predicted point along the approach (docs/SIMULATION.md, "Trying again after a miss")."""
+    regrasp_step: float = 0.02
+    """How much further along the approach each new try closes, m: the fingers' pads catch a bar
+    within about 2 cm either side of the tool point along the approach."""
+    regrasp_open: float = 0.3
+    """Time the fingers take to open after a miss, s."""
+    regrasp_move: float = 0.5
+    """Time the tool takes to move `regrasp_step` deeper, s."""
+
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
             raise NfrDrakeError("simulation: grasped_stiffness must lie in (0, 1]")
@@ -164,6 +178,9 @@ class SimulationConfig:
         if self.guarded_pull < 0.0 or self.guarded_pull_speed <= 0.0 or self.guarded_pull_force <= 0.0:
             raise NfrDrakeError("simulation: need guarded_pull >= 0, guarded_pull_speed > 0 and "
                                 "guarded_pull_force > 0")
+        if self.regrasps < 0 or self.regrasp_step <= 0.0 or min(self.regrasp_open, self.regrasp_move) <= 0.0:
+            raise NfrDrakeError("simulation: need regrasps >= 0, and regrasp_step, regrasp_open and "
+                                "regrasp_move > 0")
 
     @property
     def contact(self) -> bool:
@@ -180,6 +197,12 @@ class SimulationConfig:
         (last waypoint q >= 1)."""
         return (not self.contact and self.guarded_pull > 0.0 and plan.waypoints[-1].q >= 1.0
                 and straight_pull(plan, _STOP_LINE) is not None)
+
+    @property
+    def regrasp_time(self) -> float:
+        """The time a missed close adds to the run, s: the close itself (`dwell`), the fingers
+        opening and the tool moving deeper."""
+        return self.dwell + self.regrasp_open + self.regrasp_move
 
     def guarded_pull_time(self) -> float:
         """The longest the guarded pull takes, s: its distance at its speed, the ramp, a settle."""
@@ -234,6 +257,9 @@ class SimulationResult:
     pulled_past: float = float("nan")
     """How far the guarded pull to the stop (`PullToStop`) commanded the tool past the plan's end
     before the force it sensed stopped it, m; nan without one."""
+    tries: int = 1
+    """How many times the fingers closed (1: the first close held the handle or no try was
+    left, `SimulationConfig.regrasps`); `grasp_offset` is the last close's."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -241,7 +267,7 @@ class SimulationResult:
                 f"{joint_error_text(self.joint_type, self.joint_error)}), grasped {self.grasped} (offset "
                 f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
                 f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N, "
-                f"{self.grasp} grasp")
+                f"{self.grasp} grasp, {self.tries} {'close' if self.tries == 1 else 'closes'}")
 
 
 def joint_error_text(joint_type: str, error: float) -> str:
@@ -329,20 +355,26 @@ class CompliantCommand(LeafSystem):
     Input ports: "desired_state" [q_d; v_d] and "measured_state" [q; v] of the robot, each
     2 * num_positions values (arm joints first, then fingers). Output port "command": [q_c; v_c].
     Only the first `num_scaled` joints (the arm) are scaled; the fingers keep their gains.
+    `t_soft` lives in the context (a numeric parameter, `soften_from`): a missed grasp delays it.
     """
 
     def __init__(self, num_positions: int, num_scaled: int, t_soft: float, stiffness: float):
         super().__init__()
-        self._n, self._t_soft = num_positions, t_soft
+        self._n = num_positions
         self._scale = np.ones(num_positions)
         self._scale[:num_scaled] = stiffness
+        self.DeclareNumericParameter(BasicVector([t_soft]))
         self.DeclareVectorInputPort("desired_state", 2 * num_positions)
         self.DeclareVectorInputPort("measured_state", 2 * num_positions)
         self.DeclareVectorOutputPort("command", 2 * num_positions, self._calc_command)
 
+    def soften_from(self, root_context, t_soft: float) -> None:
+        """Scale the gains from time `t_soft` (s) on, in the diagram's context `root_context`."""
+        self.GetMyMutableContextFromRoot(root_context).get_mutable_numeric_parameter(0).SetAtIndex(0, t_soft)
+
     def _calc_command(self, context, output: BasicVector) -> None:
         desired = self.get_input_port(0).Eval(context)
-        if context.get_time() < self._t_soft:
+        if context.get_time() < context.get_numeric_parameter(0).GetAtIndex(0):
             output.SetFromVector(desired)
             return
         measured = self.get_input_port(1).Eval(context)
@@ -475,11 +507,28 @@ def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp:
     step = (min(shortfall, config.second_pull_max) if shortfall >= config.second_pull_min else 0.0) + past
     if step <= 0.0:
         return np.zeros(NUM_ARM_JOINTS), shortfall
-    robot_plant.SetPositions(context, q_command)
-    J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, tool, np.zeros(3),
+    return tool_step(robot_plant, q_command, step * u), shortfall
+
+
+def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """The arm joints' least-squares step (NUM_ARM_JOINTS,) at the robot's positions q (9,) that
+    moves the tool frame's origin by `translation` (W, m, (3,)), the hand's orientation kept; in
+    `robot_plant` (the arm alone, as the controller's)."""
+    context = robot_plant.CreateDefaultContext()
+    robot_plant.SetPositions(context, q)
+    J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot,
+                                                robot_plant.GetFrameByName(TOOL_FRAME), np.zeros(3),
                                                 robot_plant.world_frame(), robot_plant.world_frame())
-    twist = np.r_[np.zeros(3), step * u]
-    return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], twist, rcond=None)[0], shortfall
+    return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], np.r_[np.zeros(3), translation], rcond=None)[0]
+
+
+def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
+    """The arm joints' step (NUM_ARM_JOINTS,) that moves the tool `step` m further along its
+    approach (its z axis) from the robot's positions `q_grasp` (9,), where the fingers missed."""
+    context = robot_plant.CreateDefaultContext()
+    robot_plant.SetPositions(context, q_grasp)
+    approach = robot_plant.GetFrameByName(TOOL_FRAME).CalcPoseInWorld(context).rotation().col(2)
+    return tool_step(robot_plant, q_grasp, step * approach)
 
 
 _GUARD_RAMP = 0.2
@@ -583,31 +632,71 @@ class PullToStop(LeafSystem):
         output.SetFromVector(command)
 
 
-def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0
-                              ) -> PiecewisePolynomial:
+def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0,
+                              misses: int = 0, dq_miss: np.ndarray | None = None) -> PiecewisePolynomial:
     """The plan with a dwell at the grasp and the fingers closing during it, held `hold` s longer
-    at its end; [q; v], 9 + 9 values."""
+    at its end; [q; v], 9 + 9 values. With `misses` > 0 the grasp is first missed that many times:
+    each time the fingers close (`dwell`), open (`regrasp_open`) and the arm moves by the joint
+    step `dq_miss` (NUM_ARM_JOINTS,; `regrasp_step`) over `regrasp_move`; the rest of the plan
+    follows `misses * config.regrasp_time` s later, shifted by `misses * dq_miss`."""
     traj, t_g, dwell = plan.trajectory, plan.t_grasp, config.dwell
+    period, opened = config.regrasp_time, config.dwell + config.regrasp_open
     velocity = traj.MakeDerivative()
-    end = plan.duration + dwell + config.settle + hold
-    times = np.unique(np.r_[np.arange(0.0, end, 0.01), t_g, t_g + dwell, end])
+    t_last = t_g + misses * period  # the close that holds (or the last try)
+    end = plan.duration + dwell + config.settle + hold + misses * period
+    missed = [t_g + j * period + d for j in range(misses) for d in (0.0, dwell, opened)]
+    times = np.unique(np.r_[np.arange(0.0, end, 0.01), missed, t_last, t_last + dwell, end])
+    dq = np.zeros(NUM_ARM_JOINTS) if dq_miss is None else dq_miss
 
     def plan_time(t):
         return t if t <= t_g else max(t_g, t - dwell) if t < t_g + dwell else min(t - dwell, plan.duration)
 
     qs, vs = [], []
     for t in times:
-        tp = plan_time(t)
-        q = traj.value(tp).ravel().copy()
-        v = velocity.value(tp).ravel().copy() if (t <= t_g or t >= t_g + dwell) and tp < plan.duration \
-            else np.zeros_like(q)
-        closing = np.clip((t - t_g) / dwell, 0.0, 1.0)
+        if t_g < t < t_last:  # a missed close, then the move to the next try
+            j, s = divmod(t - t_g, period)
+            a = np.clip((s - opened) / config.regrasp_move, 0.0, 1.0)
+            a_dot = 0.5 * np.pi / config.regrasp_move * np.sin(np.pi * a) if 0.0 < a < 1.0 else 0.0
+            q = traj.value(t_g).ravel().copy()
+            v = np.zeros_like(q)
+            q[:NUM_ARM_JOINTS] += (j + 0.5 - 0.5 * np.cos(np.pi * a)) * dq
+            v[:NUM_ARM_JOINTS] = a_dot * dq
+            closing = min(s / dwell, 1.0) if s <= dwell else max(0.0, 1.0 - (s - dwell) / config.regrasp_open)
+        else:
+            shift = misses * period if t >= t_last else 0.0
+            tp = plan_time(t - shift)
+            q = traj.value(tp).ravel().copy()
+            moving = (t <= t_g or t >= t_last + dwell) and tp < plan.duration
+            v = velocity.value(tp).ravel().copy() if moving else np.zeros_like(q)
+            q[:NUM_ARM_JOINTS] += (misses if t >= t_last else 0) * dq
+            closing = np.clip((t - t_last) / dwell, 0.0, 1.0)
         q[NUM_ARM_JOINTS:] = FINGER_OPEN + closing * (config.finger_closed - FINGER_OPEN)
         v[NUM_ARM_JOINTS:] = 0.0
         qs.append(q)
         vs.append(v)
     qs, vs = np.array(qs).T, np.array(vs).T
     return PiecewisePolynomial.FirstOrderHold(times, np.vstack([qs, vs]))
+
+
+class PlanTries(LeafSystem):
+    """The robot's desired state [q; v] (output port "desired_state") from one of several timelines
+    of the plan, the k-th with k missed closes first (`_desired_state_trajectory`); all agree up to
+    the first close, the k-th and the (k+1)-th up to the (k+1)-th close. Which one lives in the
+    context (a numeric parameter), switched during a run when the fingers miss (`select`)."""
+
+    def __init__(self, timelines: list[PiecewisePolynomial]):
+        super().__init__()
+        self._timelines = timelines
+        self.DeclareNumericParameter(BasicVector([0.0]))
+        self.DeclareVectorOutputPort("desired_state", timelines[0].rows(), self._calc)
+
+    def select(self, root_context, misses: int) -> None:
+        """Follow the timeline with `misses` missed closes from now on."""
+        self.GetMyMutableContextFromRoot(root_context).get_mutable_numeric_parameter(0).SetAtIndex(0, misses)
+
+    def _calc(self, context, output: BasicVector) -> None:
+        timeline = self._timelines[int(context.get_numeric_parameter(0).GetAtIndex(0))]
+        output.SetFromVector(timeline.value(context.get_time()).ravel())
 
 
 def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
@@ -666,8 +755,10 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
     again = config.second_pull_time if config.pulls_again(plan) else 0.0
     to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
-    desired = builder.AddNamedSystem("plan", TrajectorySource(
-        _desired_state_trajectory(plan, fingers, again + to_stop)))
+    dq_miss = regrasp_step(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(), config.regrasp_step)
+    desired = builder.AddNamedSystem("plan", PlanTries(
+        [_desired_state_trajectory(plan, fingers, again + to_stop, misses, dq_miss)
+         for misses in range(config.regrasps + 1)]))
     second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
     builder.Connect(desired.get_output_port(), second_pull.get_input_port(0))
     builder.Connect(plant.get_state_output_port(robot), second_pull.get_input_port(1))
@@ -702,14 +793,25 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     simulator.Initialize()
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
-    t_pulled = plan.duration + config.dwell + config.settle  # the plan's pull has settled
-    end, t_held = t_pulled + again + to_stop, t_pulled + 0.8 * again
-    t_pull = plan.t_grasp + config.dwell  # the fingers are closed; the handle starts to move
+
+    def timeline(misses: int) -> tuple[float, ...]:
+        """The run's times after `misses` missed closes, s: the fingers close (half-way through
+        the dwell), the handle starts to move, the plan's pull has settled, the second pull
+        holds; and the sample times from 0 to the end."""
+        delay = misses * config.regrasp_time
+        t_close, t_pull = plan.t_grasp + delay + 0.5 * config.dwell, plan.t_grasp + delay + config.dwell
+        t_pulled = plan.duration + config.dwell + config.settle + delay
+        end, t_held = t_pulled + again + to_stop, t_pulled + 0.8 * again
+        samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_close, t_pull, t_pulled,
+                                  t_held, end])
+        return t_close, t_pull, t_pulled, t_held, list(samples)
+
+    misses = 0
+    t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
-    samples = np.unique(np.r_[np.arange(0.0, end, config.sample_period), t_activate, t_pull, t_pulled,
-                              t_held, end])
-    for t in samples:
+    while samples:
+        t = samples.pop(0)
         simulator.AdvanceTo(t)
         if t == t_pull:
             q_grasp = plant.GetPositions(plant_context, robot)
@@ -717,8 +819,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
                                          plant.GetPositions(plant_context, robot), config, t)
         if t == t_held and again and grasped:
-            second_pull.hold(context, plant.GetPositions(plant_context, robot),
-                             plan.trajectory.value(plan.trajectory.end_time()).ravel())
+            q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+            q_end[:NUM_ARM_JOINTS] += misses * dq_miss
+            second_pull.hold(context, plant.GetPositions(plant_context, robot), q_end)
         if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop
             line = straight_pull(plan, _STOP_LINE)
             pull_to_stop.start(context, line / np.linalg.norm(line), t, config.guarded_pull,
@@ -728,12 +831,18 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         if not grasped:  # until the grasp: the grip point nearest the tool
             grip = int(np.argmin(np.linalg.norm(grips_B - X_WHb.inverse() @ X_WT.translation(), axis=1)))
         p_WH = X_WHb @ grips_B[grip]
-        if t == t_activate:  # the fingers close once: they hold the handle or miss it
+        if t == t_activate:  # the fingers close: they hold the handle or miss it
             grasp_offset = float(np.linalg.norm(X_WT.translation() - p_WH))
             if np.all(np.abs(X_WT.inverse() @ p_WH) <= config.capture_half_extents):
                 for cid in constraint_ids[grip]:
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
                 grasped = True
+            elif misses < config.regrasps:  # nothing between the fingers: open, deeper, close again
+                misses += 1
+                t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
+                samples = [s for s in samples if s > t]
+                desired.select(context, misses)
+                command.soften_from(context, t_activate)
         times.append(t)
         q_obj.append((joint.GetOnePosition(plant_context) - shut) / span)
         p_tool.append(X_WT.translation())
@@ -761,7 +870,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(q_obj[-1]), float(joint_error), grasp_offset, max_drift,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
                             config.grasp, shortfall,
-                            pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"))
+                            pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
+                            misses + 1)
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

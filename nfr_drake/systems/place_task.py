@@ -174,6 +174,10 @@ class PlaceSimulationResult:
     p_W_item: np.ndarray = field(repr=False)
     shortfall: float = float("nan")
     """The pull's shortfall measured before the second pull (`SimulationResult.shortfall`), m."""
+    tries: int = 1
+    """How many times the fingers closed on the handle (`SimulationResult.tries`): the opening
+    simulated apart from another base tries again after a miss; the run that opens and places
+    from one base closes once."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -443,9 +447,11 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     max_drift = float(np.linalg.norm(np.array(drift) - drift[0], axis=1).max()) if drift else float("nan")
     grasped = bool(held_handle and held_handle[0])
     opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
+    tries = 1
     if opening is not None:
         grasped, q_opened, joint_error = opening.grasped, opening.q_final, opening.joint_error
         max_drift, opened, shortfall = opening.max_drift, opening.success, opening.shortfall
+        tries = opening.tries
     X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
     goal = scene_object.ground_truth.point("goal", q_final)
     item_error = float(np.linalg.norm(X_WI.translation() - goal))
@@ -459,7 +465,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     return PlaceSimulationResult(sim.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
                                  float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
                                  resting, float(q_final), still_open, opened, success, samples,
-                                 np.array(q_object), np.array(p_item), shortfall)
+                                 np.array(q_object), np.array(p_item), shortfall, tries)
 
 
 @dataclass

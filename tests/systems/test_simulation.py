@@ -50,8 +50,33 @@ def test_shift_along_the_bar_is_still_a_grasp(drawer_object):
     ([-0.03, 0.0, 0.0], False),  # deeper: the pull sweeps the gripper over the bar, but the
 ])                               # fingers closed (on nothing) before it
 def test_capture_region_is_the_open_gripper(drawer_object, offset_W, grasped):
-    outcome = run_task(drawer_object, 1.0, keypoints=read_keypoints(drawer_object).shifted(offset_W))
+    outcome = run_task(drawer_object, 1.0, keypoints=read_keypoints(drawer_object).shifted(offset_W),
+                       simulation_config=SimulationConfig(regrasps=0))
     assert outcome.simulation.grasped == grasped, outcome.simulation.summary()
+    assert outcome.simulation.tries == 1
+
+
+def test_a_miss_short_of_the_handle_is_tried_again_deeper_and_opens(drawer_object):
+    """Keypoints 3 cm out of the front: the first close misses, the hand opens, goes 2 cm further
+    along the approach and holds the bar; the drawer opens, the hand having stayed shut on it."""
+    short = read_keypoints(drawer_object).shifted([0.03, 0.0, 0.0])
+    outcome = run_task(drawer_object, 1.0, keypoints=short)
+    sim = outcome.simulation
+    assert outcome.success and sim.grasped, sim.summary()
+    assert sim.tries == 2
+    assert sim.grasp_offset < 0.02  # the second close: 1 cm from the bar
+    # The drawer did not move until the second close held it.
+    t_second = outcome.plan.t_grasp + SimulationConfig().regrasp_time
+    assert np.all(sim.q_object[sim.times < t_second] < 0.01)
+
+
+def test_a_miss_past_the_handle_is_not_caught_by_going_deeper(drawer_object):
+    """Keypoints 3 cm inside the front: the tries go deeper still and every close misses; the run
+    uses them all and reports a miss."""
+    deep = read_keypoints(drawer_object).shifted([-0.03, 0.0, 0.0])
+    outcome = run_task(drawer_object, 1.0, keypoints=deep, simulation_config=SimulationConfig(regrasps=2))
+    assert not outcome.simulation.grasped and not outcome.success
+    assert outcome.simulation.tries == 3
 
 
 def test_grip_points_lie_on_the_bar():
