@@ -12,9 +12,11 @@ grasp is a ball constraint between the tool frame's origin and a grip point of t
 stretch (`SceneObject.grip_half_length`), so grip points are laid along it every `grip_spacing`;
 a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
 the tool origin is switched on through the context, only if it lies inside the open gripper
-(`capture_half_extents`, in the tool frame). `SimulationConfig.grasp = "contact"` instead closes
-the fingers on the handle with a set force and lets friction hold it (compliant hydroelastic pads
-on a rigid hydroelastic handle), the arm stiff throughout, as on a real robot. A drawer's pull
+(`capture_half_extents`, in the tool frame); after a miss the hand opens and tries again
+further along the approach (`SimulationConfig.regrasps`, `PlanTries`).
+`SimulationConfig.grasp = "contact"` instead closes the fingers on the handle with a set force and
+lets friction hold it (compliant hydroelastic pads on a rigid hydroelastic handle), the arm stiff
+throughout, as on a real robot. A drawer's pull
 planned to the end of travel ends at its stop: by contact, a second pull past the planned end
 (`SecondPull`); with the constraint, a guarded pull along the plan's line that stops when the arm
 senses the stop (`PullToStop`).
@@ -80,8 +82,9 @@ class SimulationConfig:
 
     time_step: float = 0.002
     dwell: float = 0.5
-    """Time the hand rests on the handle while the fingers close, s. Half-way the fingers close once:
-    the grasp holds if the grip point is then inside `capture_half_extents`, else it never does."""
+    """Time the hand rests on the handle while the fingers close, s. Half-way the fingers close:
+    the grasp holds if the grip point is then inside `capture_half_extents`, else it is a miss
+    (`regrasps`)."""
     settle: float = 0.5
     """Time after the plan ends before the outcome is measured, s."""
     capture_half_extents: tuple[float, float, float] = (0.02, 0.03, 0.02)
