@@ -79,6 +79,35 @@ def test_a_miss_past_the_handle_is_not_caught_by_going_deeper(drawer_object):
     assert outcome.simulation.tries == 3
 
 
+def test_a_missed_close_delays_the_plan_and_shifts_it_by_the_step():
+    """The timeline after one miss agrees with the first up to the close (half-way through the
+    dwell, where the miss is found), opens the fingers, moves the arm by the step, then runs the
+    rest of the plan shifted by it."""
+    from pydrake.math import BsplineBasis
+    from pydrake.trajectories import BsplineTrajectory
+
+    from nfr_drake.systems.articulation import _desired_state_trajectory
+    from nfr_drake.world.plan import PlanResult
+    from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS
+
+    ends = np.zeros((9, 1)), np.r_[np.linspace(0.1, 0.7, NUM_ARM_JOINTS), FINGER_OPEN, FINGER_OPEN][:, None]
+    line = BsplineTrajectory(BsplineBasis(2, [0.0, 0.0, 4.0, 4.0]), list(ends))
+    plan = PlanResult(line, RigidTransform(), 0.5, [], False)  # the grasp at t = 2 s
+    config, dq = SimulationConfig(), np.full(NUM_ARM_JOINTS, 0.01)
+    once, missed = (_desired_state_trajectory(plan, config, 0.0, misses, dq) for misses in (0, 1))
+    t_g, period = plan.t_grasp, config.regrasp_time
+    assert missed.end_time() == pytest.approx(once.end_time() + period)
+    for t in np.linspace(0.0, t_g + 0.5 * config.dwell, 20):
+        np.testing.assert_allclose(missed.value(t), once.value(t), atol=1e-12)
+    open_again = missed.value(t_g + config.dwell + config.regrasp_open).ravel()
+    np.testing.assert_allclose(open_again[NUM_ARM_JOINTS:9], FINGER_OPEN)
+    np.testing.assert_allclose(open_again[:NUM_ARM_JOINTS], once.value(t_g).ravel()[:NUM_ARM_JOINTS])
+    for t in (t_g + config.dwell, 3.0, once.end_time()):  # the close that holds, the pull, the end
+        shifted = once.value(t).ravel()
+        shifted[:NUM_ARM_JOINTS] += dq
+        np.testing.assert_allclose(missed.value(t + period).ravel(), shifted, atol=1e-9)
+
+
 def test_grip_points_lie_on_the_bar():
     p, bar = np.array([0.1, 0.2, 0.3]), np.array([0.0, 1.0, 0.0])
     points = grip_points(p, bar, 0.04, 0.005)
