@@ -79,7 +79,7 @@ def test_contact_grasp_holds_a_handle_under_the_pull():
     sim = outcome.simulation
     assert sim.success, sim.summary()
     assert sim.max_drift < 0.02 and sim.q_object[-1] > 0.55
-    assert sim.summary().endswith("contact grasp")
+    assert sim.summary().endswith("contact grasp, 1 close")
 
 
 @pytest.mark.parametrize("category,index", [("closet", 5), ("drawer", 17)])
