@@ -41,7 +41,8 @@ class PipelineRow:
     says why); planned, grasped and success are then False. pose_error_cm (xy) and
     pose_error_deg (yaw): the estimated object pose's errors (nan when the pose was given).
     grasp_tries: how many times the fingers closed on the handle (`SimulationConfig.regrasps`; 0
-    when nothing was simulated).
+    when nothing was simulated). q_pulled: the articulation once the planned motion had settled,
+    before a second pull, a door's turn or a guarded pull (nan when nothing was simulated).
     """
 
     category: str
@@ -66,6 +67,7 @@ class PipelineRow:
     pose_error_cm: float
     pose_error_deg: float
     grasp_tries: int
+    q_pulled: float
 
 
 @dataclass
@@ -128,7 +130,7 @@ def _row(scenario: Scenario) -> PipelineRow:
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
         pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"),
-        grasp_tries=sim.tries if sim else 0)
+        grasp_tries=sim.tries if sim else 0, q_pulled=sim.q_pulled if sim else float("nan"))
     if scenario.category == "furniture":
         return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":

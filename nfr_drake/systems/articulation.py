@@ -49,6 +49,7 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_step
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.plan import PlanResult
@@ -151,6 +152,17 @@ class SimulationConfig:
     where it is. Above a moving drawer's resistance (3 N of runner friction, `JOINT_FRICTION`, and
     2 N s/m of damping), under the 80 N a contact grip's friction holds (2 x 40 N squeeze, mu 1)."""
 
+    second_turn: bool = True
+    """A door's pull (a planned handle path that is no line, `straight_pull`): once it has
+    settled, the robot compares the angle its tool swept about the circle through its own path
+    (forward kinematics of its joint positions since the fingers closed) with the angle the plan's
+    handle path sweeps to the target, and turns the door on (or back) by the difference about that
+    circle (`door_turn`, `turn_step`), from where the hand is, when it exceeds `second_turn_min`,
+    at most `second_turn_max`, over `second_pull_time`. With the object's pose a few degrees off,
+    the planned arc is not the door's: the compliant arm follows the true hinge and stops short of
+    or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept")."""
+    second_turn_min: float = float(np.radians(1.0))
+    second_turn_max: float = float(np.radians(25.0))
     regrasps: int = 1
     """How many times the robot tries again when its fingers close on nothing (a gripper senses
     it from their closed width; here the grip point outside `capture_half_extents` at the close):
@@ -193,6 +205,12 @@ class SimulationConfig:
         """Whether the run takes `second_pull_time` after the opening to pull again: a contact
         grasp whose planned handle path is straight (`straight_pull`)."""
         return self.contact and self.second_pull and straight_pull(plan) is not None
+
+    def turns_again(self, plan: PlanResult) -> bool:
+        """Whether the run takes `second_pull_time` after the opening to turn the door on by what
+        its hand swept short (`second_turn`): a plan whose handle path is no line, over 3
+        waypoints."""
+        return self.second_turn and len(plan.waypoints) >= 3 and straight_pull(plan) is None
 
     def pulls_to_stop(self, plan: PlanResult) -> bool:
         """Whether the run ends with a guarded pull to the stop (`PullToStop`): a constraint grasp
@@ -263,6 +281,13 @@ class SimulationResult:
     tries: int = 1
     """How many times the fingers closed (1: the first close held the handle or no try was
     left, `SimulationConfig.regrasps`); `grasp_offset` is the last close's."""
+    turned: float = float("nan")
+    """The angle the robot turned a door on after its planned pull, by what its hand swept short
+    of the plan's arc (`SimulationConfig.second_turn`), rad (negative: back); 0 when within
+    `second_turn_min`; nan when it did not measure (no door, or no grasp)."""
+    q_pulled: float = float("nan")
+    """The articulation (in [0, 1]) once the planned motion had settled, before any second pull,
+    turn or guarded pull."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -513,27 +538,6 @@ def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp:
     return tool_step(robot_plant, q_command, step * u), shortfall
 
 
-def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """The arm joints' least-squares step (NUM_ARM_JOINTS,) at the robot's positions q (9,) that
-    moves the tool frame's origin by `translation` (W, m, (3,)), the hand's orientation kept; in
-    `robot_plant` (the arm alone, as the controller's)."""
-    context = robot_plant.CreateDefaultContext()
-    robot_plant.SetPositions(context, q)
-    J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot,
-                                                robot_plant.GetFrameByName(TOOL_FRAME), np.zeros(3),
-                                                robot_plant.world_frame(), robot_plant.world_frame())
-    return np.linalg.lstsq(J[:, :NUM_ARM_JOINTS], np.r_[np.zeros(3), translation], rcond=None)[0]
-
-
-def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
-    """The arm joints' step (NUM_ARM_JOINTS,) that moves the tool `step` m further along its
-    approach (its z axis) from the robot's positions `q_grasp` (9,), where the fingers missed."""
-    context = robot_plant.CreateDefaultContext()
-    robot_plant.SetPositions(context, q_grasp)
-    approach = robot_plant.GetFrameByName(TOOL_FRAME).CalcPoseInWorld(context).rotation().col(2)
-    return tool_step(robot_plant, q_grasp, step * approach)
-
-
 _GUARD_RAMP = 0.2
 """Time over which the guarded pull's speed ramps in, s."""
 
@@ -756,7 +760,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     controller_plant = add_gravity_compensation(builder, plant, robot, plan.X_WB)  # kept alive here
     add_joint_friction(builder, plant, joint)
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
-    again = config.second_pull_time if config.pulls_again(plan) else 0.0
+    turns = config.turns_again(plan)
+    again = config.second_pull_time if config.pulls_again(plan) or turns else 0.0
     to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
     dq_miss = regrasp_step(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(), config.regrasp_step)
     desired = builder.AddNamedSystem("plan", PlanTries(
@@ -812,18 +817,31 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     misses = 0
     t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
+    turned = q_pulled = float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
     while samples:
         t = samples.pop(0)
         simulator.AdvanceTo(t)
         if t == t_pull:
             q_grasp = plant.GetPositions(plant_context, robot)
-        if t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
+        if t in (t_pulled, t_held):
+            q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+            q_end[:NUM_ARM_JOINTS] += misses * dq_miss  # the plan's last command
+        if t == t_pulled:
+            q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
+        if t == t_pulled and again and grasped and turns:  # the robot measures its turn, turns on
+            felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
+            to_target = 1 + int(np.argmin([abs(w.q - q_target) for w in plan.waypoints]))
+            planned = np.array([w.p_WH for w in plan.waypoints[:to_target]])
+            q_now = plant.GetPositions(plant_context, robot)
+            dq, turned = door_turn_offset(controller_plant, felt, planned, q_now, q_end,
+                                          config.second_turn_min, config.second_turn_max)
+            if turned:
+                second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
+        elif t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
             shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
                                          plant.GetPositions(plant_context, robot), config, t)
         if t == t_held and again and grasped:
-            q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
-            q_end[:NUM_ARM_JOINTS] += misses * dq_miss
             second_pull.hold(context, plant.GetPositions(plant_context, robot), q_end)
         if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop
             line = straight_pull(plan, _STOP_LINE)
@@ -874,7 +892,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
                             config.grasp, shortfall,
                             pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
-                            misses + 1)
+                            misses + 1, turned, q_pulled)
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

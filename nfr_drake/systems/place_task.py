@@ -178,6 +178,9 @@ class PlaceSimulationResult:
     """How many times the fingers closed on the handle (`SimulationResult.tries`): the opening
     simulated apart from another base tries again after a miss; the run that opens and places
     from one base closes once."""
+    q_pulled: float = float("nan")
+    """The articulation once the opening's planned motion had settled (`SimulationResult.q_pulled`;
+    nan for the run that opens and places from one base)."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -447,11 +450,11 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     max_drift = float(np.linalg.norm(np.array(drift) - drift[0], axis=1).max()) if drift else float("nan")
     grasped = bool(held_handle and held_handle[0])
     opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
-    tries = 1
+    tries, q_pulled = 1, float("nan")
     if opening is not None:
         grasped, q_opened, joint_error = opening.grasped, opening.q_final, opening.joint_error
         max_drift, opened, shortfall = opening.max_drift, opening.success, opening.shortfall
-        tries = opening.tries
+        tries, q_pulled = opening.tries, opening.q_pulled
     X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
     goal = scene_object.ground_truth.point("goal", q_final)
     item_error = float(np.linalg.norm(X_WI.translation() - goal))
@@ -465,7 +468,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     return PlaceSimulationResult(sim.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
                                  float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
                                  resting, float(q_final), still_open, opened, success, samples,
-                                 np.array(q_object), np.array(p_item), shortfall, tries)
+                                 np.array(q_object), np.array(p_item), shortfall, tries, q_pulled)
 
 
 @dataclass

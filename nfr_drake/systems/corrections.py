@@ -1,0 +1,96 @@
+"""Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
+a joint step for a tool move, a missed close tried again deeper, a door turned on by the angle
+its swept arc falls short of the plan's (docs/SIMULATION.md). All in the world frame W, metres and
+radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the fingers), steps the 7
+arm joints'."""
+
+import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JacobianWrtVariable
+
+from nfr_drake.world.robot import NUM_ARM_JOINTS, TOOL_FRAME
+
+
+def _tool_pose_and_jacobian(robot_plant: MultibodyPlant, context, q: np.ndarray
+                            ) -> tuple[RigidTransform, np.ndarray]:
+    """The tool frame's pose in W at q and its spatial velocity Jacobian (6, NUM_ARM_JOINTS)."""
+    robot_plant.SetPositions(context, q)
+    tool = robot_plant.GetFrameByName(TOOL_FRAME)
+    J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, tool, np.zeros(3),
+                                                robot_plant.world_frame(), robot_plant.world_frame())
+    return tool.CalcPoseInWorld(context), J[:, :NUM_ARM_JOINTS]
+
+
+def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """The arm joints' least-squares step at q that moves the tool frame's origin by `translation`
+    ((3,), m), the hand's orientation kept (first order); `robot_plant` is the arm alone."""
+    _, J = _tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q)
+    return np.linalg.lstsq(J, np.r_[np.zeros(3), translation], rcond=None)[0]
+
+
+def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
+    """The arm joints' step that moves the tool `step` m further along its approach (its z axis)
+    from `q_grasp`, where the fingers missed."""
+    X_WT, _ = _tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
+    return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
+
+
+def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle from the first
+    point to the last about it (rad, within +-pi), its centre (3,) and unit axis (3,), the angle
+    positive about the axis. Plane by SVD, circle by linear least squares in it."""
+    mean = points.mean(axis=0)
+    e1, e2 = np.linalg.svd(points - mean)[2][:2]
+    axis = np.cross(e1, e2)
+    uv = (points - mean) @ np.c_[e1, e2]
+    centre_uv = np.linalg.lstsq(np.c_[2.0 * uv, np.ones(len(uv))], (uv ** 2).sum(axis=1), rcond=None)[0][:2]
+    a, b = uv[0] - centre_uv, uv[-1] - centre_uv
+    return float(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)), mean + centre_uv @ np.r_[[e1], [e2]], axis
+
+
+def door_turn(tool_path: np.ndarray, planned_path: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """How much further to turn a door, rad: the angle the plan's handle path `planned_path` (M, 3)
+    sweeps less the angle the tool swept (`tool_path`, (N, 3), from its joint positions) about the
+    circle through its path; with that circle's centre and axis (the door's hinge as the hand felt
+    it; the axis turned to agree with the plan's)."""
+    planned, _, planned_axis = arc_angle(planned_path)
+    swept, centre, axis = arc_angle(tool_path)
+    if axis @ planned_axis < 0.0:
+        swept, axis = -swept, -axis
+    return planned - swept, centre, axis
+
+
+def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, axis: np.ndarray,
+              angle: float, iterations: int = 8) -> np.ndarray:
+    """The arm joints' step from q that turns the tool frame by `angle` (rad) about the line through
+    `centre` along unit `axis` (a door's hinge, carrying the hand on the handle), by Gauss-Newton
+    on the tool's pose."""
+    context = robot_plant.CreateDefaultContext()
+    X_WT, _ = _tool_pose_and_jacobian(robot_plant, context, q)
+    turn = RotationMatrix(AngleAxis(angle, axis / np.linalg.norm(axis)))
+    goal = RigidTransform(turn @ X_WT.rotation(), centre + turn @ (X_WT.translation() - centre))
+    q_now = q.copy()
+    for _ in range(iterations):
+        X_WT, J = _tool_pose_and_jacobian(robot_plant, context, q_now)
+        rotation = (goal.rotation() @ X_WT.rotation().inverse()).ToAngleAxis()
+        error = np.r_[rotation.angle() * rotation.axis(), goal.translation() - X_WT.translation()]
+        q_now[:NUM_ARM_JOINTS] += np.linalg.lstsq(J, error, rcond=None)[0]
+    return (q_now - q)[:NUM_ARM_JOINTS]
+
+
+def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, planned_path: np.ndarray,
+                     q_now: np.ndarray, q_command: np.ndarray, smallest: float, largest: float
+                     ) -> tuple[np.ndarray, float]:
+    """The offset to add to the arm's command `q_command` (the plan's last) that turns the hand,
+    now at `q_now` (measured), on about the door's felt hinge by `door_turn`'s angle clipped to
+    +-`largest` (rad), and that angle; no offset and 0 when it is under `smallest` or either path
+    has under 3 points."""
+    if len(tool_path) < 3 or len(planned_path) < 3:
+        return np.zeros(NUM_ARM_JOINTS), 0.0
+    angle, centre, axis = door_turn(tool_path, planned_path)
+    if abs(angle) < smallest:
+        return np.zeros(NUM_ARM_JOINTS), 0.0
+    angle = float(np.clip(angle, -largest, largest))
+    return (q_now - q_command)[:NUM_ARM_JOINTS] + turn_step(robot_plant, q_now, centre, axis, angle), angle
