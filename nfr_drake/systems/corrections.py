@@ -51,15 +51,20 @@ def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def door_turn(tool_path: np.ndarray, planned_path: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """How much further to turn a door, rad: the angle the plan's handle path `planned_path` (M, 3)
-    sweeps less the angle the tool swept (`tool_path`, (N, 3), from its joint positions) about the
-    circle through its path; with that circle's centre and axis (the door's hinge as the hand felt
-    it; the axis turned to agree with the plan's)."""
-    planned, _, planned_axis = arc_angle(planned_path)
+    """How much further to turn a door, rad: the length of the plan's handle path `planned_path`
+    (M, 3) less the length the tool swept (`tool_path`, (N, 3), from its joint positions), both
+    along their fitted circles, over the radius of the tool's circle; with that circle's centre
+    and axis (the door's hinge as the hand felt it; the axis turned to agree with the plan's). The
+    lengths, not the angles: a fitted hinge a few cm off changes the planned arc's radius and angle
+    but hardly the handle's travel (closet 12 of seed 200 in a room: planned 42.4 degrees on a
+    0.42 m radius, swept 49.9 on 0.36 m, both 0.31 m)."""
+    planned, planned_centre, planned_axis = arc_angle(planned_path)
     swept, centre, axis = arc_angle(tool_path)
     if axis @ planned_axis < 0.0:
         swept, axis = -swept, -axis
-    return planned - swept, centre, axis
+    radius = float(np.linalg.norm(tool_path - centre, axis=1).mean())
+    planned_radius = float(np.linalg.norm(planned_path - planned_centre, axis=1).mean())
+    return planned * planned_radius / radius - swept, centre, axis
 
 
 def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, axis: np.ndarray,
