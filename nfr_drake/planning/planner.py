@@ -113,6 +113,11 @@ class PlannerConfig:
     about 35 degrees the Panda hand's 0.2 m wide palm would touch a door 3 cm behind the bar."""
     min_distance: float = 0.01
     """Clearance between the robot and the floor / carcass box (and itself), m."""
+    tight_min_distance: float = 0.005
+    """The clearance tried when nothing plans at `min_distance`, m: a bar 7-9 cm above the floor,
+    held 1.5 cm deep by contact, leaves the hand's 0.2 m wide palm under 1 cm from the floor
+    (docs/PLANNING.md, "A tighter clearance when nothing plans"). At or above `min_distance`: no
+    second try."""
     collision_samples: int = 24
     num_control_points: int = 22
     velocity_scale: float = 0.5
@@ -510,9 +515,25 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
     the constraints that failed.
     """
     config = config or PlannerConfig()
-    t0, cpu0 = time.perf_counter(), time.process_time()
     if not 0.0 <= q_target <= 1.0:
         raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")
+    try:
+        return _plan(kt, q_target, q_start, config, obstacles, must_reach)
+    except PlanningError as err:
+        if config.tight_min_distance >= config.min_distance:
+            raise
+        try:
+            return _plan(kt, q_target, q_start, replace(config, min_distance=config.tight_min_distance),
+                         obstacles, must_reach)
+        except PlanningError as tight:
+            raise PlanningError(f"{err}; with {100 * config.tight_min_distance:.1f} cm of clearance: "
+                                f"{str(tight).split(': ', 1)[1]}") from None
+
+
+def _plan(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray, config: PlannerConfig,
+          obstacles: list[ObstacleBox] | None, must_reach: np.ndarray | None) -> PlanResult:
+    """`plan_articulation` at `config`'s clearance."""
+    t0, cpu0 = time.perf_counter(), time.process_time()
     q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
     waypoints = handle_waypoints(kt, q_values)
     if q_target == 1.0 and kt.q_current < 1.0 and config.end_stop_overshoot > 0.0:
