@@ -1,11 +1,13 @@
 """The planner, from ground-truth keypoint trajectories only."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.grasp import handle_tangent, handle_waypoints
+from nfr_drake.planning.grasp import carcass_box, handle_tangent, handle_waypoints
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.planning.scene import build_planning_scene
 from nfr_drake.systems.scene_objects import sampled_part
@@ -84,6 +86,23 @@ def test_a_contact_grasp_plan_holds_the_handle_along_its_path():
         held.append(waypoint.X_WG(plan.flip).rotation().inverse() @ X_WT.rotation())
     turns = [np.degrees((held[0].inverse() @ R).ToAngleAxis().angle()) for R in held]
     assert max(turns) < 2 * config.rigid_tolerance_deg + 1.0, turns  # the grasp's and each knot's tolerance
+
+
+def test_a_low_bar_held_deep_plans_at_the_tighter_clearance():
+    """A drawer bar 8.3 cm above the floor, held 1.5 cm deep by contact: no grasp keeps the palm 1 cm
+    from the floor; the second try, at 0.5 cm, plans it, and its grasp holds that clearance."""
+    obj, _, scene_object = sampled_part("drawer", 7, 8, RigidTransform())
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    config = grasp_planner(PlannerConfig(), "contact")
+    assert scene_object.obstacles is None  # a sampled drawer: the keypoints' carcass box
+    with pytest.raises(PlanningError, match="IK of grasp"):
+        plan_articulation(kt, 1.0, config=replace(config, tight_min_distance=config.min_distance))
+    plan = plan_articulation(kt, 1.0, config=config)
+    scene = build_planning_scene(plan.X_WB, [carcass_box(kt)])
+    scene.plant.SetPositions(scene.plant_context, plan.trajectory.value(plan.t_grasp).ravel())
+    query = scene.plant.get_geometry_query_input_port().Eval(scene.plant_context)
+    nearest = min(p.distance for p in query.ComputeSignedDistancePairwiseClosestPoints(0.05))
+    assert config.tight_min_distance - 1e-3 <= nearest < config.min_distance
 
 
 @pytest.mark.slow
