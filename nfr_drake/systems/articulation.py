@@ -52,6 +52,7 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_step
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.plan import PlanResult
 from nfr_drake.world.robot import (
     FINGER_JOINTS,
@@ -156,8 +157,9 @@ class SimulationConfig:
     """A door's pull (a planned handle path that is no line, `straight_pull`): once it has
     settled, the robot compares the angle its tool swept about the circle through its own path
     (forward kinematics of its joint positions since the fingers closed) with the angle the plan's
-    handle path sweeps to the target, and turns the door on (or back) by the difference about that
-    circle (`door_turn`, `turn_step`), from where the hand is, when it exceeds `second_turn_min`,
+    keypoints turn the handle by about their hinge to the target (`planned_door_turn`), and turns
+    the door on (or back) by the difference about that circle (`door_turn`, `turn_step`), from
+    where the hand is, when it exceeds `second_turn_min`,
     at most `second_turn_max`, over `second_pull_time`. With the object's pose a few degrees off,
     the planned arc is not the door's: the compliant arm follows the true hinge and stops short of
     or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept")."""
@@ -206,11 +208,12 @@ class SimulationConfig:
         grasp whose planned handle path is straight (`straight_pull`)."""
         return self.contact and self.second_pull and straight_pull(plan) is not None
 
-    def turns_again(self, plan: PlanResult) -> bool:
+    def turns_again(self, plan: PlanResult, keypoints: KeypointTrajectory | None) -> bool:
         """Whether the run takes `second_pull_time` after the opening to turn the door on by what
-        its hand swept short (`second_turn`): a plan whose handle path is no line, over 3
-        waypoints."""
-        return self.second_turn and len(plan.waypoints) >= 3 and straight_pull(plan) is None
+        its hand swept short (`second_turn`): a plan whose handle path is no line, made from
+        `keypoints` with a hinge."""
+        return (self.second_turn and keypoints is not None and "hinge_top" in keypoints.names
+                and straight_pull(plan) is None)
 
     def pulls_to_stop(self, plan: PlanResult) -> bool:
         """Whether the run ends with a guarded pull to the stop (`PullToStop`): a constraint grasp
@@ -707,9 +710,11 @@ class PlanTries(LeafSystem):
 
 
 def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
-                          meshcat: Meshcat | None = None,
-                          config: SimulationConfig | None = None) -> SimulationResult:
-    """Run the plan on the true object and measure the outcome; records into `meshcat` if given."""
+                          meshcat: Meshcat | None = None, config: SimulationConfig | None = None,
+                          keypoints: KeypointTrajectory | None = None) -> SimulationResult:
+    """Run the plan on the true object and measure the outcome; records into `meshcat` if given.
+    `keypoints`: those the plan was made from (a door's turn by what the hand swept compares with
+    their hinge's turn, `SimulationConfig.second_turn`; None: no turn)."""
     config = config or SimulationConfig()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
@@ -760,7 +765,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     controller_plant = add_gravity_compensation(builder, plant, robot, plan.X_WB)  # kept alive here
     add_joint_friction(builder, plant, joint)
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
-    turns = config.turns_again(plan)
+    turns = config.turns_again(plan, keypoints)
     again = config.second_pull_time if config.pulls_again(plan) or turns else 0.0
     to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
     dq_miss = regrasp_step(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(), config.regrasp_step)
@@ -831,10 +836,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
         if t == t_pulled and again and grasped and turns:  # the robot measures its turn, turns on
             felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
-            to_target = 1 + int(np.argmin([abs(w.q - q_target) for w in plan.waypoints]))
-            planned = np.array([w.p_WH for w in plan.waypoints[:to_target]])
             q_now = plant.GetPositions(plant_context, robot)
-            dq, turned = door_turn_offset(controller_plant, felt, planned, q_now, q_end,
+            dq, turned = door_turn_offset(controller_plant, felt, keypoints, q_target, q_now, q_end,
                                           config.second_turn_min, config.second_turn_max)
             if turned:
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)

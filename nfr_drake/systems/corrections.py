@@ -1,7 +1,7 @@
 """Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
 a joint step for a tool move, a missed close tried again deeper, a door turned on by the angle
-its swept arc falls short of the plan's (docs/SIMULATION.md). All in the world frame W, metres and
-radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the fingers), steps the 7
+its hand swept short of the keypoints' turn (docs/SIMULATION.md). All in the world frame W,
+metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the fingers), steps the 7
 arm joints'."""
 
 import numpy as np
@@ -10,6 +10,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 
+from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.robot import NUM_ARM_JOINTS, TOOL_FRAME
 
 
@@ -50,20 +51,28 @@ def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     return float(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)), mean + centre_uv @ np.r_[[e1], [e2]], axis
 
 
-def door_turn(tool_path: np.ndarray, planned_path: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """How much further to turn a door, rad: the length of the plan's handle path `planned_path`
-    (M, 3) less the length the tool swept (`tool_path`, (N, 3), from its joint positions), both
-    along their fitted circles, over the radius of the tool's circle; with that circle's centre
-    and axis (the door's hinge as the hand felt it; the axis turned to agree with the plan's). The
-    lengths, not the angles: a fitted hinge a few cm off changes the planned arc's radius and so
-    its angle, but hardly the handle's travel."""
-    planned, planned_centre, planned_axis = arc_angle(planned_path)
+def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[float, np.ndarray]:
+    """The angle a door's keypoints turn the handle by from their present articulation to
+    `q_target`, about their hinge (rad, signed about the returned unit axis, hinge_bottom to
+    hinge_top at the present articulation). About the hinge, not about a circle through the handle's
+    path: a fitted path's curvature can be off where its ends are right."""
+    bottom, top = (keypoints.point(name, keypoints.q_current) for name in ("hinge_bottom", "hinge_top"))
+    axis = (top - bottom) / np.linalg.norm(top - bottom)
+    a, b = ((p - bottom) - ((p - bottom) @ axis) * axis
+            for p in (keypoints.point("handle", q) for q in (keypoints.q_current, q_target)))
+    return float(np.arctan2(np.cross(a, b) @ axis, a @ b)), axis
+
+
+def door_turn(tool_path: np.ndarray, planned: float, planned_axis: np.ndarray
+              ) -> tuple[float, np.ndarray, np.ndarray]:
+    """How much further to turn a door, rad: the `planned` turn (rad about `planned_axis`,
+    `planned_door_turn`) less the angle the tool swept (`tool_path`, (N, 3), from its joint
+    positions) about the circle through its path; with that circle's centre and axis (the door's
+    hinge as the hand felt it, turned to agree with the plan's)."""
     swept, centre, axis = arc_angle(tool_path)
     if axis @ planned_axis < 0.0:
         swept, axis = -swept, -axis
-    radius = float(np.linalg.norm(tool_path - centre, axis=1).mean())
-    planned_radius = float(np.linalg.norm(planned_path - planned_centre, axis=1).mean())
-    return planned * planned_radius / radius - swept, centre, axis
+    return planned - swept, centre, axis
 
 
 def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, axis: np.ndarray,
@@ -84,16 +93,16 @@ def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, ax
     return (q_now - q)[:NUM_ARM_JOINTS]
 
 
-def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, planned_path: np.ndarray,
-                     q_now: np.ndarray, q_command: np.ndarray, smallest: float, largest: float
-                     ) -> tuple[np.ndarray, float]:
+def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, keypoints: KeypointTrajectory,
+                     q_target: float, q_now: np.ndarray, q_command: np.ndarray, smallest: float,
+                     largest: float) -> tuple[np.ndarray, float]:
     """The offset to add to the arm's command `q_command` (the plan's last) that turns the hand,
-    now at `q_now` (measured), on about the door's felt hinge by `door_turn`'s angle clipped to
-    +-`largest` (rad), and that angle; no offset and 0 when it is under `smallest` or either path
-    has under 3 points."""
-    if len(tool_path) < 3 or len(planned_path) < 3:
+    now at `q_now` (measured), on about the door's felt hinge by `door_turn`'s angle for the turn
+    `keypoints` plan to `q_target`, clipped to +-`largest` (rad), and that angle; no offset and 0
+    when it is under `smallest` or the tool's path has under 3 points."""
+    if len(tool_path) < 3:
         return np.zeros(NUM_ARM_JOINTS), 0.0
-    angle, centre, axis = door_turn(tool_path, planned_path)
+    angle, centre, axis = door_turn(tool_path, *planned_door_turn(keypoints, q_target))
     if abs(angle) < smallest:
         return np.zeros(NUM_ARM_JOINTS), 0.0
     angle = float(np.clip(angle, -largest, largest))

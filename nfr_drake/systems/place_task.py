@@ -619,7 +619,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
             return failed("; ".join([*errors, f"base moved after the opening: {err}"]))
         seconds = time.perf_counter() - started
         scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
-        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening)
+        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening,
+                                        kt)
         if replay is not None:
             write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
         q_door = measured_articulation(kt, opening)

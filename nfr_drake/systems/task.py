@@ -96,7 +96,8 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         meshcat = Meshcat()
     if meshcat is not None:
         _show_plan(meshcat, kt, plan, q_target, obstacles, reference)
-    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig())
+    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig(),
+                                       keypoints=kt)
     path = write_replay(meshcat, replay) if replay is not None else None
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)
 
