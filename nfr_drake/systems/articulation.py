@@ -42,14 +42,14 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import JacobianWrtVariable, JointActuatorIndex, PdControllerGains
+from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_step
+from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_pose_and_jacobian, tool_step
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -575,7 +575,6 @@ class PullToStop(LeafSystem):
         super().__init__()
         self._plant, self._context = robot_plant, robot_plant.CreateDefaultContext()
         self._n, self._period = robot_plant.num_positions(), period
-        self._tool = robot_plant.GetFrameByName(TOOL_FRAME)
         self._compliance = 1.0 / (stiffness * _KP[:NUM_ARM_JOINTS])  # rad / N m, per joint
         # [u (3), t_start, distance, speed, force, active]
         self.DeclareNumericParameter(BasicVector(np.r_[1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0]))
@@ -600,11 +599,8 @@ class PullToStop(LeafSystem):
 
     def _tool_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The tool's position in W (3,) and spatial velocity Jacobian (6, NUM_ARM_JOINTS) at q."""
-        self._plant.SetPositions(self._context, q)
-        J = self._plant.CalcJacobianSpatialVelocity(self._context, JacobianWrtVariable.kQDot, self._tool,
-                                                    np.zeros(3), self._plant.world_frame(),
-                                                    self._plant.world_frame())
-        return self._tool.CalcPoseInWorld(self._context).translation(), J[:, :NUM_ARM_JOINTS]
+        X_WT, J = tool_pose_and_jacobian(self._plant, self._context, q)
+        return X_WT.translation(), J
 
     def _update(self, context, state) -> None:
         settings = context.get_numeric_parameter(0).get_value()

@@ -1,8 +1,8 @@
 """Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
 a joint step for a tool move, a missed close tried again deeper, a door turned on by the angle
 its hand swept short of the keypoints' turn (docs/SIMULATION.md). All in the world frame W,
-metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the fingers), steps the 7
-arm joints'."""
+metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the
+fingers), steps the 7 arm joints'."""
 
 import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
@@ -14,9 +14,10 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.robot import NUM_ARM_JOINTS, TOOL_FRAME
 
 
-def _tool_pose_and_jacobian(robot_plant: MultibodyPlant, context, q: np.ndarray
+def tool_pose_and_jacobian(robot_plant: MultibodyPlant, context, q: np.ndarray
                             ) -> tuple[RigidTransform, np.ndarray]:
-    """The tool frame's pose in W at q and its spatial velocity Jacobian (6, NUM_ARM_JOINTS)."""
+    """The tool frame's pose in W at q and its spatial velocity Jacobian (6, NUM_ARM_JOINTS), in
+    `robot_plant` (the arm alone) at its `context`."""
     robot_plant.SetPositions(context, q)
     tool = robot_plant.GetFrameByName(TOOL_FRAME)
     J = robot_plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, tool, np.zeros(3),
@@ -27,14 +28,14 @@ def _tool_pose_and_jacobian(robot_plant: MultibodyPlant, context, q: np.ndarray
 def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
     """The arm joints' least-squares step at q that moves the tool frame's origin by `translation`
     ((3,), m), the hand's orientation kept (first order); `robot_plant` is the arm alone."""
-    _, J = _tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q)
+    _, J = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q)
     return np.linalg.lstsq(J, np.r_[np.zeros(3), translation], rcond=None)[0]
 
 
 def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
     """The arm joints' step that moves the tool `step` m further along its approach (its z axis)
     from `q_grasp`, where the fingers missed."""
-    X_WT, _ = _tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
+    X_WT, _ = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
     return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
 
 
@@ -81,12 +82,12 @@ def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, ax
     `centre` along unit `axis` (a door's hinge, carrying the hand on the handle), by Gauss-Newton
     on the tool's pose."""
     context = robot_plant.CreateDefaultContext()
-    X_WT, _ = _tool_pose_and_jacobian(robot_plant, context, q)
+    X_WT, _ = tool_pose_and_jacobian(robot_plant, context, q)
     turn = RotationMatrix(AngleAxis(angle, axis / np.linalg.norm(axis)))
     goal = RigidTransform(turn @ X_WT.rotation(), centre + turn @ (X_WT.translation() - centre))
     q_now = q.copy()
     for _ in range(iterations):
-        X_WT, J = _tool_pose_and_jacobian(robot_plant, context, q_now)
+        X_WT, J = tool_pose_and_jacobian(robot_plant, context, q_now)
         rotation = (goal.rotation() @ X_WT.rotation().inverse()).ToAngleAxis()
         error = np.r_[rotation.angle() * rotation.axis(), goal.translation() - X_WT.translation()]
         q_now[:NUM_ARM_JOINTS] += np.linalg.lstsq(J, error, rcond=None)[0]
