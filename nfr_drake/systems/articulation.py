@@ -286,7 +286,8 @@ class SimulationResult:
     left, `SimulationConfig.regrasps`); `grasp_offset` is the last close's."""
     turned: float = float("nan")
     """The angle the robot turned a door on after its planned pull, by what its hand swept short
-    of the plan's arc (`SimulationConfig.second_turn`), rad (negative: back); 0 when within
+    of the keypoints' turn about their hinge (`SimulationConfig.second_turn`), rad (negative:
+    back); 0 when within
     `second_turn_min`; nan when it did not measure (no door, or no grasp)."""
     q_pulled: float = float("nan")
     """The articulation (in [0, 1]) once the planned motion had settled, before any second pull,
