@@ -14,6 +14,11 @@ import os
 import pytest
 
 os.environ.setdefault("DRAKE_ALLOW_NETWORK", "meshcat")
+# oneDNN's AVX2 kernels crash torch's convolution backward on some virtual CPUs (segmentation
+# fault, bus error or a hang in the baseline's training test on the project's AMD EPYC machine;
+# README, "Troubleshooting"); the SSE4.1 ones do not. Set before
+# torch is imported; a value set outside wins.
+os.environ.setdefault("ONEDNN_MAX_CPU_ISA", "SSE41")
 
 
 @pytest.fixture(scope="module")
