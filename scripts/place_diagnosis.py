@@ -98,11 +98,11 @@ def carry(index: int) -> None:
     held = scenario.sample_item()
     planned = {}
 
-    def stop(obj_, X_WO, q_door, q_target, open_plan, place, *rest, **kwargs):
-        planned.update(place=place, q_door=q_door)
+    def stop(obj_, X_WO, opening, place, *rest, **kwargs):
+        planned.update(place=place, q_door=opening.q_final)
         raise StopIteration
 
-    place_task.simulate_open_and_place = stop
+    place_task.simulate_place = stop
     try:
         outcome = place_task.run_place_task(obj, scenario.X_WO, 0.0, 0.6, held, simulation_config=CONTACT)
         print(outcome.planning_error)

@@ -292,6 +292,8 @@ class SimulationResult:
     q_pulled: float = float("nan")
     """The articulation (in [0, 1]) once the planned motion had settled, before any second pull,
     turn or guarded pull."""
+    q_robot: np.ndarray = field(default_factory=lambda: np.full(9, np.nan), repr=False)
+    """The robot's positions at the end (arm joints, then fingers; rad, m), (9,)."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -892,7 +894,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
                             config.grasp, shortfall,
                             pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
-                            misses + 1, turned, q_pulled)
+                            misses + 1, turned, q_pulled, plant.GetPositions(plant_context, robot))
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

@@ -1,11 +1,13 @@
 """Open, then place: the paper's last step (its Fig. 1e), planned and simulated on the true object.
 
 The scene: the object, the arm where the opening plan put its base, a small table beside the
-arm (`table_beside`) with an item on it (`nfr_drake.world.items`). Where the base moves between
-the opening and the place (`MOVE_BASE`: closets), the opening is simulated first
-(`simulate_articulation`) and the place from the second base in a second simulation that starts
-with the front where the opening left it; the base's drive between the two (the hand letting go,
-the arm tucking in) is not simulated, and the table stands beside the second base.
+arm (`table_beside`) with an item on it (`nfr_drake.world.items`). The opening is simulated
+first (`simulate_articulation`, with its second close, second pull and door turn), then the place
+(`simulate_place`) in a second simulation that starts with the front where the opening left it,
+at rest: from the same base with the arm where the opening left it, its fingers on the handle,
+or (`MOVE_BASE`: closets) from a second base with the arm at the place's first posture; the
+base's drive between the two (the hand letting go, the arm tucking in) is not simulated, and the
+table stands beside the place's base.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import BasicVector, DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -47,15 +49,12 @@ from nfr_drake.planning.place import (
 )
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.systems.articulation import (
-    CompliantCommand,
     SecondPull,
     SimulationConfig,
     SimulationResult,
-    _desired_state_trajectory,
     add_gravity_compensation,
     add_joint_friction,
     couple_fingers,
-    grip_points,
     hydroelastic_grip,
     joint_error_text,
     rigid_hydroelastic,
@@ -125,7 +124,7 @@ def table_beside(X_WB: RigidTransform, obstacles: list[ObstacleBox], reach: floa
 
 @dataclass
 class PlaceSimulationConfig:
-    """Options of `simulate_open_and_place`; `opening` are those of the opening's simulation
+    """Options of `simulate_place`; `opening` are those of the opening's simulation
     (`SimulationConfig`: time step, dwell, grasp capture, tolerances, and the grasp: "constraint",
     the hand holding the handle with a ball constraint and the item with a weld, switched on when
     the fingers close on them, or "contact", the fingers squeezing and friction holding)."""
@@ -145,7 +144,7 @@ class PlaceSimulationConfig:
 
 @dataclass
 class PlaceSimulationResult:
-    """What the simulated arm did. The opening (attributes as `SimulationResult`'s): grasped (the
+    """What the simulated arm did. The opening (from its `SimulationResult`): grasped (the
     handle), q_opened (articulation in [0, 1] when the opening ends), joint_error there (rad or
     m), max_drift (largest move of the held grip point in the tool frame while pulling, m). The
     place: picked (the item left the table in the hand), item_error (its bottom centre to the
@@ -175,12 +174,9 @@ class PlaceSimulationResult:
     shortfall: float = float("nan")
     """The pull's shortfall measured before the second pull (`SimulationResult.shortfall`), m."""
     tries: int = 1
-    """How many times the fingers closed on the handle (`SimulationResult.tries`): the opening
-    simulated apart from another base tries again after a miss; the run that opens and places
-    from one base closes once."""
+    """How many times the fingers closed on the handle (`SimulationResult.tries`)."""
     q_pulled: float = float("nan")
-    """The articulation once the opening's planned motion had settled (`SimulationResult.q_pulled`;
-    nan for the run that opens and places from one base)."""
+    """The articulation once the opening's planned motion had settled (`SimulationResult.q_pulled`)."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -192,30 +188,11 @@ class PlaceSimulationResult:
                 f"(articulation {self.q_final:.3f})")
 
 
-class _Stiffening(CompliantCommand):
-    """`CompliantCommand` whose gains come back in full at `t_stiff` (the handle let go)."""
-
-    def __init__(self, num_positions: int, num_scaled: int, t_soft: float, t_stiff: float, stiffness: float):
-        super().__init__(num_positions, num_scaled, t_soft, stiffness)
-        self._t_stiff = t_stiff
-
-    def _calc_command(self, context, output: BasicVector) -> None:
-        if context.get_time() >= self._t_stiff:
-            output.SetFromVector(self.get_input_port(0).Eval(context))
-            return
-        super()._calc_command(context, output)
-
-
 @dataclass
 class _Timeline:
-    """Times of the combined run, s: the opening's (grasp switched on, pull from, the planned
-    pull settled, end: after the second pull, `SimulationConfig.second_pull`), the item's grasp
-    (switched on) and release, the end; the hand's backing off the handle (from, duration)."""
+    """Times of the place's run, s: the item's grasp (switched on) and release, the end; the
+    hand's backing off (from, duration: the first piece of the segment to the item)."""
 
-    t_activate: float
-    t_pull: float
-    t_pulled: float
-    t_opened: float
     t_item: float
     t_item_release: float
     t_end: float
@@ -223,51 +200,33 @@ class _Timeline:
     back_duration: float
 
 
-def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSimulationConfig,
-                    finger_closed: float, item_half_width: float, finger_item: float, again: float = 0.0
-                    ) -> tuple[PiecewisePolynomial, _Timeline]:
-    """[q; v] of the robot (9 + 9) over the whole run: the opening as `simulate_articulation`
-    plays it (none when `open_plan` is None: the arm starts at the place's first positions, the
-    fingers open, and the timeline's opening times are -1), `again` s held on the handle (the
-    second pull's time, `SecondPull` adds its motion), the fingers opening, the segments with
-    the fingers closing on the item after the first (to its sides in 70% of the dwell, then to
-    `finger_item`: a contact grasp does not hit it) and opening after the second, the settling
-    time."""
-    if open_plan is None:
-        start = np.r_[place.segments[0].value(0.0), np.zeros(NUM_ARM_JOINTS + 2)]
-        opening = PiecewisePolynomial.ZeroOrderHold([0.0, 1.0], np.column_stack([start, start]))
-        t_o, finger_closed = 0.0, FINGER_OPEN
-    else:
-        opening = _desired_state_trajectory(open_plan, replace(cfg.opening, finger_closed=finger_closed))
-        t_o = opening.end_time()
+def _desired_states(place: PlacePlan, cfg: PlaceSimulationConfig, finger_start: float,
+                    item_half_width: float, finger_item: float) -> tuple[PiecewisePolynomial, _Timeline]:
+    """[q; v] of the robot (9 + 9) over the place's run: the arm at the place's first positions
+    while the fingers open from `finger_start` (`release`), the segments with the fingers closing
+    on the item after the first (to its sides in 70% of the dwell, then to `finger_item`: a
+    contact grasp does not hit it) and opening after the second, the settling time."""
     to_pick, carry, retreat = place.segments
-    t1 = t_o + again + cfg.release
+    t1 = cfg.release
     t2 = t1 + to_pick.duration
     t3 = t2 + cfg.pick_dwell
     t4 = t3 + carry.duration
     t5 = t4 + cfg.release
     t6 = t5 + retreat.duration
     end = t6 + cfg.settle
-    dt = 0.01
-    times = np.unique(np.r_[np.arange(t_o, end, dt), t1, t2, t3, t4, t5, t6, end])
-    q_end_open = opening.value(t_o).ravel()[:9]
+    times = np.unique(np.r_[np.arange(0.0, end, 0.01), t1, t2, t3, t4, t5, t6, end])
 
     def arm(t: float) -> np.ndarray:
-        for start, seg in ((t1, to_pick), (t3, carry), (t5, retreat)):
-            if t < start:
-                break
-            last = (start, seg)
-        else:
-            last = (t5, retreat)
         if t < t1:
-            return q_end_open
-        start, seg = last
+            return to_pick.value(0.0)
+        start, seg = max(((s, g) for s, g in ((t1, to_pick), (t3, carry), (t5, retreat)) if s <= t),
+                         key=lambda pair: pair[0])
         return seg.value(min(t - start, seg.duration))
 
     def fingers(t: float) -> float:
         ramp = lambda a, b, t0, d: a + np.clip((t - t0) / d, 0.0, 1.0) * (b - a)  # noqa: E731
         if t < t2:
-            return ramp(finger_closed, FINGER_OPEN, t_o + again, cfg.release)
+            return ramp(finger_start, FINGER_OPEN, 0.0, cfg.release)
         if t < t2 + 0.7 * cfg.pick_dwell:
             return ramp(FINGER_OPEN, item_half_width, t2, 0.7 * cfg.pick_dwell)
         if t < t4:
@@ -278,17 +237,9 @@ def _desired_states(open_plan: PlanResult | None, place: PlacePlan, cfg: PlaceSi
     v = np.gradient(q, times, axis=0)
     q[:, NUM_ARM_JOINTS:] = np.array([fingers(t) for t in times])[:, None]
     v[:, NUM_ARM_JOINTS:] = 0.0
-    head_t = np.array(opening.get_segment_times())
-    head_t = head_t[head_t < t_o]
-    head = np.array([opening.value(t).ravel() for t in head_t]).reshape(len(head_t), 2 * len(q[0]))
-    knots = np.r_[head_t, times]
-    values = np.vstack([head, np.hstack([q, v])]).T
-    t_g = -1.0 if open_plan is None else open_plan.t_grasp
-    opened = (-1.0, -1.0, -1.0, -1.0) if open_plan is None else (
-        t_g + 0.5 * cfg.opening.dwell, t_g + cfg.opening.dwell, t_o, t_o + again)
     back = float(to_pick.pieces[0].end_time() - to_pick.pieces[0].start_time())
-    timeline = _Timeline(*opened, t2 + 0.5 * cfg.pick_dwell, t4, end, t1, back)
-    return PiecewisePolynomial.FirstOrderHold(knots, values), timeline
+    timeline = _Timeline(t2 + 0.5 * cfg.pick_dwell, t4, end, t1, back)
+    return PiecewisePolynomial.FirstOrderHold(times, np.hstack([q, v]).T), timeline
 
 
 def _interior(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> tuple[RigidTransform, np.ndarray]:
@@ -305,19 +256,20 @@ def _interior(obj: ArticulatedObject, X_WO: RigidTransform, q: float) -> tuple[R
     return X_WO @ RigidTransform(centre), np.array(half)
 
 
-def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float,
-                            open_plan: PlanResult | None, place: PlacePlan, item: Item, table: ObstacleBox,
-                            meshcat: Meshcat | None = None, config: PlaceSimulationConfig | None = None,
-                            opening: SimulationResult | None = None) -> PlaceSimulationResult:
-    """Open front 0 of `obj` (at X_WO, shut at q_start) with `open_plan`, then pick `item` from
-    `table` and place it with `place`, in one SAP simulation; records into `meshcat` if given.
-    With `open_plan` None the opening was simulated before (`opening`, its outcome) from another
-    base: the run starts with the front at q_start and the arm on the place's base (`place.X_WB`)."""
+def simulate_place(obj: ArticulatedObject, X_WO: RigidTransform, opening: SimulationResult, place: PlacePlan,
+                   item: Item, table: ObstacleBox, arm_start: np.ndarray | None = None,
+                   meshcat: Meshcat | None = None, config: PlaceSimulationConfig | None = None
+                   ) -> PlaceSimulationResult:
+    """After `opening` (the simulated opening of front 0 of `obj` at X_WO), pick `item` from
+    `table` and place it with `place`, in a SAP simulation that starts with the front where the
+    opening left it (`opening.q_final`); records into `meshcat` if given. `arm_start`: the
+    robot's positions (9,) where the opening ended, its base being the place's (the hand lets go
+    of the handle and backs off from where it is, `SimulationResult.q_robot`); None: the base
+    moved, the arm starts at the place's first positions with the fingers open."""
     cfg = config or PlaceSimulationConfig()
     sim = cfg.opening
-    X_WB = place.X_WB if open_plan is None else open_plan.X_WB
-    contact = sim.contact
-    scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
+    X_WB = place.X_WB
+    scene_object = SceneObject.from_articulated_object(obj, X_WO, opening.q_final)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=sim.time_step, discrete_contact_approximation="sap"), builder)
@@ -334,7 +286,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     plant.RegisterVisualGeometry(world, table.X_WB, shape, "table", np.array([0.55, 0.4, 0.3, 1.0]))
     item_body = item.add_to(plant)  # compliant hydroelastic; the object rigid, to rest on
     object_bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
-    if contact:
+    if sim.contact:
         hydroelastic_grip(plant, scene_graph, [plant.GetBodyByName(name, robot) for name in HAND_BODIES[1:]],
                           object_bodies)
     else:
@@ -342,19 +294,13 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     set_arm_gains(plant, robot)
     couple_fingers(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
-    handle_body = plant.GetBodyByName(scene_object.handle_body_name, model)
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
-    bar_B = scene_object.bar_B / np.linalg.norm(scene_object.bar_B)
-    grips_B = grip_points(scene_object.p_BH, bar_B, scene_object.grip_half_length, sim.grip_spacing)
-    handle_ids, item_id = [], None
-    if not contact:
-        handle_ids = [plant.AddBallConstraint(hand, X_HT.translation(), handle_body, p_BG)
-                      for p_BG in grips_B]
-        item_id = plant.AddWeldConstraint(hand, X_HT @ place.X_GI, item_body, RigidTransform())
+    item_id = None if sim.contact else plant.AddWeldConstraint(hand, X_HT @ place.X_GI, item_body,
+                                                               RigidTransform())
     plant.Finalize()
 
     joint = plant.GetJointByName(scene_object.joint_name, model)
-    if not contact:  # the constraints are the grasps
+    if not sim.contact:  # the constraints are the grasps: the hand does not touch what it holds
         hand_bodies = [plant.GetBodyByName(name, robot) for name in HAND_BODIES]
         moving = [plant.get_body(b) for b in plant.GetBodiesKinematicallyAffectedBy([joint.index()])]
         hand_set, held = (GeometrySet([g for b in bodies for g in plant.GetCollisionGeometriesForBody(b)])
@@ -362,78 +308,51 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeBetween(hand_set, held))
 
-    controller_plant = add_gravity_compensation(builder, plant, robot, X_WB)  # kept alive here
+    _controller_plant = add_gravity_compensation(builder, plant, robot, X_WB)  # held while the run lasts
     add_joint_friction(builder, plant, joint)
-    again = sim.second_pull_time if open_plan is not None and sim.pulls_again(open_plan) else 0.0
-    desired, times = _desired_states(open_plan, place, cfg, sim.finger_target(sim.finger_closed),
-                                     item.width / 2, sim.finger_target(item.width / 2), again)
+    finger_start = FINGER_OPEN if arm_start is None else sim.finger_target(sim.finger_closed)
+    desired, times = _desired_states(place, cfg, finger_start, item.width / 2,
+                                     sim.finger_target(item.width / 2))
     source = builder.AddNamedSystem("plan", TrajectorySource(desired))
-    second_pull = builder.AddNamedSystem("second_pull", SecondPull(plant.num_positions(robot)))
-    builder.Connect(source.get_output_port(), second_pull.get_input_port(0))
-    builder.Connect(plant.get_state_output_port(robot), second_pull.get_input_port(1))
-    command = builder.AddNamedSystem("compliance", _Stiffening(
-        plant.num_positions(robot), NUM_ARM_JOINTS, times.t_activate, times.t_opened,
-        1.0 if contact else sim.grasped_stiffness))
-    builder.Connect(second_pull.get_output_port(), command.get_input_port(0))
-    builder.Connect(plant.get_state_output_port(robot), command.get_input_port(1))
-    builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(robot))
+    let_go = builder.AddNamedSystem("let_go", SecondPull(plant.num_positions(robot)))
+    builder.Connect(source.get_output_port(), let_go.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(robot), let_go.get_input_port(1))
+    builder.Connect(let_go.get_output_port(), plant.get_desired_state_input_port(robot))
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     diagram = builder.Build()
 
     simulator = Simulator(diagram)
-    ctx = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
-    lower = joint.position_lower_limits()[0]
-    span = joint.position_upper_limits()[0] - lower
-    set_joint_value(plant, ctx, joint, lower + q_start * span)
-    plant.SetPositions(ctx, robot, desired.value(0.0).ravel()[:plant.num_positions(robot)])
+    root = simulator.get_mutable_context()
+    ctx = plant.GetMyMutableContextFromRoot(root)
+    lower, opened = scene_object.shut_and_open(joint)
+    span = opened - lower
+    set_joint_value(plant, ctx, joint, lower + opening.q_final * span)
+    q_place = desired.value(0.0).ravel()[:plant.num_positions(robot)]
+    plant.SetPositions(ctx, robot, q_place if arm_start is None else arm_start)
+    if arm_start is not None:  # held where the opening left it, the offset fading as the hand backs off
+        let_go.set(root, (arm_start - q_place)[:NUM_ARM_JOINTS], -1.0, 1e-3, times.t_back,
+                   times.back_duration)
     plant.SetFreeBodyPose(ctx, item_body, place.X_WI_pick)
-    for cid in [*handle_ids, *([item_id] if item_id is not None else [])]:
-        plant.SetConstraintActiveStatus(ctx, cid, False)
+    if item_id is not None:
+        plant.SetConstraintActiveStatus(ctx, item_id, False)
     if meshcat is not None:
         meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=False)
     simulator.Initialize()
 
     tool = plant.GetFrameByName(TOOL_FRAME, robot)
-    samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_activate,
-                              times.t_pull, times.t_pulled, times.t_pulled + 0.8 * again, times.t_opened,
-                              times.t_item,
+    samples = np.unique(np.r_[np.arange(0.0, times.t_end, sim.sample_period), times.t_item,
                               times.t_item_release, times.t_end])
-    samples = samples[samples >= 0.0]
-    grip, held_handle, drift, p_item, q_object, q_opened, lifted = 0, [], [], [], [], float("nan"), 0.0
-    shortfall = float("nan")
+    p_item, q_object, lifted = [], [], 0.0
     for t in samples:
         simulator.AdvanceTo(t)
-        X_WT = tool.CalcPoseInWorld(ctx)
-        X_WH = plant.EvalBodyPoseInWorld(ctx, handle_body)
-        if t <= times.t_activate:
-            grip = int(np.argmin(np.linalg.norm(grips_B - X_WH.inverse() @ X_WT.translation(), axis=1)))
-        p_grip = X_WH @ grips_B[grip]
-        if t == times.t_pull:
-            q_grasp = plant.GetPositions(ctx, robot)
-        if t == times.t_pulled and again and held_handle[0]:  # the robot measures its pull, pulls again
-            shortfall = second_pull.pull(simulator.get_mutable_context(), controller_plant, open_plan,
-                                         q_grasp, plant.GetPositions(ctx, robot), sim, t, times.t_back,
-                                         times.back_duration)  # and lets it go as it backs off
-        if t == times.t_pulled + 0.8 * again and again and held_handle[0]:
-            second_pull.hold(simulator.get_mutable_context(), plant.GetPositions(ctx, robot),
-                             open_plan.trajectory.value(open_plan.trajectory.end_time()).ravel())
-        if t == times.t_activate:  # the fingers have closed on the handle
-            held_handle = [bool(np.all(np.abs(X_WT.inverse() @ p_grip) <= sim.capture_half_extents))]
-            if held_handle[0] and not contact:
-                plant.SetConstraintActiveStatus(ctx, handle_ids[grip], True)
-        if times.t_pull <= t <= times.t_opened:
-            drift.append(X_WT.inverse() @ p_grip)
-        if t == times.t_opened:
-            q_opened = (joint.GetOnePosition(ctx) - lower) / span
-            if not contact and held_handle[0]:
-                plant.SetConstraintActiveStatus(ctx, handle_ids[grip], False)
         X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
-        if t == times.t_item and not contact:
+        if t == times.t_item and item_id is not None:
+            X_WT = tool.CalcPoseInWorld(ctx)
             offset = np.linalg.norm((X_WT.inverse() @ X_WI).translation() - place.X_GI.translation())
             if offset <= np.linalg.norm(sim.capture_half_extents):
                 plant.SetConstraintActiveStatus(ctx, item_id, True)
-        if t == times.t_item_release and not contact:
+        if t == times.t_item_release and item_id is not None:
             plant.SetConstraintActiveStatus(ctx, item_id, False)
         if times.t_item < t <= times.t_item_release:
             lifted = max(lifted, X_WI.translation()[2] - place.X_WI_pick.translation()[2])
@@ -445,16 +364,7 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
 
     revolute = joint.type_name() == "revolute"
     tolerance = sim.revolute_tolerance if revolute else sim.prismatic_tolerance
-    q_final = (joint.GetOnePosition(ctx) - lower) / span
-    joint_error = abs(q_opened - q_target) * span
-    max_drift = float(np.linalg.norm(np.array(drift) - drift[0], axis=1).max()) if drift else float("nan")
-    grasped = bool(held_handle and held_handle[0])
-    opened = grasped and joint_error <= tolerance and max_drift <= sim.drift_tolerance
-    tries, q_pulled = 1, float("nan")
-    if opening is not None:
-        grasped, q_opened, joint_error = opening.grasped, opening.q_final, opening.joint_error
-        max_drift, opened, shortfall = opening.max_drift, opening.success, opening.shortfall
-        tries, q_pulled = opening.tries, opening.q_pulled
+    q_final = q_object[-1]
     X_WI = plant.EvalBodyPoseInWorld(ctx, item_body)
     goal = scene_object.ground_truth.point("goal", q_final)
     item_error = float(np.linalg.norm(X_WI.translation() - goal))
@@ -462,13 +372,15 @@ def simulate_open_and_place(obj: ArticulatedObject, X_WO: RigidTransform, q_star
     inside = bool(np.all(np.abs(X_WC.inverse() @ (X_WI @ [0.0, 0.0, item.height / 2])) <= half))
     resting = float(np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(ctx, item_body).translational())) \
         < cfg.rest_speed
-    still_open = abs(q_final - q_target) * span <= tolerance
+    still_open = abs(q_final - opening.q_target) * abs(span) <= tolerance
     picked = lifted >= 0.5 * PlaceConfig().lift_height
-    success = opened and picked and inside and resting and still_open and item_error <= cfg.place_tolerance
-    return PlaceSimulationResult(sim.grasp, "revolute" if revolute else "prismatic", q_target, grasped,
-                                 float(q_opened), float(joint_error), max_drift, picked, item_error, inside,
-                                 resting, float(q_final), still_open, opened, success, samples,
-                                 np.array(q_object), np.array(p_item), shortfall, tries, q_pulled)
+    success = opening.success and picked and inside and resting and still_open \
+        and item_error <= cfg.place_tolerance
+    return PlaceSimulationResult(sim.grasp, opening.joint_type, opening.q_target, opening.grasped,
+                                 opening.q_final, opening.joint_error, opening.max_drift, picked,
+                                 item_error, inside, resting, float(q_final), still_open, opening.success,
+                                 success, samples, np.array(q_object), np.array(p_item), opening.shortfall,
+                                 opening.tries, opening.q_pulled)
 
 
 @dataclass
@@ -583,14 +495,15 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     """Open front 0 of `obj` (a closet or a drawer at X_WO, at q_start) to q_target and place
     `item` (standing on a table beside the robot) at the goal keypoint, planned with `keypoints`
     (default: the object's own, with its true geometry as obstacles; given keypoints are planned
-    with keypoint-derived boxes only), then simulated on the true object. A drawer's place is
-    planned from the opening's base (`_one_base`). A closet's (or a drawer's where no one base
+    with keypoint-derived boxes only), then simulated on the true object: the opening
+    (`simulate_articulation`), then the place (`simulate_place`). A drawer's place is planned
+    with its opening, from one base (`_one_base`). A closet's (or a drawer's where no one base
     serves both) from a base re-placed after the opening (`MOVE_BASE`): the opening is planned
     and simulated first, then the place planned around the front where the opening left it
     (`measured_articulation`, `door_band`; with given keypoints, a closet's shelf over the goal
-    where a look inside sees it, `look_inside`) and simulated from there. `replay`: an HTML replay of
-    the run (with a moved base, of the place; the opening's beside it, `*_opening.html`), with the
-    keypoint paths used (and `reference`'s under "keypoints_true")."""
+    where a look inside sees it, `look_inside`). `replay`: an HTML replay of the place, with the
+    keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside it
+    (`*_opening.html`)."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
@@ -603,7 +516,7 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
     failed = lambda why, seconds=float("nan"): PlaceTaskOutcome(  # noqa: E731
         q_target, kt, None, None, why, seconds, None, None)
-    errors, plan, opening = [], None, None
+    errors, plan = [], None
     if not MOVE_BASE[kt.category]:
         try:
             plan, place, table = _one_base(kt, q_target, item, obstacles, config, place_config)
@@ -611,18 +524,18 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
             errors.append(str(err))
             plan = None
     moved = plan is None
-    meshcats = [Meshcat() if replay is not None else None for _ in range(1 + moved)]
     if moved:
         try:
             plan = plan_articulation(kt, q_target, config=config)
         except PlanningError as err:
             return failed("; ".join([*errors, f"base moved after the opening: {err}"]))
-        seconds = time.perf_counter() - started
-        scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
-        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening,
-                                        kt)
-        if replay is not None:
-            write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+    seconds = time.perf_counter() - started
+    meshcats = [Meshcat() if replay is not None else None for _ in range(2)]
+    scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
+    opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening, kt)
+    if replay is not None:
+        write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+    if moved:
         q_door = measured_articulation(kt, opening)
         if keypoints is not None and kt.category == "closet":  # look in for the shelf over the goal
             free = look_inside(obj, X_WO, opening.q_final, kt, q_door)
@@ -635,8 +548,6 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
             return failed("; ".join([*errors, f"base moved after the opening (front measured at "
                                      f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned)
         seconds += time.perf_counter() - planned
-    else:
-        seconds = time.perf_counter() - started
     for meshcat in meshcats[:1] if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
         if reference is not None:
@@ -650,8 +561,7 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         away[2] = 0.0
         side = np.cross([0.0, 0.0, 1.0], away / np.linalg.norm(away))
         frame_camera(meshcat, centre, centre + 0.6 * away + 1.2 * side + [0.0, 0.0, 0.9])
-    simulation = simulate_open_and_place(obj, X_WO, opening.q_final if moved else q_start, q_target,
-                                         None if moved else plan, place, item, table, meshcats[0],
-                                         simulation_config, opening)
+    simulation = simulate_place(obj, X_WO, opening, place, item, table, None if moved else opening.q_robot,
+                                meshcats[0], simulation_config)
     path = write_replay(meshcats[0], replay) if replay is not None else None
     return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path)
