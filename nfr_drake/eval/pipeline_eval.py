@@ -231,7 +231,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             are counted as refused, apart from the failures.
         task: "open", or "open-and-place" (then pick an item from a table beside the robot and
             place it at the goal keypoint; the CSV gets the place's columns, `PlaceRow`).
-        grasp: open-and-place: "constraint" or "contact" (`Scenario.grasp`).
+        grasp: how the hand holds the handle (and the item): "constraint" or "contact"
+            (`Scenario.grasp`).
         object_pose: "given" (the true pose, the paper's setting) or "estimated" from the views
             (cameras around a coarse look; `Scenario.object_pose`); the CSV holds its errors.
         perceive: what the cameras see: the object "alone" (the paper's setting) or in a "room"

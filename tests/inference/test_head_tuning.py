@@ -81,6 +81,7 @@ def test_bad_options_and_too_few_captures(model_folder, fitted_run, tmp_path):
         tune_head(FittedModel(model_folder), dirs[:5], root / "run", HeadTuningConfig())
 
 
+@pytest.mark.slow
 def test_a_slot_model_learns_every_parts_keypoints_where_gt_names_them(furniture_model_folder, tmp_path):
     captures_command("furniture", n=10, out=tmp_path / "caps", views=2, size=16, seed=7)
     dirs = fit_captures(furniture_model_folder, tmp_path / "caps", tmp_path / "run")

@@ -24,8 +24,9 @@ from nfr_drake.world.obstacles import distance_to_box
 from nfr_drake.world.plan import ObstacleBox
 
 
-@pytest.mark.parametrize("category,seed,q_target,reach", [("closet", 0, 0.6, 0.7),
-                                                           ("drawer", 3, 1.0, PLACE_REACH["drawer"][1])])
+@pytest.mark.parametrize("category,seed,q_target,reach", [
+    pytest.param("closet", 0, 0.6, 0.7, marks=pytest.mark.slow),
+    ("drawer", 3, 1.0, PLACE_REACH["drawer"][1])])
 def test_place_plan_ends_at_the_goal(category, seed, q_target, reach):
     """The planned item, where the hand lets go, stands upright within 3 cm of the goal keypoint
     (kinematically: the tool's pose at the end of the carry times the grasp), and every segment

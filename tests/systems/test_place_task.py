@@ -30,7 +30,7 @@ from nfr_drake.world.items import Item, sample_item
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 
-@pytest.mark.parametrize("grasp", ["constraint", "contact"])
+@pytest.mark.parametrize("grasp", ["constraint", pytest.param("contact", marks=pytest.mark.slow)])
 def test_open_and_place_a_drawer(tmp_path, grasp):
     """A drawer opened and an item from the table placed in it from one base, with either grasp
     (by contact: the pads squeeze the handle, then the item, friction holds them): it rests
