@@ -82,12 +82,14 @@ class PartRow(PipelineRow):
 @dataclass
 class PlaceRow(PipelineRow):
     """One object's open-and-place run: `PipelineRow`'s columns (those of the opening; success is
-    the whole task's) and the place's: the grasp simulated, the item ("kind WxDxH cm"), whether it
-    was picked, its distance to the true goal (cm), inside the compartment, and the front still
-    open at the end."""
+    the whole task's) and the place's: the grasp simulated, the item ("kind WxDxH cm"), whether
+    the opening succeeded (as `task open` judges it; also where the place then found no plan),
+    whether the item was picked, its distance to the true goal (cm), inside the compartment, and
+    the front still open at the end."""
 
     grasp: str
     item: str
+    opened: bool
     picked: bool
     item_error_cm: float
     inside: bool
@@ -136,7 +138,9 @@ def _row(scenario: Scenario) -> PipelineRow:
     if scenario.task == "open":
         return row
     item = scenario.sample_item()
-    return PlaceRow(**asdict(row), grasp=scenario.grasp, item=str(item), picked=bool(sim and sim.picked),
+    opened = task is not None and task.opening is not None and task.opening.success
+    return PlaceRow(**asdict(row), grasp=scenario.grasp, item=str(item), opened=opened,
+                    picked=bool(sim and sim.picked),
                     item_error_cm=float(100 * sim.item_error) if sim else float("nan"),
                     inside=bool(sim and sim.inside), still_open=bool(sim and sim.still_open))
 
@@ -321,10 +325,12 @@ def part_summary(rows: list[dict]) -> str:
 
 
 def place_summary(rows: list[dict]) -> str:
-    """One line on the place of open-and-place CSV rows (`PlaceRow`): items picked, inside the
-    compartment, the median distance to the goal of those placed, fronts still open."""
-    count = lambda key: sum(r[key] == "True" for r in rows)  # noqa: E731
+    """One line on the place of open-and-place CSV rows (`PlaceRow`): fronts opened (rows that have
+    the column), items picked, inside the compartment, the median distance to the goal of those
+    placed, fronts still open."""
+    count = lambda key: sum(r.get(key) == "True" for r in rows)  # noqa: E731
     errors = [float(r["item_error_cm"]) for r in rows if r["inside"] == "True"]
     median = f"{np.median(errors):.1f} cm" if errors else "n/a"
-    return (f"place: {count('picked')}/{len(rows)} items picked, {count('inside')} inside (median "
+    opened = f"{count('opened')} opened, " if rows and "opened" in rows[0] else ""
+    return (f"place: {opened}{count('picked')}/{len(rows)} items picked, {count('inside')} inside (median "
             f"{median} from the goal), {count('still_open')} fronts still open")

@@ -387,7 +387,8 @@ def simulate_place(obj: ArticulatedObject, X_WO: RigidTransform, opening: Simula
 class PlaceTaskOutcome:
     """Result of `run_place_task`: the opening plan and the place plan (None where planning
     failed, `planning_error` then says why), their planning time (s), the simulation (None
-    without both plans), the replay's path."""
+    without both plans), the replay's path, and the opening's simulation (where it ran: also when
+    the place, planned after it from a moved base, then found no plan)."""
 
     q_target: float
     keypoints: KeypointTrajectory
@@ -397,6 +398,7 @@ class PlaceTaskOutcome:
     planning_seconds: float
     simulation: PlaceSimulationResult | None
     replay: Path | None
+    opening: SimulationResult | None = None
 
     @property
     def success(self) -> bool:
@@ -514,8 +516,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
-    failed = lambda why, seconds=float("nan"): PlaceTaskOutcome(  # noqa: E731
-        q_target, kt, None, None, why, seconds, None, None)
+    failed = lambda why, seconds=float("nan"), opening=None: PlaceTaskOutcome(  # noqa: E731
+        q_target, kt, None, None, why, seconds, None, None, opening)
     errors, plan = [], None
     if not MOVE_BASE[kt.category]:
         try:
@@ -546,7 +548,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
             place, table = _place_in_front(kt, q_door, item, obstacles, place_config)
         except PlanningError as err:
             return failed("; ".join([*errors, f"base moved after the opening (front measured at "
-                                     f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned)
+                                     f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned,
+                          opening)
         seconds += time.perf_counter() - planned
     for meshcat in meshcats[:1] if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
@@ -564,4 +567,4 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     simulation = simulate_place(obj, X_WO, opening, place, item, table, None if moved else opening.q_robot,
                                 meshcats[0], simulation_config)
     path = write_replay(meshcats[0], replay) if replay is not None else None
-    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path)
+    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path, opening)

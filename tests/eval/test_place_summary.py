@@ -11,3 +11,5 @@ def test_place_rows_extend_the_pipeline_rows_and_are_summarised():
             dict(picked="False", inside="False", item_error_cm="nan", still_open="True")]
     assert place_summary(rows) == ("place: 2/3 items picked, 2 inside (median 1.2 cm from the goal), "
                                    "2 fronts still open")
+    opened = [dict(row, opened=state) for row, state in zip(rows, ("True", "True", "False"), strict=True)]
+    assert place_summary(opened).startswith("place: 2 opened, 2/3 items picked")
