@@ -179,14 +179,15 @@ def run_pipeline_room_case(case: Case, fit: FitConfig) -> dict:
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start, part=part)
     line = {**asdict(case), "key": case.key, "category": category, "model_category": category}
     try:
-        predicted, seconds, confidence, X_WO = perceive_scene(scenario, obj)
+        perceived = perceive_scene(scenario, obj)
     except ObjectPoseError as err:
         return {**line, "handle_error_m": None, "failure": f"{type(err).__name__}: {err}"}
+    predicted, confidence = perceived.trajectory, perceived.confidence
     error = np.linalg.norm(predicted.point("handle", predicted.q_current)
                            - truth.point("handle", truth.q_current))
     return {**line, "q": predicted.q_current, "q_true": scenario.q_start,
-            "handle_error_m": float(error), "X_WO": X_WO.GetAsMatrix4().tolist(),
-            "features": confidence["features"], "seconds": seconds}
+            "handle_error_m": float(error), "X_WO": perceived.X_WO.GetAsMatrix4().tolist(),
+            "features": confidence["features"], "seconds": perceived.seconds}
 
 
 def run_case(case: Case, fitted: FittedModel, fit: FitConfig) -> dict:

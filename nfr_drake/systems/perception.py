@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import torch
 from pydrake.common.value import Value
 from pydrake.geometry import (
     ClippingRange,
@@ -52,6 +53,7 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, drake_camera_info
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.forward import semantic_point_cloud
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
     FittedModel,
@@ -71,6 +73,7 @@ from nfr_drake.perception.object_pose import (
 )
 from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
+from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 PERCEPTION_RENDERER = "nfr_perception"
@@ -98,6 +101,7 @@ class NfrPerceptionSystem(LeafSystem):
         - fit_result
         - confidence
         - X_WO
+        - semantic_cloud
 
     camera_i_rgb: ImageRgba8U of camera i (intrinsics `cameras[i]`, pose `X_WCs[i]`).
     keypoint_trajectory: abstract `KeypointTrajectory` in W over [0, 1], q_current = the estimate.
@@ -107,6 +111,9 @@ class NfrPerceptionSystem(LeafSystem):
     features, per_view}; p None when the model folder has no calibration; furniture: of the part
     asked for), or None.
     X_WO: abstract `RigidTransform`, the object's pose in W: the given one, or the estimate.
+    semantic_cloud: abstract `SemanticCloud`, the fitted field's labelled surface points in W at
+    the fitted q, rendered from the cameras at `cloud_size` pixels high (computed when first
+    asked for; None for a model with several parts).
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
     `mask_crop`, those of its second look at the crop around the object's box in each view,
@@ -136,7 +143,7 @@ class NfrPerceptionSystem(LeafSystem):
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
                  segmenter: Segmenter | None = None, part: int | None = None,
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
-                 room_loss: RoomLoss = "background", mask_crop: bool = True):
+                 room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -152,6 +159,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
+        self._cloud_size = cloud_size
         self.fit_count = 0
         self._image_ports = [
             self.DeclareAbstractInputPort(f"camera_{i}_rgb", Value(ImageRgba8U()))
@@ -175,6 +183,9 @@ class NfrPerceptionSystem(LeafSystem):
             prerequisites_of_calc=ticket)
         self._X_WO_port = self.DeclareAbstractOutputPort(
             "X_WO", lambda: Value[object](None), self._CalcX_WO, prerequisites_of_calc=ticket)
+        self._cloud_port = self.DeclareAbstractOutputPort(
+            "semantic_cloud", lambda: Value[object](None), self._CalcSemanticCloud,
+            prerequisites_of_calc=ticket)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._Fit)
 
     def get_camera_rgb_input_port(self, i: int):
@@ -191,6 +202,9 @@ class NfrPerceptionSystem(LeafSystem):
 
     def get_confidence_output_port(self):
         return self._confidence_port
+
+    def get_semantic_cloud_output_port(self):
+        return self._cloud_port
 
     def get_X_WO_output_port(self):
         return self._X_WO_port
@@ -319,6 +333,20 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _CalcX_WO(self, context, output) -> None:
         output.set_value(self._stored(context)[1])
+
+    def _CalcSemanticCloud(self, context, output) -> None:
+        result, X_WO = self._stored(context)
+        if self._model.num_slots > 1 or result.z is None:
+            output.set_value(None)
+            return
+        X_OW = X_WO.inverse()
+        size = self._cloud_size
+        views = [(camera.scaled(max(1, round(camera.width * size / camera.height)), size),
+                  (X_OW @ X_WC).GetAsMatrix4())
+                 for camera, X_WC in zip(self._cameras, self._X_WCs, strict=True)]
+        z = torch.as_tensor(np.asarray(result.z))
+        points_O, classes = semantic_point_cloud(self._model.model, z, result.q, views)
+        output.set_value(SemanticCloud(X_WO.multiply(points_O.T.astype(float)).T, classes, result.q))
 
 
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:

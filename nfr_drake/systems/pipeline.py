@@ -39,6 +39,7 @@ from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import TaskOutcome, run_task
+from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 _ROOM_STREAM = 203  # the perception room's stream (the cameras use 7, the coarse look 20, the item 23)
@@ -102,26 +103,41 @@ def perceive(scenario: Scenario, obj: ArticulatedObject) -> tuple[KeypointTrajec
 def perceive_with_confidence(scenario: Scenario, obj: ArticulatedObject
                              ) -> tuple[KeypointTrajectory, float, dict | None]:
     """`perceive`, and the fit's confidence (the perception system's "confidence" port)."""
-    trajectory, seconds, confidence, _ = perceive_scene(scenario, obj)
-    return trajectory, seconds, confidence
+    perceived = perceive_scene(scenario, obj)
+    return perceived.trajectory, perceived.seconds, perceived.confidence
 
 
-def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None = None
-                   ) -> tuple[KeypointTrajectory, float, dict | None, RigidTransform]:
-    """`perceive_with_confidence`, and the object's pose the keypoints were placed with (the
-    "X_WO" port: the scenario's, or the estimate with `Scenario.object_pose` "estimated", the
-    cameras then around `Scenario.coarse_look`). With `Scenario.perceive` "room" the cameras see
-    the object in `perception_room`. A piece of furniture is framed as its captures are (its
-    bounds over every articulation in view, `CameraDistribution` "bounds") and the trajectory is
-    that of its part `part` (the perception system's `part`)."""
+@dataclass
+class Perceived:
+    """What `perceive_scene` returns: the keypoint trajectory in W, the fit's wall time (s), its
+    confidence (the "confidence" port), the object's pose the keypoints were placed with (the
+    "X_WO" port), and the fitted field's labelled points in W (the "semantic_cloud" port; None
+    unless asked for)."""
+
+    trajectory: KeypointTrajectory
+    seconds: float
+    confidence: dict | None
+    X_WO: RigidTransform
+    cloud: SemanticCloud | None = None
+
+
+def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None = None,
+                   cloud: bool = False) -> Perceived:
+    """Photograph `obj` and fit the field (`perception_simulator`): the pose is the scenario's, or
+    the estimate with `Scenario.object_pose` "estimated", the cameras then around
+    `Scenario.coarse_look`. With `Scenario.perceive` "room" the cameras see the object in
+    `perception_room`. A piece of furniture is framed as its captures are (its bounds over every
+    articulation in view, `CameraDistribution` "bounds") and the trajectory is that of its part
+    `part` (the perception system's `part`). `cloud`: also render the fitted field's points."""
     simulator, perception = perception_simulator(scenario, obj, part)
     started = time.perf_counter()
     simulator.Initialize()  # the perception system fits here, once
     seconds = time.perf_counter() - started
     context = perception.GetMyContextFromRoot(simulator.get_context())
-    return (perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
-            perception.get_confidence_output_port().Eval(context),
-            perception.get_X_WO_output_port().Eval(context))
+    return Perceived(perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
+                     perception.get_confidence_output_port().Eval(context),
+                     perception.get_X_WO_output_port().Eval(context),
+                     perception.get_semantic_cloud_output_port().Eval(context) if cloud else None)
 
 
 def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int | None = None
@@ -175,14 +191,15 @@ def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
 
 def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
          keypoints: KeypointTrajectory | None, reference: KeypointTrajectory | None,
-         replay: Path | None) -> TaskOutcome | PlaceTaskOutcome:
-    """Phase 2: the scenario's task planned with `keypoints` (None: the object's own)."""
+         replay: Path | None, cloud: SemanticCloud | None = None) -> TaskOutcome | PlaceTaskOutcome:
+    """Phase 2: the scenario's task planned with `keypoints` (None: the object's own; `cloud`: the
+    fitted field's points they came with, which size a drawer's obstacles for the place)."""
     simulation = replace(scenario.simulation, grasp=scenario.grasp)
     planner = grasp_planner(scenario.planner, scenario.grasp)
     if scenario.task == "open-and-place":
         return run_place_task(obj, scenario.X_WO, scenario.q_start, scenario.q_target, scenario.sample_item(),
                               keypoints=keypoints, reference=reference, replay=replay, planner_config=planner,
-                              simulation_config=PlaceSimulationConfig(opening=simulation))
+                              simulation_config=PlaceSimulationConfig(opening=simulation), cloud=cloud)
     return run_task(scene_object, scenario.q_target, keypoints=keypoints, replay=replay, reference=reference,
                     planner_config=planner, simulation_config=simulation)
 
@@ -206,26 +223,27 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                perceived=False)
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start, part=part)
     try:
-        predicted, seconds, confidence, X_WO_hat = perceive_scene(
-            scenario, obj, part if scenario.category == "furniture" else None)
+        perceived = perceive_scene(scenario, obj, part if scenario.category == "furniture" else None,
+                                   cloud=scenario.task == "open-and-place")
     except ObjectPoseError as err:
         return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
                                truth=truth, task=None, refused=f"nothing planned: {err}",
                                pose_error=(math.inf, math.inf))
     pose_error = None
+    predicted, confidence = perceived.trajectory, perceived.confidence
     if scenario.object_pose == "estimated":
-        error = scenario.X_WO.inverse() @ X_WO_hat
+        error = scenario.X_WO.inverse() @ perceived.X_WO
         pose_error = (100.0 * float(np.linalg.norm(error.translation()[:2])),
                       abs(math.degrees(RollPitchYaw(error.rotation()).yaw_angle())))
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid
     refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
-    task = None if refused else _run(scenario, obj, scene_object, predicted, truth, replay)
+    task = None if refused else _run(scenario, obj, scene_object, predicted, truth, replay, perceived.cloud)
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start,
         keypoint_rmse_cm=_rmse_cm(now(predicted), now(truth)),
         handle_path_rmse_cm=_rmse_cm(predicted.point("handle", grid), truth.point("handle", grid)),
-        perception_seconds=seconds, predicted=predicted, truth=truth, task=task,
+        perception_seconds=perceived.seconds, predicted=predicted, truth=truth, task=task,
         confidence=confidence, refused=refused or "", pose_error=pose_error)

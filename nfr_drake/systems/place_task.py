@@ -35,7 +35,12 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.objects.articulated import ArticulatedObject
-from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
+from nfr_drake.planning.compartment import (
+    compartment_entry,
+    compartment_obstacles,
+    drawer_half_width,
+    front_normal,
+)
 from nfr_drake.planning.place import (
     GRASP_OF,
     PLACE_REACH,
@@ -64,6 +69,7 @@ from nfr_drake.systems.articulation import (
 from nfr_drake.systems.interior import free_height_above_goal
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.items import Item
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.obstacles import distance_to_box, object_obstacles
@@ -493,7 +499,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
                    keypoints: KeypointTrajectory | None = None, reference: KeypointTrajectory | None = None,
                    replay: Path | None = None, planner_config: PlannerConfig | None = None,
                    place_config: PlaceConfig | None = None,
-                   simulation_config: PlaceSimulationConfig | None = None) -> PlaceTaskOutcome:
+                   simulation_config: PlaceSimulationConfig | None = None,
+                   cloud: SemanticCloud | None = None) -> PlaceTaskOutcome:
     """Open front 0 of `obj` (a closet or a drawer at X_WO, at q_start) to q_target and place
     `item` (standing on a table beside the robot) at the goal keypoint, planned with `keypoints`
     (default: the object's own, with its true geometry as obstacles; given keypoints are planned
@@ -505,14 +512,17 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     (`measured_articulation`, `door_band`; with given keypoints, a closet's shelf over the goal
     where a look inside sees it, `look_inside`). `replay`: an HTML replay of the place, with the
     keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside it
-    (`*_opening.html`)."""
+    (`*_opening.html`). `cloud`: the fitted field's points that came with `keypoints`; a drawer's
+    obstacles then have its measured width (`drawer_half_width`)."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
         kt = KeypointTrajectory.from_articulated_object(obj, X_WO, q_start)
         obstacles_at = lambda q: true_compartment(obj, X_WO, q)  # noqa: E731
     else:
-        kt, obstacles_at = keypoints, lambda q: compartment_obstacles(keypoints, q)  # noqa: E731
+        half = drawer_half_width(keypoints, cloud) if cloud is not None and keypoints.category == "drawer" \
+            else None
+        kt, obstacles_at = keypoints, lambda q: compartment_obstacles(keypoints, q, half_width=half)  # noqa: E731
     obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)

@@ -6,7 +6,12 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
+from nfr_drake.planning.compartment import (
+    compartment_entry,
+    compartment_obstacles,
+    drawer_half_width,
+    front_normal,
+)
 from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
@@ -18,6 +23,7 @@ from nfr_drake.planning.place import (
 from nfr_drake.planning.planner import PlannerConfig, plan_articulation
 from nfr_drake.planning.scene import build_planning_scene
 from nfr_drake.systems.place_task import ITEM_REACH, table_beside
+from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.items import Item, sample_item
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.obstacles import distance_to_box
@@ -295,3 +301,28 @@ def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkey
     with pytest.raises(PlanningError, match=failure):
         plan_place(opening.X_WB, opening.trajectory.value(opening.duration).ravel(),
                    place_problem(kt, 1.0, item, X_WI, table), handle=opening.waypoints[-1])
+
+
+def test_a_drawers_walls_take_the_width_the_fitted_points_give():
+    """A drawer's front seen as the field's points (a 0.6 m wide panel, two stray points 1 m out,
+    the carcass's points wider still): its half width is the front's to within a centimetre, its
+    walls and front stand outside it; without points, the narrowest box's; under 20 points, none."""
+    obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    goal, handle = kt.point("goal", 0.0), kt.point("handle", 0.0)
+    rng = np.random.default_rng(0)
+    front = np.c_[np.full(1000, handle[0]), goal[1] + rng.uniform(-0.3, 0.3, 1000),
+                  rng.uniform(0.02, 0.2, 1000)]
+    stray = np.array([[handle[0], goal[1] + 1.0, 0.1], [handle[0], goal[1] - 1.0, 0.1]])
+    carcass = np.c_[np.full(200, handle[0] - 0.02), goal[1] + rng.uniform(-0.5, 0.5, 200), np.full(200, 0.1)]
+    cloud = SemanticCloud(np.r_[front, stray, carcass], np.r_[np.full(1002, 2), np.ones(200, int)], 0.0)
+    half = drawer_half_width(kt, cloud)
+    assert 0.29 <= half <= 0.30
+    _, moving = compartment_obstacles(kt, 1.0, half_width=half)
+    walls = {b.name: b for b in moving}
+    for side in ("drawer_side_a", "drawer_side_b"):
+        assert abs(walls[side].X_WB.translation()[1] - goal[1]) > half
+    assert walls["drawer_front"].size[1] >= 2 * half
+    _, narrow = compartment_obstacles(kt, 1.0)
+    assert max(b.size[1] for b in narrow) < 2 * 0.2
+    assert drawer_half_width(kt, SemanticCloud(front[:19], np.full(19, 2), 0.0)) is None

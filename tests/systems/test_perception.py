@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+import torch
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
@@ -14,6 +15,8 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.render import ObjectRenderer
+from nfr_drake.inference.forward import semantic_point_cloud
+from nfr_drake.inference.infer import FittedModel
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.systems.perception import AddNfrPerception
@@ -59,6 +62,15 @@ def test_fits_once_at_initialisation_and_once_per_refit(model_dir):
     # Keypoints come out in W: the fit result (in O) moved by X_WO.
     p_O = result.trajectory["goal"][3]
     np.testing.assert_allclose(kt.point("goal", kt.q_grid[3]), X_WO.multiply(p_O), atol=1e-9)
+    # The fitted field's points come out in W too, at the fitted q, from the cameras at 48 px.
+    cloud = system.get_semantic_cloud_output_port().Eval(context)
+    assert system.fit_count == 2 and cloud.q == pytest.approx(result.q)
+    views = [(camera.scaled(48, 48), X) for X in X_OCs]
+    field = FittedModel(model_dir).model
+    points_O, classes = semantic_point_cloud(field, torch.as_tensor(result.z), result.q, views)
+    assert len(points_O) > 100
+    np.testing.assert_array_equal(cloud.classes, classes)
+    np.testing.assert_allclose(cloud.points, X_WO.multiply(points_O.T.astype(float)).T, atol=1e-5)
 
 
 def test_perception_cameras_see_the_object_as_the_training_renderer_does(model_dir):

@@ -100,8 +100,9 @@ def test_pipeline_estimates_the_object_pose_from_cameras_placed_at_a_coarse_look
     look = scenario.X_WO.inverse() @ scenario.coarse_look()
     assert np.linalg.norm(look.translation()) > 0.01  # the cameras do not aim at the true object
     obj = scenario.sample_object()
-    predicted, _, _, X_WO_hat = perceive_scene(scenario, obj)
-    error = scenario.X_WO.inverse() @ X_WO_hat
+    perceived = perceive_scene(scenario, obj)
+    predicted = perceived.trajectory
+    error = scenario.X_WO.inverse() @ perceived.X_WO
     assert np.linalg.norm(error.translation()[:2]) < 0.02
     assert abs(np.degrees(np.arctan2(error.rotation().matrix()[1, 0], error.rotation().matrix()[0, 0]))) < 2.0
     truth = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, scenario.q_start)
