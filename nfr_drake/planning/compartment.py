@@ -78,7 +78,7 @@ def drawer_half_width(kt: KeypointTrajectory, cloud: SemanticCloud, share: float
     the cloud holds under 20 such points. The quantile, not the largest: a few stray labels do
     not widen it. Its walls (`compartment_obstacles`) stand outside it, a wall's thickness
     (2 cm) on the side of caution: on drawers 0-5 of capture seed 901 (the object alone) the
-    quantile of 48-pixel views lay from 1.3 cm inside to 0.5 cm outside the front's true half
+    quantile of 48-pixel views lay from 1.2 cm inside to 0.5 cm outside the front's true half
     width."""
     moving = cloud.moving()
     if len(moving) < 20:
