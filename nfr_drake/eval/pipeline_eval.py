@@ -43,6 +43,8 @@ class PipelineRow:
     grasp_tries: how many times the fingers closed on the handle (`SimulationConfig.regrasps`; 0
     when nothing was simulated). q_pulled: the articulation once the planned motion had settled,
     before a second pull, a door's turn or a guarded pull (nan when nothing was simulated).
+    hinge_gap_cm: where a door's turn was measured, the hinge the hand felt against the
+    keypoints' (`SimulationResult.hinge_gap`; nan otherwise).
     """
 
     category: str
@@ -68,6 +70,7 @@ class PipelineRow:
     pose_error_deg: float
     grasp_tries: int
     q_pulled: float
+    hinge_gap_cm: float
 
 
 @dataclass
@@ -132,7 +135,8 @@ def _row(scenario: Scenario) -> PipelineRow:
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
         pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"),
-        grasp_tries=sim.tries if sim else 0, q_pulled=sim.q_pulled if sim else float("nan"))
+        grasp_tries=sim.tries if sim else 0, q_pulled=sim.q_pulled if sim else float("nan"),
+        hinge_gap_cm=100 * sim.hinge_gap if sim else float("nan"))
     if scenario.category == "furniture":
         return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":
@@ -208,6 +212,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           mask_crop: bool = True, objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           regrasps: int = SimulationConfig.regrasps,
+                          turn_max_hinge_gap: float = SimulationConfig.second_turn_max_hinge_gap,
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
@@ -251,6 +256,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             at the plan's end).
         regrasps: how many times the hand tries again, 2 cm further along the approach, after
             its fingers closed on nothing (`SimulationConfig.regrasps`; 0: one close).
+        turn_max_hinge_gap: a door is turned by what the hand swept only when the hinge it felt
+            lies within this of the keypoints' hinge, m (`SimulationConfig.second_turn_max_hinge_gap`;
+            inf: always); the CSV's hinge_gap_cm holds the gap.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)
@@ -259,7 +267,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop,
-                    simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps))
+                    simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps,
+                                                second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):
         raise NfrDrakeError(f"--objects: indices must not be negative, got {list(objects)}")
     rows = evaluate_pipeline(base, list(objects) if objects else n, csv_path, part_target=q_target is None)

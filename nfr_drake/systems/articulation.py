@@ -165,6 +165,10 @@ class SimulationConfig:
     or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept")."""
     second_turn_min: float = float(np.radians(1.0))
     second_turn_max: float = float(np.radians(25.0))
+    second_turn_max_hinge_gap: float = float("inf")
+    """The door is turned only when the hinge its hand felt (the circle's axis) lies within this
+    of the keypoints' hinge line (`hinge_gap`), m; inf: always. `SimulationResult.hinge_gap`
+    records the gap either way."""
     regrasps: int = 1
     """How many times the robot tries again when its fingers close on nothing (a gripper senses
     it from their closed width; here the grip point outside `capture_half_extents` at the close):
@@ -292,6 +296,9 @@ class SimulationResult:
     q_pulled: float = float("nan")
     """The articulation (in [0, 1]) once the planned motion had settled, before any second pull,
     turn or guarded pull."""
+    hinge_gap: float = float("nan")
+    """Where the robot measured a door's turn: the horizontal distance from the hinge its hand
+    felt to the keypoints' hinge line, m (`corrections.hinge_gap`); nan otherwise."""
     q_robot: np.ndarray = field(default_factory=lambda: np.full(9, np.nan), repr=False)
     """The robot's positions at the end (arm joints, then fingers; rad, m), (9,)."""
 
@@ -821,7 +828,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     misses = 0
     t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
-    turned = q_pulled = float("nan")
+    turned = q_pulled = gap = float("nan")
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
     while samples:
         t = samples.pop(0)
@@ -836,8 +843,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         if t == t_pulled and again and grasped and turns:  # the robot measures its turn, turns on
             felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
             q_now = plant.GetPositions(plant_context, robot)
-            dq, turned = door_turn_offset(controller_plant, felt, keypoints, q_target, q_now, q_end,
-                                          config.second_turn_min, config.second_turn_max)
+            dq, turned, gap = door_turn_offset(controller_plant, felt, keypoints, q_target, q_now, q_end,
+                                               config.second_turn_min, config.second_turn_max,
+                                               config.second_turn_max_hinge_gap)
             if turned:
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
         elif t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
@@ -894,7 +902,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
                             config.grasp, shortfall,
                             pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
-                            misses + 1, turned, q_pulled, plant.GetPositions(plant_context, robot))
+                            misses + 1, turned, q_pulled, gap, plant.GetPositions(plant_context, robot))
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

@@ -94,17 +94,29 @@ def turn_step(robot_plant: MultibodyPlant, q: np.ndarray, centre: np.ndarray, ax
     return (q_now - q)[:NUM_ARM_JOINTS]
 
 
+def hinge_gap(centre: np.ndarray, keypoints: KeypointTrajectory) -> float:
+    """The horizontal distance from a felt hinge's point `centre` ((3,), m) to the keypoints' hinge
+    line (hinge_bottom to hinge_top at their present articulation) at the centre's height, m."""
+    bottom, top = (keypoints.point(name, keypoints.q_current) for name in ("hinge_bottom", "hinge_top"))
+    on_line = bottom + (centre[2] - bottom[2]) / (top[2] - bottom[2]) * (top - bottom)
+    return float(np.linalg.norm((centre - on_line)[:2]))
+
+
 def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, keypoints: KeypointTrajectory,
                      q_target: float, q_now: np.ndarray, q_command: np.ndarray, smallest: float,
-                     largest: float) -> tuple[np.ndarray, float]:
+                     largest: float, largest_gap: float = np.inf) -> tuple[np.ndarray, float, float]:
     """The offset to add to the arm's command `q_command` (the plan's last) that turns the hand,
     now at `q_now` (measured), on about the door's felt hinge by `door_turn`'s angle for the turn
-    `keypoints` plan to `q_target`, clipped to +-`largest` (rad), and that angle; no offset and 0
-    when it is under `smallest` or the tool's path has under 3 points."""
+    `keypoints` plan to `q_target`, clipped to +-`largest` (rad), that angle, and the felt hinge's
+    gap to the keypoints' (`hinge_gap`, m); no offset and angle 0 when the angle is under
+    `smallest` or the gap over `largest_gap` (the keypoints' hinge, whose turn the angle comes
+    from, is not the door's), and gap nan when the tool's path has under 3 points."""
     if len(tool_path) < 3:
-        return np.zeros(NUM_ARM_JOINTS), 0.0
+        return np.zeros(NUM_ARM_JOINTS), 0.0, float("nan")
     angle, centre, axis = door_turn(tool_path, *planned_door_turn(keypoints, q_target))
-    if abs(angle) < smallest:
-        return np.zeros(NUM_ARM_JOINTS), 0.0
+    gap = hinge_gap(centre, keypoints)
+    if abs(angle) < smallest or gap > largest_gap:
+        return np.zeros(NUM_ARM_JOINTS), 0.0, gap
     angle = float(np.clip(angle, -largest, largest))
-    return (q_now - q_command)[:NUM_ARM_JOINTS] + turn_step(robot_plant, q_now, centre, axis, angle), angle
+    return ((q_now - q_command)[:NUM_ARM_JOINTS] + turn_step(robot_plant, q_now, centre, axis, angle), angle,
+            gap)

@@ -183,6 +183,8 @@ class PlaceSimulationResult:
     """How many times the fingers closed on the handle (`SimulationResult.tries`)."""
     q_pulled: float = float("nan")
     """The articulation once the opening's planned motion had settled (`SimulationResult.q_pulled`)."""
+    hinge_gap: float = float("nan")
+    """The opening's felt hinge against the keypoints' (`SimulationResult.hinge_gap`), m."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -386,7 +388,7 @@ def simulate_place(obj: ArticulatedObject, X_WO: RigidTransform, opening: Simula
                                  opening.q_final, opening.joint_error, opening.max_drift, picked,
                                  item_error, inside, resting, float(q_final), still_open, opening.success,
                                  success, samples, np.array(q_object), np.array(p_item), opening.shortfall,
-                                 opening.tries, opening.q_pulled)
+                                 opening.tries, opening.q_pulled, opening.hinge_gap)
 
 
 @dataclass
