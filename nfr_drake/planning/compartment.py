@@ -12,8 +12,10 @@ layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
   behind the handle, its back as far behind the goal as the front is ahead, side walls at the
   narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`) or, where the fitted field's points give
-  the front's width (`drawer_half_width`), at that, as high as a front with its handle at
-  mid-height, the front itself as high as the category allows for its handle's height.
+  the front's width (`drawer_half_width`), from the front's edge (and a wall's thickness beyond)
+  to the box's inside behind it (`_DRAWER_FRONT_OVERLAY` in from the edge), as high as a front
+  with its handle at mid-height, the front itself as high as the category allows for its
+  handle's height.
 """
 
 from __future__ import annotations
@@ -30,6 +32,10 @@ from nfr_drake.world.plan import ObstacleBox
 _Z = np.array([0.0, 0.0, 1.0])
 _WALL = 0.02  # thickness of the estimated panels, m
 _DRAWER_MIN_HALF_WIDTH = 0.145  # half the narrowest drawer box's inside, m (0.35 m wide, 2.5 cm panels)
+_DRAWER_FRONT_OVERLAY = 0.045
+"""How far a drawer box's inside lies in from its front's edge, m: the carcass's side panel, the
+runners' clearance and the box's wall (2.4-3.7 cm in `nfr_drake.objects.drawer`; 18 mm + 12.5 mm +
+15 mm in a kitchen cabinet)."""
 _DRAWER_FRONT_BEHIND_HANDLE = 0.05  # the drawer front's inner face behind its grip, m (standoff + front)
 _DRAWER_FLOOR_ABOVE_BASE = 0.03  # a drawer's inner floor above its carcass's base, m (panel, gap, wall)
 _DRAWER_LOWEST_HANDLE = 0.35  # the lowest handle height as a fraction of the front's (0.5 - 0.15)
@@ -62,30 +68,32 @@ def compartment_obstacles(kt: KeypointTrajectory, q: float, free_height: float |
     """Obstacle boxes in W of the compartment opened to articulation q (module docstring): those
     that stay put, and those of the moving part (the door, the drawer's box). free_height: a
     closet's measured free height above the goal, m (its shelf's underside there; none when that
-    reaches the top); None: the lowest shelf the closet's height allows. half_width: a drawer's
-    measured half width about its goal, m (`drawer_half_width`); None: the narrowest box's."""
+    reaches the top); None: the lowest shelf the closet's height allows. half_width: a drawer
+    front's measured half width about its goal, m (`drawer_half_width`); None: the walls of the
+    narrowest box."""
     if "goal" not in kt.names:
         raise NfrDrakeError(f"the {kt.category}'s keypoint trajectory has no goal keypoint to place at")
     if kt.category == "closet":
         return _closet(kt, q, free_height)
-    return _drawer(kt, q, _DRAWER_MIN_HALF_WIDTH if half_width is None else half_width)
+    if half_width is None:
+        return _drawer(kt, q, _DRAWER_MIN_HALF_WIDTH, _DRAWER_MIN_HALF_WIDTH + _WALL)
+    return _drawer(kt, q, half_width - _DRAWER_FRONT_OVERLAY, half_width + _WALL)
 
 
 def drawer_half_width(kt: KeypointTrajectory, cloud: SemanticCloud, share: float = 0.98) -> float | None:
-    """A drawer's half width about its goal keypoint along the front, m, from the fitted field's
-    points of its moving part (`SemanticCloud.moving`): the `share` quantile of their lateral
-    distances from the goal, at least the narrowest box's (`_DRAWER_MIN_HALF_WIDTH`); None when
-    the cloud holds under 20 such points. The quantile, not the largest: a few stray labels do
-    not widen it. Its walls (`compartment_obstacles`) stand outside it, a wall's thickness
-    (2 cm) on the side of caution: on drawers 0-5 of capture seed 901 (the object alone) the
-    quantile of 48-pixel views lay from 1.2 cm inside to 0.5 cm outside the front's true half
-    width."""
+    """A drawer front's half width about its goal keypoint, m, from the fitted field's points of
+    its moving part (`SemanticCloud.moving`; at the shut drawer the front is all there is to see):
+    the `share` quantile of their lateral distances from the goal; None when the cloud holds under
+    20 such points. The quantile, not the largest: a few stray labels do not widen it. The
+    walls (`compartment_obstacles`) reach a wall's thickness (2 cm) past it on the side of
+    caution: on drawers 0-5 of capture seed 901 (the object alone) the quantile of 48-pixel
+    views lay from 1.2 cm inside to 0.5 cm outside the front's true half width."""
     moving = cloud.moving()
     if len(moving) < 20:
         return None
     _, lat, _ = _frame(handle_tangent(kt, cloud.q))
     lateral = np.abs((moving - kt.point("goal", cloud.q)) @ lat)
-    return max(float(np.quantile(lateral, share)), _DRAWER_MIN_HALF_WIDTH)
+    return float(np.quantile(lateral, share))
 
 
 def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
@@ -124,7 +132,8 @@ def _closet(kt: KeypointTrajectory, q: float, free_height: float | None) -> list
     return boxes, [door] if door is not None else []
 
 
-def _drawer(kt: KeypointTrajectory, q: float, half: float) -> list[ObstacleBox]:
+def _drawer(kt: KeypointTrajectory, q: float, inner: float, outer: float) -> list[ObstacleBox]:
+    """The drawer's boxes at q, its side walls from `inner` to `outer` (m) either side of the goal."""
     n, lat, R = _frame(handle_tangent(kt, q))
     axes = (n, lat, _Z)
     goal, handle = kt.point("goal", q), kt.point("handle", q)
@@ -134,12 +143,12 @@ def _drawer(kt: KeypointTrajectory, q: float, half: float) -> list[ObstacleBox]:
     top, front_top = _drawer_tops(kt, q)
     y0, floor = goal @ lat, goal[2]
     return [carcass_box(kt)], [
-        _box("drawer_floor", R, axes, [back, y0 - half, 0.0], [inner_front, y0 + half, floor]),
-        _box("drawer_front", R, axes, [inner_front, y0 - half - _WALL, 0.0],
-             [inner_front + 0.02, y0 + half + _WALL, front_top]),
-        _box("drawer_back", R, axes, [back - _WALL, y0 - half - _WALL, 0.0], [back, y0 + half + _WALL, top]),
-        _box("drawer_side_a", R, axes, [back, y0 - half - _WALL, 0.0], [inner_front, y0 - half, top]),
-        _box("drawer_side_b", R, axes, [back, y0 + half, 0.0], [inner_front, y0 + half + _WALL, top]),
+        _box("drawer_floor", R, axes, [back, y0 - outer, 0.0], [inner_front, y0 + outer, floor]),
+        _box("drawer_front", R, axes, [inner_front, y0 - outer, 0.0],
+             [inner_front + 0.02, y0 + outer, front_top]),
+        _box("drawer_back", R, axes, [back - _WALL, y0 - outer, 0.0], [back, y0 + outer, top]),
+        _box("drawer_side_a", R, axes, [back, y0 - outer, 0.0], [inner_front, y0 - inner, top]),
+        _box("drawer_side_b", R, axes, [back, y0 + inner, 0.0], [inner_front, y0 + outer, top]),
     ]
 
 

@@ -305,8 +305,9 @@ def test_a_collision_query_error_in_the_solver_fails_the_plan_in_one_line(monkey
 
 def test_a_drawers_walls_take_the_width_the_fitted_points_give():
     """A drawer's front seen as the field's points (a 0.6 m wide panel, two stray points 1 m out,
-    the carcass's points wider still): its half width is the front's to within a centimetre, its
-    walls and front stand outside it; without points, the narrowest box's; under 20 points, none."""
+    the carcass's points wider still): its half width is the front's to within a centimetre; the
+    walls reach from the box's inside, 4.5 cm in, to a wall's thickness past the front's edge, the
+    front across it all; without points, the narrowest box's walls; under 20 points, none."""
     obj = sample_object("drawer", object_rng(SEED_DOMAIN_TRAIN, 3, 0))
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
     goal, handle = kt.point("goal", 0.0), kt.point("handle", 0.0)
@@ -321,8 +322,11 @@ def test_a_drawers_walls_take_the_width_the_fitted_points_give():
     _, moving = compartment_obstacles(kt, 1.0, half_width=half)
     walls = {b.name: b for b in moving}
     for side in ("drawer_side_a", "drawer_side_b"):
-        assert abs(walls[side].X_WB.translation()[1] - goal[1]) > half
-    assert walls["drawer_front"].size[1] >= 2 * half
+        centre = abs(walls[side].X_WB.translation()[1] - goal[1])
+        width = walls[side].size[1]
+        assert centre - width / 2 == pytest.approx(half - 0.045)
+        assert centre + width / 2 == pytest.approx(half + 0.02)
+    assert walls["drawer_front"].size[1] == pytest.approx(2 * half + 0.04)
     _, narrow = compartment_obstacles(kt, 1.0)
-    assert max(b.size[1] for b in narrow) < 2 * 0.2
+    assert max(b.size[1] for b in narrow) == pytest.approx(2 * 0.165)
     assert drawer_half_width(kt, SemanticCloud(front[:19], np.full(19, 2), 0.0)) is None
