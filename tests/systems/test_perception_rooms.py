@@ -255,7 +255,7 @@ def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_pa
     from nfr_drake.eval import pipeline_eval
     from nfr_drake.systems import pipeline
 
-    def no_object(scenario, obj, part=None):
+    def no_object(scenario, obj, part=None, cloud=False):
         raise ObjectPoseError("object pose: the masks agree on no object in front of the cameras")
 
     monkeypatch.setattr(pipeline, "perceive_scene", no_object)
