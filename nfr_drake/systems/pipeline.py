@@ -86,6 +86,8 @@ class PipelineOutcome:
         else:
             lines.append(f"planning time {task.planning_seconds:.2f} s")
             lines.append(task.simulation.summary())
+        if isinstance(task, PlaceTaskOutcome) and task.opening_replay is not None:
+            lines.append(f"replay of the opening: {task.opening_replay}")
         if task is not None and task.replay is not None:
             lines.append(f"replay: {task.replay}")
         return "\n".join(lines)

@@ -396,7 +396,7 @@ class PlaceTaskOutcome:
     """Result of `run_place_task`: the opening plan and the place plan (None where planning
     failed, `planning_error` then says why), their planning time (s), the simulation (None
     without both plans), the replay's path, and the opening's simulation (where it ran: also when
-    the place, planned after it from a moved base, then found no plan)."""
+    the place, planned after it from a moved base, then found no plan) and its replay's path."""
 
     q_target: float
     keypoints: KeypointTrajectory
@@ -407,6 +407,7 @@ class PlaceTaskOutcome:
     simulation: PlaceSimulationResult | None
     replay: Path | None
     opening: SimulationResult | None = None
+    opening_replay: Path | None = None
 
     @property
     def success(self) -> bool:
@@ -528,8 +529,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
-    failed = lambda why, seconds=float("nan"), opening=None: PlaceTaskOutcome(  # noqa: E731
-        q_target, kt, None, None, why, seconds, None, None, opening)
+    failed = lambda why, seconds=float("nan"), opening=None, opening_replay=None: PlaceTaskOutcome(  # noqa: E731
+        q_target, kt, None, None, why, seconds, None, None, opening, opening_replay)
     errors, plan = [], None
     if not MOVE_BASE[kt.category]:
         try:
@@ -547,8 +548,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     meshcats = [Meshcat() if replay is not None else None for _ in range(2)]
     scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
     opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening, kt)
-    if replay is not None:
-        write_replay(meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+    opening_replay = None if replay is None else write_replay(
+        meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
     if moved:
         q_door = measured_articulation(kt, opening)
         if keypoints is not None and kt.category == "closet":  # look in for the shelf over the goal
@@ -561,7 +562,7 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         except PlanningError as err:
             return failed("; ".join([*errors, f"base moved after the opening (front measured at "
                                      f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned,
-                          opening)
+                          opening, opening_replay)
         seconds += time.perf_counter() - planned
     for meshcat in meshcats[:1] if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
@@ -579,4 +580,4 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     simulation = simulate_place(obj, X_WO, opening, place, item, table, None if moved else opening.q_robot,
                                 meshcats[0], simulation_config)
     path = write_replay(meshcats[0], replay) if replay is not None else None
-    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path, opening)
+    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path, opening, opening_replay)

@@ -50,7 +50,8 @@ def test_open_and_place_a_drawer(tmp_path, grasp):
     np.testing.assert_allclose(sim.p_W_item[-1][:2], outcome.place.X_WI_place.translation()[:2], atol=0.02)
     letting_go = sim.times <= PlaceSimulationConfig().release + 0.5
     assert np.abs(sim.q_object[letting_go] - sim.q_opened).max() * obj.front(0).joint_upper < 0.003
-    for replay in (tmp_path / "place_opening.html", outcome.replay):
+    assert outcome.opening_replay == tmp_path / "place_opening.html"
+    for replay in (outcome.opening_replay, outcome.replay):
         assert replay.stat().st_size > 10_000
 
 
@@ -69,7 +70,8 @@ def test_open_and_place_a_closet_from_a_moved_base(tmp_path):
     assert outcome.success, sim.summary()
     assert np.linalg.norm(outcome.place.X_WB.translation() - outcome.plan.X_WB.translation()) > 0.05
     assert sim.item_error < 0.03 and sim.still_open
-    for replay in (tmp_path / "place_opening.html", outcome.replay):
+    assert outcome.opening_replay == tmp_path / "place_opening.html"
+    for replay in (outcome.opening_replay, outcome.replay):
         assert replay.stat().st_size > 10_000
 
 
