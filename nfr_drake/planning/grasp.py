@@ -34,6 +34,9 @@ handle's standoff from its door (4.5-7 cm from the carcass, less the door's thic
 the fingertips reach past the grasp point (1 cm) plus the planner's clearance."""
 _PANEL_THICKNESS = 0.02
 _PANEL_EDGE_MARGIN = 0.05  # door beyond the handle, away from the hinge, m
+_PANEL_WIDTH_MARGIN = 0.03
+"""How far a door's box reaches past its measured width, m: the width's 0.98 quantile fell 1.0-2.1 cm
+short of the door on closets 0-5 of capture seed 901 (`scripts/fitted_widths.py`)."""
 _PANEL_MIN_ANGLE_DEG = 10.0  # below this opening the carcass box already covers the door
 _DRAWER_HALF_WIDTH = 0.4
 _DRAWER_DEPTH = 0.5
@@ -108,13 +111,15 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
     return ObstacleBox("carcass", size, RigidTransform(R, centre))
 
 
-def door_panel_box(kt: KeypointTrajectory) -> ObstacleBox | None:
+def door_panel_box(kt: KeypointTrajectory, width: float | None = None) -> ObstacleBox | None:
     """A thin box standing for an open door at kt.q_current, from the keypoints alone; None for a
     drawer or a door opened less than `_PANEL_MIN_ANGLE_DEG` (the carcass box covers it).
 
-    It reaches from the hinge axis to `_PANEL_EDGE_MARGIN` past the handle and from `hinge_bottom`
-    to `hinge_top`; its front face lies `PANEL_SETBACK` behind the handle across the door's outward
-    normal (the handle tangent). It only holds for the approach: the door moves once grasped.
+    It reaches from the hinge axis to `_PANEL_EDGE_MARGIN` past the handle (or, with the door's
+    measured `width` from its hinge, m, `compartment.door_width`, to `_PANEL_WIDTH_MARGIN` past
+    that) and from `hinge_bottom` to `hinge_top`; its front face lies `PANEL_SETBACK` behind the
+    handle across the door's outward normal (the handle tangent). It only holds for the approach:
+    the door moves once grasped.
     """
     if kt.category != "closet":
         return None
@@ -133,7 +138,7 @@ def door_panel_box(kt: KeypointTrajectory) -> ObstacleBox | None:
     n = _unit(n - (n @ axis) * axis, "the door's normal")
     u = np.cross(axis, n)  # across the door; (n, u, axis) is right-handed
     h = kt.point("handle", q) - a
-    width = abs(h @ u) + _PANEL_EDGE_MARGIN
+    width = abs(h @ u) + _PANEL_EDGE_MARGIN if width is None else width + _PANEL_WIDTH_MARGIN
     height = abs((b - a) @ axis)
     depth_centre = h @ n - PANEL_SETBACK - _PANEL_THICKNESS / 2
     centre = (a + b) / 2 + depth_centre * n + np.sign(h @ u) * (width / 2) * u

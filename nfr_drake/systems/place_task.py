@@ -38,7 +38,6 @@ from nfr_drake.objects.articulated import ArticulatedObject
 from nfr_drake.planning.compartment import (
     compartment_entry,
     compartment_obstacles,
-    drawer_half_width,
     front_normal,
 )
 from nfr_drake.planning.place import (
@@ -515,17 +514,15 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     (`measured_articulation`, `door_band`; with given keypoints, a closet's shelf over the goal
     where a look inside sees it, `look_inside`). `replay`: an HTML replay of the place, with the
     keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside it
-    (`*_opening.html`). `cloud`: the fitted field's points that came with `keypoints`; a drawer's
-    obstacles then have its measured width (`drawer_half_width`)."""
+    (`*_opening.html`). `cloud`: the fitted field's points that came with `keypoints`; the
+    moving part's obstacles then have its measured width (`compartment_obstacles`)."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
         kt = KeypointTrajectory.from_articulated_object(obj, X_WO, q_start)
         obstacles_at = lambda q: true_compartment(obj, X_WO, q)  # noqa: E731
     else:
-        half = drawer_half_width(keypoints, cloud) if cloud is not None and keypoints.category == "drawer" \
-            else None
-        kt, obstacles_at = keypoints, lambda q: compartment_obstacles(keypoints, q, half_width=half)  # noqa: E731
+        kt, obstacles_at = keypoints, lambda q: compartment_obstacles(keypoints, q, cloud=cloud)  # noqa: E731
     obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
@@ -554,7 +551,7 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         q_door = measured_articulation(kt, opening)
         if keypoints is not None and kt.category == "closet":  # look in for the shelf over the goal
             free = look_inside(obj, X_WO, opening.q_final, kt, q_door)
-            obstacles_at = lambda q: compartment_obstacles(keypoints, q, free)  # noqa: E731
+            obstacles_at = lambda q: compartment_obstacles(keypoints, q, free, cloud)  # noqa: E731
         obstacles = door_band(obstacles_at, q_door)
         planned = time.perf_counter()
         try:

@@ -9,6 +9,7 @@ from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.compartment import (
     compartment_entry,
     compartment_obstacles,
+    door_width,
     drawer_half_width,
     front_normal,
 )
@@ -319,7 +320,7 @@ def test_a_drawers_walls_take_the_width_the_fitted_points_give():
     cloud = SemanticCloud(np.r_[front, stray, carcass], np.r_[np.full(1002, 2), np.ones(200, int)], 0.0)
     half = drawer_half_width(kt, cloud)
     assert 0.29 <= half <= 0.30
-    _, moving = compartment_obstacles(kt, 1.0, half_width=half)
+    _, moving = compartment_obstacles(kt, 1.0, cloud=cloud)
     walls = {b.name: b for b in moving}
     for side in ("drawer_side_a", "drawer_side_b"):
         centre = abs(walls[side].X_WB.translation()[1] - goal[1])
@@ -329,4 +330,28 @@ def test_a_drawers_walls_take_the_width_the_fitted_points_give():
     assert walls["drawer_front"].size[1] == pytest.approx(2 * half + 0.04)
     _, narrow = compartment_obstacles(kt, 1.0)
     assert max(b.size[1] for b in narrow) == pytest.approx(2 * 0.165)
-    assert drawer_half_width(kt, SemanticCloud(front[:19], np.full(19, 2), 0.0)) is None
+    few = SemanticCloud(front[:19], np.full(19, 2), 0.0)
+    assert drawer_half_width(kt, few) is None
+    assert [b.size[1] for b in compartment_obstacles(kt, 1.0, cloud=few)[1]] == [b.size[1] for b in narrow]
+
+
+def test_a_closet_doors_box_takes_the_width_the_fitted_points_give():
+    """A shut door seen as the field's points from its hinge line to its free edge: its width is
+    the door's within 1.5 cm, and the open door's box reaches 3 cm past it, where from the handle
+    alone it reaches 5 cm past the handle."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    hinge, handle = kt.point("hinge_bottom", 0.0), kt.point("handle", 0.0)
+    across = (handle - hinge) * [1.0, 1.0, 0.0]
+    reach = np.linalg.norm(across)
+    door = reach + obj.params["handle_edge_offset"]
+    rng = np.random.default_rng(0)
+    points = hinge + np.outer(rng.uniform(0.0, door, 2000), across / reach) + np.outer(
+        rng.uniform(0.0, 0.8, 2000), [0.0, 0.0, 1.0])
+    cloud = SemanticCloud(points, np.full(2000, 2), 0.0)
+    width = door_width(kt, cloud)
+    assert width == pytest.approx(door, abs=0.015)
+    boxes = {b.name: b for b in compartment_obstacles(kt, 0.6, cloud=cloud)[1]}
+    assert boxes["open_door"].size[1] == pytest.approx(width + 0.03)
+    from_handle = {b.name: b for b in compartment_obstacles(kt, 0.6)[1]}
+    assert from_handle["open_door"].size[1] == pytest.approx(reach + 0.05, abs=0.01)
