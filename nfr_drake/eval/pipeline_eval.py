@@ -25,6 +25,7 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.pipeline import run_scenario
+from nfr_drake.systems.place_task import PlaceTaskOutcome
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.systems.task import OPEN_TARGET
 
@@ -105,6 +106,7 @@ def _row(scenario: Scenario) -> PipelineRow:
     scale = np.degrees(1.0) if revolute else 100.0
     task = outcome.task
     sim = task.simulation if task is not None else None
+    opening = task.opening if isinstance(task, PlaceTaskOutcome) else sim  # its SimulationResult
     if task is None:
         failure = outcome.refused
     else:
@@ -135,8 +137,8 @@ def _row(scenario: Scenario) -> PipelineRow:
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
         pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"),
-        grasp_tries=sim.tries if sim else 0, q_pulled=sim.q_pulled if sim else float("nan"),
-        hinge_gap_cm=100 * sim.hinge_gap if sim else float("nan"))
+        grasp_tries=opening.tries if opening else 0, q_pulled=opening.q_pulled if opening else float("nan"),
+        hinge_gap_cm=100 * opening.hinge_gap if opening else float("nan"))
     if scenario.category == "furniture":
         return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":

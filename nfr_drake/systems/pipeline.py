@@ -195,7 +195,7 @@ def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
          keypoints: KeypointTrajectory | None, reference: KeypointTrajectory | None,
          replay: Path | None, cloud: SemanticCloud | None = None) -> TaskOutcome | PlaceTaskOutcome:
     """Phase 2: the scenario's task planned with `keypoints` (None: the object's own; `cloud`: the
-    fitted field's points they came with, which size a drawer's obstacles for the place)."""
+    fitted field's points they came with, which size the moving part's obstacles for the place)."""
     simulation = replace(scenario.simulation, grasp=scenario.grasp)
     planner = grasp_planner(scenario.planner, scenario.grasp)
     if scenario.task == "open-and-place":

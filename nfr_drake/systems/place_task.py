@@ -35,11 +35,7 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.objects.articulated import ArticulatedObject
-from nfr_drake.planning.compartment import (
-    compartment_entry,
-    compartment_obstacles,
-    front_normal,
-)
+from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
 from nfr_drake.planning.place import (
     GRASP_OF,
     PLACE_REACH,
@@ -176,14 +172,6 @@ class PlaceSimulationResult:
     times: np.ndarray = field(repr=False)
     q_object: np.ndarray = field(repr=False)
     p_W_item: np.ndarray = field(repr=False)
-    shortfall: float = float("nan")
-    """The pull's shortfall measured before the second pull (`SimulationResult.shortfall`), m."""
-    tries: int = 1
-    """How many times the fingers closed on the handle (`SimulationResult.tries`)."""
-    q_pulled: float = float("nan")
-    """The articulation once the opening's planned motion had settled (`SimulationResult.q_pulled`)."""
-    hinge_gap: float = float("nan")
-    """The opening's felt hinge against the keypoints' (`SimulationResult.hinge_gap`), m."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -386,8 +374,7 @@ def simulate_place(obj: ArticulatedObject, X_WO: RigidTransform, opening: Simula
     return PlaceSimulationResult(sim.grasp, opening.joint_type, opening.q_target, opening.grasped,
                                  opening.q_final, opening.joint_error, opening.max_drift, picked,
                                  item_error, inside, resting, float(q_final), still_open, opening.success,
-                                 success, samples, np.array(q_object), np.array(p_item), opening.shortfall,
-                                 opening.tries, opening.q_pulled, opening.hinge_gap)
+                                 success, samples, np.array(q_object), np.array(p_item))
 
 
 @dataclass
