@@ -111,15 +111,17 @@ def carcass_box(kt: KeypointTrajectory) -> ObstacleBox:
     return ObstacleBox("carcass", size, RigidTransform(R, centre))
 
 
-def door_panel_box(kt: KeypointTrajectory, width: float | None = None) -> ObstacleBox | None:
+def door_panel_box(kt: KeypointTrajectory, width: float | None = None, top: float | None = None
+                   ) -> ObstacleBox | None:
     """A thin box standing for an open door at kt.q_current, from the keypoints alone; None for a
     drawer or a door opened less than `_PANEL_MIN_ANGLE_DEG` (the carcass box covers it).
 
     It reaches from the hinge axis to `_PANEL_EDGE_MARGIN` past the handle (or, with the door's
     measured `width` from its hinge, m, `compartment.door_width`, to `_PANEL_WIDTH_MARGIN` past
-    that) and from `hinge_bottom` to `hinge_top`; its front face lies `PANEL_SETBACK` behind the
-    handle across the door's outward normal (the handle tangent). It only holds for the approach:
-    the door moves once grasped.
+    that) and from `hinge_bottom` to `hinge_top` (or to `top`, m in W, where that lies higher: the
+    door's top edge as measured, `compartment.part_top`, with its margin); its front face lies
+    `PANEL_SETBACK` behind the handle across the door's outward normal (the handle tangent). It
+    only holds for the approach: the door moves once grasped.
     """
     if kt.category != "closet":
         return None
@@ -139,8 +141,8 @@ def door_panel_box(kt: KeypointTrajectory, width: float | None = None) -> Obstac
     u = np.cross(axis, n)  # across the door; (n, u, axis) is right-handed
     h = kt.point("handle", q) - a
     width = abs(h @ u) + _PANEL_EDGE_MARGIN if width is None else width + _PANEL_WIDTH_MARGIN
-    height = abs((b - a) @ axis)
+    height = max(abs((b - a) @ axis), (top - a[2]) / axis[2] if top is not None else 0.0)
     depth_centre = h @ n - PANEL_SETBACK - _PANEL_THICKNESS / 2
-    centre = (a + b) / 2 + depth_centre * n + np.sign(h @ u) * (width / 2) * u
+    centre = a + height / 2 * axis + depth_centre * n + np.sign(h @ u) * (width / 2) * u
     R = RotationMatrix(np.column_stack([n, u, axis]))
     return ObstacleBox("open_door", np.array([_PANEL_THICKNESS, width, height]), RigidTransform(R, centre))

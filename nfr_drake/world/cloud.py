@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+STATIC_CLASS = 1
+"""The semantic class of the part that stays put (the carcass)."""
 MOVING_CLASSES = (2, 3)
 """The semantic classes of the moving part: its panels and its handle (`SEMANTIC_CLASS_NAMES`:
 background, carcass, moving, handle)."""
@@ -27,3 +29,7 @@ class SemanticCloud:
     def moving(self) -> np.ndarray:
         """The moving part's points (its panels and handle), (M, 3)."""
         return self.points[np.isin(self.classes, MOVING_CLASSES)]
+
+    def static(self) -> np.ndarray:
+        """The static part's points (the carcass), (S, 3)."""
+        return self.points[self.classes == STATIC_CLASS]

@@ -355,3 +355,37 @@ def test_a_closet_doors_box_takes_the_width_the_fitted_points_give():
     assert boxes["open_door"].size[1] == pytest.approx(width + 0.03)
     from_handle = {b.name: b for b in compartment_obstacles(kt, 0.6)[1]}
     assert from_handle["open_door"].size[1] == pytest.approx(reach + 0.05, abs=0.01)
+
+
+def _top_of(box: ObstacleBox) -> float:
+    """The highest corner of a box in W, m."""
+    return float(box.X_WB.translation()[2] + np.abs(box.X_WB.rotation().matrix())[2] @ box.size / 2)
+
+
+def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_higher():
+    """Points of the door and of the carcass (their upper 5 cm) up to 4 and 3 cm over the
+    keypoints' hinge_top: the
+    open door's box and the carcass's top panel reach 2 cm over the points' top (the panel's
+    underside stays a wall under hinge_top); points that end lower leave the boxes at hinge_top."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    hinge_top = kt.point("hinge_top", 0.0)[2]
+    rng = np.random.default_rng(0)
+
+    def cloud(door_above: float, carcass_above: float) -> SemanticCloud:
+        door = kt.point("hinge_bottom", 0.0) + np.outer(rng.uniform(0.05, 0.3, 500), [0.0, -1.0, 0.0])
+        door[:, 2] = hinge_top + door_above - rng.uniform(0.0, 0.05, 500)
+        carcass = np.column_stack([rng.uniform(-0.1, 0.1, 500), rng.uniform(-0.2, 0.2, 500),
+                                   hinge_top + carcass_above - rng.uniform(0.0, 0.05, 500)])
+        return SemanticCloud(np.vstack([door, carcass]), np.r_[np.full(500, 2), np.full(500, 1)], 0.0)
+
+    fixed, moving = compartment_obstacles(kt, 0.6, cloud=cloud(0.04, 0.03))
+    top_panel = {b.name: b for b in fixed}["compartment_top"]
+    assert _top_of(moving[0]) == pytest.approx(hinge_top + 0.04 + 0.02, abs=0.006)
+    assert _top_of(top_panel) == pytest.approx(hinge_top + 0.03 + 0.02, abs=0.006)
+    assert _top_of(top_panel) - top_panel.size[2] == pytest.approx(hinge_top - 0.02)
+    plain_fixed, plain_moving = compartment_obstacles(kt, 0.6)
+    low_fixed, low_moving = compartment_obstacles(kt, 0.6, cloud=cloud(-0.1, -0.1))
+    assert _top_of(low_moving[0]) == pytest.approx(_top_of(plain_moving[0]))
+    assert _top_of(plain_moving[0]) == pytest.approx(hinge_top, abs=1e-6)
+    assert [_top_of(b) for b in low_fixed] == pytest.approx([_top_of(b) for b in plain_fixed])
