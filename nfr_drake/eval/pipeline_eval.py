@@ -39,7 +39,9 @@ class PipelineRow:
     handle (the horizontal handle-to-hinge vectors point the same way; False for a door predicted
     as a drawer). p_handle_within_2cm: the
     fit's confidence (nan without a calibration); refused: the fit was not planned on (`failure`
-    says why); planned, grasped and success are then False. pose_error_cm (xy) and
+    says why); planned, grasped and success are then False. grasped, final_error and
+    max_drift_cm are the opening's (an open-and-place row's too, where the place then found no
+    plan). pose_error_cm (xy) and
     pose_error_deg (yaw): the estimated object pose's errors (nan when the pose was given).
     grasp_tries: how many times the fingers closed on the handle (`SimulationConfig.regrasps`; 0
     when nothing was simulated). q_pulled: the articulation once the planned motion had settled,
@@ -128,10 +130,10 @@ def _row(scenario: Scenario) -> PipelineRow:
         hinge_side_correct=hinge_side,
         p_handle_within_2cm=_probability(outcome.confidence), refused=task is None,
         planned=task is not None and task.plan is not None,
-        grasped=bool(sim and sim.grasped), success=task is not None and task.success,
-        final_error=float(sim.joint_error * scale) if sim else float("nan"),
+        grasped=bool(opening and opening.grasped), success=task is not None and task.success,
+        final_error=float(opening.joint_error * scale) if opening else float("nan"),
         unit="deg" if revolute else "cm",
-        max_drift_cm=float(100 * sim.max_drift) if sim else float("nan"),
+        max_drift_cm=float(100 * opening.max_drift) if opening else float("nan"),
         fit_seconds=outcome.perception_seconds,
         planning_seconds=task.planning_seconds if task is not None else 0.0,
         failure=failure.replace("\n", " "),

@@ -145,29 +145,20 @@ class PlaceSimulationConfig:
 
 @dataclass
 class PlaceSimulationResult:
-    """What the simulated arm did. The opening (from its `SimulationResult`): grasped (the
-    handle), q_opened (articulation in [0, 1] when the opening ends), joint_error there (rad or
-    m), max_drift (largest move of the held grip point in the tool frame while pulling, m). The
-    place: picked (the item left the table in the hand), item_error (its bottom centre to the
-    true goal at the end, m), inside (its centre in the compartment's inner box), resting (speed
-    under `rest_speed`), q_final (articulation at the end; `still_open`: within the opening's
-    tolerance of the target). times (s, (M,)), q_object ((M,)), p_W_item (m, (M, 3)): the
-    samples."""
+    """What the simulated arm did: the opening before the place (its `SimulationResult`), then
+    the place: picked (the item left the table in the hand), item_error (its bottom centre to
+    the true goal at the end, m), inside (its centre in the compartment's inner box), resting
+    (speed under `rest_speed`), q_final (articulation at the end; `still_open`: within the
+    opening's tolerance of the target). times (s, (M,)), q_object ((M,)), p_W_item (m, (M, 3)):
+    the samples."""
 
-    grasp: str
-    joint_type: str
-    q_target: float
-    grasped: bool
-    q_opened: float
-    joint_error: float
-    max_drift: float
+    opening: SimulationResult = field(repr=False)
     picked: bool
     item_error: float
     inside: bool
     resting: bool
     q_final: float
     still_open: bool
-    opened: bool
     success: bool
     times: np.ndarray = field(repr=False)
     q_object: np.ndarray = field(repr=False)
@@ -175,12 +166,12 @@ class PlaceSimulationResult:
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
-        return (f"{verdict} ({self.grasp} grasp): opened {self.opened} (articulation {self.q_opened:.3f}, "
-                f"target {self.q_target:.3f}, error {joint_error_text(self.joint_type, self.joint_error)}, "
-                f"handle grasped "
-                f"{self.grasped}); item picked {self.picked}, {self.item_error * 100:.1f} cm from the goal, "
-                f"inside {self.inside}, resting {self.resting}; front still open {self.still_open} "
-                f"(articulation {self.q_final:.3f})")
+        o = self.opening
+        return (f"{verdict} ({o.grasp} grasp): opened {o.success} (articulation {o.q_final:.3f}, "
+                f"target {o.q_target:.3f}, error {joint_error_text(o.joint_type, o.joint_error)}, "
+                f"handle grasped {o.grasped}); item picked {self.picked}, {self.item_error * 100:.1f} cm "
+                f"from the goal, inside {self.inside}, resting {self.resting}; front still open "
+                f"{self.still_open} (articulation {self.q_final:.3f})")
 
 
 @dataclass
@@ -371,9 +362,7 @@ def simulate_place(obj: ArticulatedObject, X_WO: RigidTransform, opening: Simula
     picked = lifted >= 0.5 * PlaceConfig().lift_height
     success = opening.success and picked and inside and resting and still_open \
         and item_error <= cfg.place_tolerance
-    return PlaceSimulationResult(sim.grasp, opening.joint_type, opening.q_target, opening.grasped,
-                                 opening.q_final, opening.joint_error, opening.max_drift, picked,
-                                 item_error, inside, resting, float(q_final), still_open, opening.success,
+    return PlaceSimulationResult(opening, picked, item_error, inside, resting, float(q_final), still_open,
                                  success, samples, np.array(q_object), np.array(p_item))
 
 

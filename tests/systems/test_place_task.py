@@ -42,14 +42,14 @@ def test_open_and_place_a_drawer(tmp_path, grasp):
                              simulation_config=PlaceSimulationConfig(opening=SimulationConfig(grasp=grasp)))
     assert outcome.planning_error == ""
     sim = outcome.simulation
-    assert sim.opened and sim.picked and sim.inside and sim.resting and sim.still_open, sim.summary()
+    assert sim.opening.success and sim.picked and sim.inside and sim.resting and sim.still_open, sim.summary()
     assert sim.item_error < 0.03
     assert outcome.success and sim.summary().startswith(f"SUCCESS ({grasp} grasp)")
     # The item left the table and ended where the plan let go of it.
     assert sim.p_W_item[:, 2].max() > outcome.place.X_WI_pick.translation()[2] + 0.05
     np.testing.assert_allclose(sim.p_W_item[-1][:2], outcome.place.X_WI_place.translation()[:2], atol=0.02)
     letting_go = sim.times <= PlaceSimulationConfig().release + 0.5
-    assert np.abs(sim.q_object[letting_go] - sim.q_opened).max() * obj.front(0).joint_upper < 0.003
+    assert np.abs(sim.q_object[letting_go] - sim.opening.q_final).max() * obj.front(0).joint_upper < 0.003
     assert outcome.opening_replay == tmp_path / "place_opening.html"
     for replay in (outcome.opening_replay, outcome.replay):
         assert replay.stat().st_size > 10_000
