@@ -26,7 +26,6 @@ from nfr_drake.planning.compartment import door_width, drawer_half_width
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.obstacles import object_obstacles
-from nfr_drake.world.plan import ObstacleBox
 
 
 def main() -> None:
@@ -57,7 +56,7 @@ def main() -> None:
                 f"{width:7.3f}  {truth:12.3f}  {100 * (width - truth):13.1f}")
         if not drawer:
             boxes = object_obstacles(obj, scenario.X_WO, cloud.q, moving=-1, merge=False)
-            tops = {b.name: _top(b) for b in boxes}
+            tops = {b.name: b.top for b in boxes}
             door = max(v for k, v in tops.items() if k.startswith("front0_"))
             carcass = max(v for k, v in tops.items() if not k.startswith("front0_"))
             seen = [float(np.quantile(p[:, 2], 0.98)) for p in (cloud.moving(), cloud.static())]
@@ -65,10 +64,6 @@ def main() -> None:
                      f"  {100 * (seen[0] - door):9.1f}  {carcass:13.3f}  {100 * (seen[1] - carcass):9.1f}")
         print(line, flush=True)
 
-
-def _top(box: ObstacleBox) -> float:
-    """The highest corner of a box in W, m."""
-    return float(box.X_WB.translation()[2] + np.abs(box.X_WB.rotation().matrix())[2] @ box.size / 2)
 
 
 if __name__ == "__main__":

@@ -534,8 +534,7 @@ def _over(boxes: list[ObstacleBox], a: np.ndarray, b: np.ndarray, X_WB: RigidTra
     pts = a + np.linspace(0.0, 1.0, 25)[:, None] * (b - a)
     need = -np.inf
     for box in boxes:
-        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * box.size / 2
-        top = float((box.X_WB.rotation().matrix() @ corners.T)[2].max() + box.X_WB.translation()[2])
+        top = box.top
         level = pts * [1, 1, 0] + [0, 0, top - 1e-3]
         if distance_to_box(box, level).min() <= _OVER_REACH:
             need = max(need, top + _OVER_CLEARANCE)

@@ -47,6 +47,11 @@ class ObstacleBox:
     size: np.ndarray
     X_WB: RigidTransform
 
+    @property
+    def top(self) -> float:
+        """Height of its highest corner in W, m."""
+        return float(self.X_WB.translation()[2] + np.abs(self.X_WB.rotation().matrix()[2]) @ self.size / 2)
+
 
 @dataclass
 class PlanResult:

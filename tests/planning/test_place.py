@@ -357,11 +357,6 @@ def test_a_closet_doors_box_takes_the_width_the_fitted_points_give():
     assert from_handle["open_door"].size[1] == pytest.approx(reach + 0.05, abs=0.01)
 
 
-def _top_of(box: ObstacleBox) -> float:
-    """The highest corner of a box in W, m."""
-    return float(box.X_WB.translation()[2] + np.abs(box.X_WB.rotation().matrix())[2] @ box.size / 2)
-
-
 def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_higher():
     """Points of the door and of the carcass (their upper 5 cm) up to 4 and 3 cm over the
     keypoints' hinge_top: the
@@ -381,11 +376,11 @@ def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_high
 
     fixed, moving = compartment_obstacles(kt, 0.6, cloud=cloud(0.04, 0.03))
     top_panel = {b.name: b for b in fixed}["compartment_top"]
-    assert _top_of(moving[0]) == pytest.approx(hinge_top + 0.04 + 0.02, abs=0.006)
-    assert _top_of(top_panel) == pytest.approx(hinge_top + 0.03 + 0.02, abs=0.006)
-    assert _top_of(top_panel) - top_panel.size[2] == pytest.approx(hinge_top - 0.02)
+    assert moving[0].top == pytest.approx(hinge_top + 0.04 + 0.02, abs=0.006)
+    assert top_panel.top == pytest.approx(hinge_top + 0.03 + 0.02, abs=0.006)
+    assert top_panel.top - top_panel.size[2] == pytest.approx(hinge_top - 0.02)
     plain_fixed, plain_moving = compartment_obstacles(kt, 0.6)
     low_fixed, low_moving = compartment_obstacles(kt, 0.6, cloud=cloud(-0.1, -0.1))
-    assert _top_of(low_moving[0]) == pytest.approx(_top_of(plain_moving[0]))
-    assert _top_of(plain_moving[0]) == pytest.approx(hinge_top, abs=1e-6)
-    assert [_top_of(b) for b in low_fixed] == pytest.approx([_top_of(b) for b in plain_fixed])
+    assert low_moving[0].top == pytest.approx(plain_moving[0].top)
+    assert plain_moving[0].top == pytest.approx(hinge_top, abs=1e-6)
+    assert [b.top for b in low_fixed] == pytest.approx([b.top for b in plain_fixed])
