@@ -8,7 +8,8 @@ layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of
   `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
   shelves: a third of the way up) or, where the free height above the goal was measured (a look
   into the opened closet, `nfr_drake.systems.interior`), at that height, and its open door
-  (`grasp.door_panel_box` at the target);
+  (`grasp.door_panel_box` at the target); the top and the door's top edge as high as the fitted
+  field's points reach where that is higher than `hinge_top` (`part_top`);
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
   behind the handle, its back as far behind the goal as the front is ahead, side walls at the
   narrowest box's half width (`_DRAWER_MIN_HALF_WIDTH`) or, where the fitted field's points give
