@@ -359,9 +359,9 @@ def test_a_closet_doors_box_takes_the_width_the_fitted_points_give():
 
 def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_higher():
     """Points of the door and of the carcass (their upper 5 cm) up to 4 and 3 cm over the
-    keypoints' hinge_top: the
-    open door's box and the carcass's top panel reach 2 cm over the points' top (the panel's
-    underside stays a wall under hinge_top); points that end lower leave the boxes at hinge_top."""
+    keypoints' hinge_top: the open door's box and the carcass's top panel reach 2 cm over the
+    points' top (the panel's underside stays a wall under hinge_top); points that end lower leave
+    the boxes at hinge_top."""
     obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
     hinge_top = kt.point("hinge_top", 0.0)[2]
