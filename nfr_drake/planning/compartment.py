@@ -6,8 +6,9 @@ drawer's inner floor centre that moves with it) and the handle; the rest comes f
 layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
 - a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
   `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
-  shelves: a third of the way up) or, where the free height above the goal was measured (a look
-  into the opened closet, `nfr_drake.systems.interior`), at that height, and its open door
+  shelves: a third of the way up) and its floor at the goal's height or, where a look into the
+  opened closet measured them (`InteriorLook`, `nfr_drake.systems.interior`), the shelf's
+  underside and the floor where it saw them, and its open door
   (`grasp.door_panel_box` at the target); the top and the door's top edge as high as the fitted
   field's points reach where that is higher than `hinge_top` (`part_top`);
 - a drawer is the solid carcass box (`grasp.carcass_box`) and the pulled-out box: its front panel
@@ -20,6 +21,8 @@ layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
@@ -64,12 +67,24 @@ def _box(name: str, R: RotationMatrix, axes: tuple[np.ndarray, ...], lo: np.ndar
     return ObstacleBox(name, np.abs(np.asarray(hi) - np.asarray(lo)), RigidTransform(R, centre))
 
 
-def compartment_obstacles(kt: KeypointTrajectory, q: float, free_height: float | None = None,
+@dataclass(frozen=True)
+class InteriorLook:
+    """What a look into an opened closet saw in the vertical column over its goal keypoint,
+    heights in W, m: the floor's top (None where the view saw nothing below the camera) and the
+    underside of the lowest thing over it (a shelf, the top panel; where nothing was seen, the
+    height the view reaches)."""
+
+    floor: float | None
+    ceiling: float
+
+
+def compartment_obstacles(kt: KeypointTrajectory, q: float, look: InteriorLook | None = None,
                           cloud: SemanticCloud | None = None) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
     """Obstacle boxes in W of the compartment opened to articulation q (module docstring): those
-    that stay put, and those of the moving part (the door, the drawer's box). free_height: a
-    closet's measured free height above the goal, m (its shelf's underside there; none when that
-    reaches the top); None: the lowest shelf the closet's height allows. cloud: the fitted
+    that stay put, and those of the moving part (the door, the drawer's box). look: a closet's
+    floor and the shelf over the goal as a look inside saw them (no shelf where the ceiling
+    reaches the top); None: the floor at the goal's height, the lowest shelf the closet's
+    height allows. cloud: the fitted
     field's points that came with the keypoints: the moving part's width from them (a drawer
     front's half width about its goal, `drawer_half_width`; a closet door's width from its hinge,
     `door_width`) and a closet's top and its door's top edge (`part_top`, where higher than the
@@ -78,7 +93,7 @@ def compartment_obstacles(kt: KeypointTrajectory, q: float, free_height: float |
     if "goal" not in kt.names:
         raise NfrDrakeError(f"the {kt.category}'s keypoint trajectory has no goal keypoint to place at")
     if kt.category == "closet":
-        return _closet(kt, q, free_height, cloud)
+        return _closet(kt, q, look, cloud)
     half_width = None if cloud is None else drawer_half_width(kt, cloud)
     if half_width is None:
         return _drawer(kt, q, _DRAWER_MIN_HALF_WIDTH, _DRAWER_MIN_HALF_WIDTH + _WALL)
@@ -144,7 +159,7 @@ def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
     return np.sqrt(1.0 - sin ** 2) * (t - (t @ _Z) * _Z) + sin * r / np.linalg.norm(r)
 
 
-def _closet(kt: KeypointTrajectory, q: float, free_height: float | None, cloud: SemanticCloud | None
+def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: SemanticCloud | None
             ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
     """A closet's hollow carcass and its open door; its top panel spans from a wall under the
     lower of the keypoints' and the points' top to the higher."""
@@ -159,8 +174,8 @@ def _closet(kt: KeypointTrajectory, q: float, free_height: float | None, cloud: 
     underside = top if measured is None else min(top, measured - TOP_MARGIN)
     shelf = floor + (top - 2 * floor) / 3 - floor / 2  # underside of the lowest shelf a closet can have
     top = top if measured is None else max(top, measured)
-    if free_height is not None:
-        shelf = floor + free_height
+    if look is not None:
+        floor, shelf = (floor if look.floor is None else look.floor), look.ceiling
     boxes = [
         _box("compartment_bottom", R, axes, [back, y0 - half, 0.0], [front, y0 + half, floor]),
         _box("compartment_top", R, axes, [back, y0 - half, underside - _WALL], [front, y0 + half, top]),

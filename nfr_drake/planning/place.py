@@ -152,15 +152,21 @@ class PlaceProblem:
 
 def place_problem(kt: KeypointTrajectory, q_target: float, item: Item, X_WI: RigidTransform,
                   table: ObstacleBox, obstacles: tuple[list[ObstacleBox], list[ObstacleBox]] | None = None,
-                  config: PlaceConfig | None = None, toward: np.ndarray | None = None) -> PlaceProblem:
+                  config: PlaceConfig | None = None, toward: np.ndarray | None = None,
+                  floor: float | None = None) -> PlaceProblem:
     """The problem of placing `item` (at X_WI on `table`) at the goal of `kt` opened to q_target:
     a side grasp into a closet, a top grasp into a drawer. obstacles: (fixed, moving) boxes, e.g.
     of a true model; None: from the keypoints (`compartment_obstacles`). toward: the base's
-    position (m, (3,) in W) a closet's way in turns toward (`compartment_entry`); None: straight in."""
+    position (m, (3,) in W) a closet's way in turns toward (`compartment_entry`); None: straight in.
+    floor: the compartment floor's height under the goal where measured (m in W; a look inside,
+    `InteriorLook`): the goal's height; None: the keypoint's."""
     entry, depth = _entry(kt, q_target, item, config or PlaceConfig(), toward)
     fixed, moving = obstacles if obstacles is not None else compartment_obstacles(kt, q_target)
-    return PlaceProblem(GRASP_OF[kt.category], kt.point("goal", q_target), entry,
-                        depth, list(fixed), list(moving), table, item, X_WI)
+    goal = kt.point("goal", q_target)
+    if floor is not None:
+        goal = np.array([goal[0], goal[1], floor])
+    return PlaceProblem(GRASP_OF[kt.category], goal, entry, depth, list(fixed), list(moving), table, item,
+                        X_WI)
 
 
 def _entry(kt: KeypointTrajectory, q_target: float, item: Item, cfg: PlaceConfig,

@@ -35,7 +35,12 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.objects.articulated import ArticulatedObject
-from nfr_drake.planning.compartment import compartment_entry, compartment_obstacles, front_normal
+from nfr_drake.planning.compartment import (
+    InteriorLook,
+    compartment_entry,
+    compartment_obstacles,
+    front_normal,
+)
 from nfr_drake.planning.place import (
     GRASP_OF,
     PLACE_REACH,
@@ -61,7 +66,7 @@ from nfr_drake.systems.articulation import (
     set_arm_gains,
     simulate_articulation,
 )
-from nfr_drake.systems.interior import free_height_above_goal
+from nfr_drake.systems.interior import look_into_compartment
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.cloud import SemanticCloud
@@ -448,24 +453,26 @@ def door_band(obstacles_at, q: float, margin: float = DOOR_MARGIN
 
 
 def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt: KeypointTrajectory,
-                q: float) -> float:
-    """The free height above kt's goal at articulation q (m), seen in `obj` opened to q_true (in
-    [0, 1]) by a camera held low in front of the front kt's keypoints give
-    (`free_height_above_goal`)."""
+                q: float) -> InteriorLook:
+    """The floor and the ceiling over kt's goal at articulation q, seen in `obj` opened to q_true
+    (in [0, 1]) by a camera held low in front of the front kt's keypoints give
+    (`look_into_compartment`)."""
     _, opening = compartment_entry(kt, q)
-    return free_height_above_goal(obj, X_WO, q_true, kt.point("goal", q), front_normal(kt, q), opening)
+    return look_into_compartment(obj, X_WO, q_true, kt.point("goal", q), front_normal(kt, q), opening)
 
 
-def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig
-                    ) -> tuple[PlacePlan, ObstacleBox]:
+def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig,
+                    floor: float | None = None) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
-    the first that plans), and its table."""
+    the first that plans), and its table; `floor`: the goal's height where measured (m in W;
+    `place_problem`)."""
     boxes = [*obstacles[0], *obstacles[1]]
     errors = []
     for X_WB in place_bases(kt, q, boxes):
         try:
             table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
-            problem = place_problem(kt, q, item, X_WI, table, obstacles, place_config, X_WB.translation())
+            problem = place_problem(kt, q, item, X_WI, table, obstacles, place_config, X_WB.translation(),
+                                    floor)
             return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, place_config), table
         except PlanningError as err:
             errors.append(str(err))
@@ -487,8 +494,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     with its opening, from one base (`_one_base`). A closet's (or a drawer's where no one base
     serves both) from a base re-placed after the opening (`MOVE_BASE`): the opening is planned
     and simulated first, then the place planned around the front where the opening left it
-    (`measured_articulation`, `door_band`; with given keypoints, a closet's shelf over the goal
-    where a look inside sees it, `look_inside`). `replay`: an HTML replay of the place, with the
+    (`measured_articulation`, `door_band`; with given keypoints, a closet's floor and the shelf
+    over the goal where a look inside sees them, `look_inside`, the goal at the floor's height). `replay`: an HTML replay of the place, with the
     keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside it
     (`*_opening.html`). `cloud`: the fitted field's points that came with `keypoints`; the
     moving part's obstacles then have its measured width (`compartment_obstacles`)."""
@@ -525,13 +532,15 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
     if moved:
         q_door = measured_articulation(kt, opening)
-        if keypoints is not None and kt.category == "closet":  # look in for the shelf over the goal
-            free = look_inside(obj, X_WO, opening.q_final, kt, q_door)
-            obstacles_at = lambda q: compartment_obstacles(keypoints, q, free, cloud)  # noqa: E731
+        look = None
+        if keypoints is not None and kt.category == "closet":  # look in for the floor and the shelf
+            look = look_inside(obj, X_WO, opening.q_final, kt, q_door)
+            obstacles_at = lambda q: compartment_obstacles(keypoints, q, look, cloud)  # noqa: E731
         obstacles = door_band(obstacles_at, q_door)
         planned = time.perf_counter()
         try:
-            place, table = _place_in_front(kt, q_door, item, obstacles, place_config)
+            place, table = _place_in_front(kt, q_door, item, obstacles, place_config,
+                                           None if look is None else look.floor)
         except PlanningError as err:
             return failed("; ".join([*errors, f"base moved after the opening (front measured at "
                                      f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned,

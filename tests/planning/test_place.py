@@ -7,6 +7,7 @@ from pydrake.math import RigidTransform
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.compartment import (
+    InteriorLook,
     compartment_entry,
     compartment_obstacles,
     door_width,
@@ -176,17 +177,23 @@ def _short_closet_with_shelves(shelves: int):
 
 
 def test_a_measured_free_height_replaces_the_assumed_lowest_shelf():
-    """Keypoint-derived boxes: without a measure, the lowest shelf a 0.40 m closet can have, 11-12
-    cm over its floor (a third of the way up, less half a panel); with one, the shelf's underside at
-    the measured height, and none where it reaches the top."""
+    """Keypoint-derived boxes: without a look inside, the lowest shelf a 0.40 m closet can have,
+    11-12 cm over its floor (a third of the way up, less half a panel), the floor at the goal;
+    with one, the shelf's underside and the floor's top where the look saw them, and no shelf
+    where the ceiling is the top."""
     from nfr_drake.planning.place import free_height
 
     kt = KeypointTrajectory.from_articulated_object(_short_closet_with_shelves(0), RigidTransform(), 0.0)
     goal = kt.point("goal", 0.6)
     assumed = free_height(compartment_obstacles(kt, 0.6)[0], goal)
     assert 0.10 < assumed < 0.14
-    assert free_height(compartment_obstacles(kt, 0.6, 0.25)[0], goal) == pytest.approx(0.25, abs=0.006)
-    fixed, _ = compartment_obstacles(kt, 0.6, 1.0)
+    bottom = {b.name: b for b in compartment_obstacles(kt, 0.6)[0]}["compartment_bottom"]
+    assert bottom.top == pytest.approx(goal[2])
+    fixed, _ = compartment_obstacles(kt, 0.6, InteriorLook(goal[2] + 0.012, goal[2] + 0.25))
+    assert free_height(fixed, goal + [0.0, 0.0, 0.012]) == pytest.approx(0.238, abs=0.006)
+    assert {b.name: b for b in fixed}["compartment_bottom"].top == pytest.approx(goal[2] + 0.012)
+    fixed, _ = compartment_obstacles(kt, 0.6, InteriorLook(None, goal[2] + 1.0))
+    assert {b.name: b for b in fixed}["compartment_bottom"].top == pytest.approx(goal[2])
     assert not [b for b in fixed if "shelf" in b.name]
     assert free_height(fixed, goal) > 0.35  # the top panel
 
