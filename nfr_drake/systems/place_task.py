@@ -495,10 +495,11 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     serves both) from a base re-placed after the opening (`MOVE_BASE`): the opening is planned
     and simulated first, then the place planned around the front where the opening left it
     (`measured_articulation`, `door_band`; with given keypoints, a closet's floor and the shelf
-    over the goal where a look inside sees them, `look_inside`, the goal at the floor's height). `replay`: an HTML replay of the place, with the
-    keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside it
-    (`*_opening.html`). `cloud`: the fitted field's points that came with `keypoints`; the
-    moving part's obstacles then have its measured width (`compartment_obstacles`)."""
+    over the goal where a look inside sees them, `look_inside`, the goal at the floor's height).
+    `replay`: an HTML replay of the place, with the keypoint paths used (and `reference`'s under
+    "keypoints_true"), the opening's beside it (`*_opening.html`). `cloud`: the fitted field's
+    points that came with `keypoints`; the moving part's obstacles then have its measured width
+    (`compartment_obstacles`)."""
     started = time.perf_counter()
     place_config = place_config or PlaceConfig()
     if keypoints is None:
