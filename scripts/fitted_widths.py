@@ -9,8 +9,9 @@ For each object of the capture seed: photographed alone by the pipeline's camera
 the measured width (a drawer front's half width about its goal, `drawer_half_width`; a door's
 width from its hinge line, `door_width`) and the true one (half the carcass's width; the
 carcass's width), m. For a closet also the open door's top edge, as the keypoints give it
-(`hinge_top`) and as the fitted field's points of the moving part give it (their 0.98 quantile
-of height), against the true door's top, and the carcass's top from its points, cm from the truth
+(`hinge_top`) and as the fitted field's points of the moving part give it (`part_top`: their
+0.98 quantile of height), against the true door's top, and the carcass's top from its points, cm
+from the truth
 (docs/PLACE.md, "The tops from the fitted field").
 """
 
@@ -19,10 +20,8 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
 from nfr_drake.cpu import set_torch_threads
-from nfr_drake.planning.compartment import door_width, drawer_half_width
+from nfr_drake.planning.compartment import door_width, drawer_half_width, part_top
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.obstacles import object_obstacles
@@ -59,7 +58,7 @@ def main() -> None:
             tops = {b.name: b.top for b in boxes}
             door = max(v for k, v in tops.items() if k.startswith("front0_"))
             carcass = max(v for k, v in tops.items() if not k.startswith("front0_"))
-            seen = [float(np.quantile(p[:, 2], 0.98)) for p in (cloud.moving(), cloud.static())]
+            seen = [part_top(p) for p in (cloud.moving(), cloud.static())]
             line += (f"  {door:10.3f}  {100 * (kt.point('hinge_top', cloud.q)[2] - door):12.1f}"
                      f"  {100 * (seen[0] - door):9.1f}  {carcass:13.3f}  {100 * (seen[1] - carcass):9.1f}")
         print(line, flush=True)

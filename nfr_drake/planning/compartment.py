@@ -141,11 +141,11 @@ over them."""
 
 
 def part_top(points: np.ndarray, share: float = 0.98) -> float | None:
-    """The top of a part from its fitted points (m, (N, 3) in W): their heights' `share` quantile
-    and `TOP_MARGIN`, m; None under 20 points."""
+    """The top of a part's fitted points (m, (N, 3) in W): their heights' `share` quantile, m;
+    None under 20 points."""
     if len(points) < 20:
         return None
-    return float(np.quantile(points[:, 2], share)) + TOP_MARGIN
+    return float(np.quantile(points[:, 2], share))
 
 
 def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
@@ -171,9 +171,9 @@ def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: 
     half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
     y0, floor, top = goal @ lat, goal[2], kt.point("hinge_top", 0.0)[2]
     measured = None if cloud is None else part_top(cloud.static())
-    underside = top if measured is None else min(top, measured - TOP_MARGIN)
+    underside = top if measured is None else min(top, measured)
     shelf = floor + (top - 2 * floor) / 3 - floor / 2  # underside of the lowest shelf a closet can have
-    top = top if measured is None else max(top, measured)
+    top = top if measured is None else max(top, measured + TOP_MARGIN)
     if look is not None:
         floor, shelf = (floor if look.floor is None else look.floor), look.ceiling
     boxes = [
@@ -187,7 +187,7 @@ def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: 
         boxes.append(_box("compartment_shelf", R, axes, [back, y0 - half, shelf],
                           [front - 0.01, y0 + half, shelf + _WALL]))
     width, door_top = (None, None) if cloud is None else (door_width(kt, cloud), part_top(cloud.moving()))
-    door = door_panel_box(kt.with_current(q), width, door_top)
+    door = door_panel_box(kt.with_current(q), width, None if door_top is None else door_top + TOP_MARGIN)
     return boxes, [door] if door is not None else []
 
 
