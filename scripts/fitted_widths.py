@@ -11,8 +11,7 @@ width from its hinge line, `door_width`) and the true one (half the carcass's wi
 carcass's width), m. For a closet also the open door's top edge, as the keypoints give it
 (`hinge_top`) and as the fitted field's points of the moving part give it (`part_top`: their
 0.98 quantile of height), against the true door's top, and the carcass's top from its points, cm
-from the truth
-(docs/PLACE.md, "The tops from the fitted field").
+from the truth (docs/PLACE.md, "The tops from the fitted field").
 """
 
 from __future__ import annotations
