@@ -5,7 +5,13 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
-from nfr_drake.planning.grasp import PANEL_SETBACK, carcass_box, door_panel_box, handle_waypoints
+from nfr_drake.planning.grasp import (
+    PANEL_SETBACK,
+    carcass_box,
+    door_panel_box,
+    handle_tangent,
+    handle_waypoints,
+)
 from nfr_drake.world.keypoints import KeypointTrajectory
 
 X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, 0.4), [0.3, -0.2, 0.0])
@@ -39,6 +45,27 @@ def test_closet_grasp_frame_and_box():
     assert np.any(np.abs(p_BH) > box.size / 2 + 0.04)  # the handle is well outside the box
     p_BG = box.X_WB.inverse() @ obj.keypoints(0.0)["goal"]
     assert np.all(np.abs(p_BG) <= box.size / 2 + 1e-9)  # the carcass centre is inside
+
+
+def test_a_doors_approach_follows_its_hinge_not_a_bent_end_of_its_path():
+    """A door's keypoints whose handle path is bent at its shut end (the first grid step's point
+    moved 1 cm sideways, as a fitted path can be): the path's own direction there is several
+    degrees off, the handle's tangent (about the hinge line) and so the approach within 0.1
+    degree of the true door's."""
+    obj = _object("closet")
+    kt = KeypointTrajectory.from_articulated_object(obj, X_WO, 0.0)
+    p_WK = kt.p_WK.copy()
+    handle = kt.names.index("handle")
+    lateral = np.cross([0.0, 0.0, 1.0], p_WK[1, handle] - p_WK[0, handle])
+    p_WK[1, handle] += 0.01 * lateral / np.linalg.norm(lateral)
+    bent = KeypointTrajectory(kt.category, kt.q_grid, kt.names, p_WK, 0.0)
+    step = bent.point("handle", bent.q_grid[1]) - bent.point("handle", 0.0)
+    true = handle_tangent(kt, 0.0)
+    angle = lambda a, b: np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))  # noqa: E731
+    assert angle(step, true) > 3.0
+    assert angle(handle_tangent(bent, 0.0), true) < 0.1
+    (wp,) = handle_waypoints(bent, np.array([0.0]))
+    assert angle(wp.approach_W, -true) < 0.1
 
 
 def test_open_door_panel_box():
