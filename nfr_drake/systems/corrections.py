@@ -39,23 +39,15 @@ def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) 
     return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
 
 
-def arc_angle(points: np.ndarray, radius: float | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle from the first
     point to the last about it (rad, within +-pi), its centre (3,) and unit axis (3,), the angle
-    positive about the axis. Plane by SVD, circle by linear least squares in it; with `radius`
-    (m), the circle of that radius nearest the points (Gauss-Newton on its centre, from the free
-    circle's): over a door's 50-degree arc a free circle's centre moves centimetres for a bar
-    that slips a centimetre outward in the fingers, one of known radius a few millimetres."""
+    positive about the axis. Plane by SVD, circle by linear least squares in it."""
     mean = points.mean(axis=0)
     e1, e2 = np.linalg.svd(points - mean)[2][:2]
     axis = np.cross(e1, e2)
     uv = (points - mean) @ np.c_[e1, e2]
     centre_uv = np.linalg.lstsq(np.c_[2.0 * uv, np.ones(len(uv))], (uv ** 2).sum(axis=1), rcond=None)[0][:2]
-    for _ in range(0 if radius is None else 20):
-        offsets = uv - centre_uv
-        distances = np.linalg.norm(offsets, axis=1)
-        step = np.linalg.lstsq(offsets / distances[:, None], distances - radius, rcond=None)[0]
-        centre_uv = centre_uv + step
     a, b = uv[0] - centre_uv, uv[-1] - centre_uv
     return float(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)), mean + centre_uv @ np.r_[[e1], [e2]], axis
 
@@ -72,24 +64,13 @@ def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[f
     return float(np.arctan2(np.cross(a, b) @ axis, a @ b)), axis
 
 
-def hinge_radius(keypoints: KeypointTrajectory) -> float:
-    """The handle's horizontal distance from the keypoints' hinge line at their present
-    articulation, m: the door's radius at the handle, which an error in the object's pose leaves
-    as it is."""
-    bottom, top = (keypoints.point(name, keypoints.q_current) for name in ("hinge_bottom", "hinge_top"))
-    axis = (top - bottom) / np.linalg.norm(top - bottom)
-    r = keypoints.point("handle", keypoints.q_current) - bottom
-    return float(np.linalg.norm(r - (r @ axis) * axis))
-
-
-def door_turn(tool_path: np.ndarray, planned: float, planned_axis: np.ndarray, radius: float | None = None
+def door_turn(tool_path: np.ndarray, planned: float, planned_axis: np.ndarray
               ) -> tuple[float, np.ndarray, np.ndarray]:
     """How much further to turn a door, rad: the `planned` turn (rad about `planned_axis`,
     `planned_door_turn`) less the angle the tool swept (`tool_path`, (N, 3), from its joint
-    positions) about the circle through its path (of `radius`, m, where given: `arc_angle`);
-    with that circle's centre and axis (the door's hinge as the hand felt it, turned to agree
-    with the plan's)."""
-    swept, centre, axis = arc_angle(tool_path, radius)
+    positions) about the circle through its path; with that circle's centre and axis (the door's
+    hinge as the hand felt it, turned to agree with the plan's)."""
+    swept, centre, axis = arc_angle(tool_path)
     if axis @ planned_axis < 0.0:
         swept, axis = -swept, -axis
     return planned - swept, centre, axis
@@ -125,16 +106,14 @@ def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, keypoin
                      q_target: float, q_now: np.ndarray, q_command: np.ndarray, smallest: float,
                      largest: float, largest_gap: float = np.inf) -> tuple[np.ndarray, float, float]:
     """The offset to add to the arm's command `q_command` (the plan's last) that turns the hand,
-    now at `q_now` (measured), on about the door's felt hinge (the circle of the keypoints'
-    radius, `hinge_radius`, through the tool's path) by `door_turn`'s angle for the turn
+    now at `q_now` (measured), on about the door's felt hinge by `door_turn`'s angle for the turn
     `keypoints` plan to `q_target`, clipped to +-`largest` (rad), that angle, and the felt hinge's
     gap to the keypoints' (`hinge_gap`, m); no offset and angle 0 when the angle is under
     `smallest` or the gap over `largest_gap` (the keypoints' hinge, whose turn the angle comes
     from, is not the door's), and gap nan when the tool's path has under 3 points."""
     if len(tool_path) < 3:
         return np.zeros(NUM_ARM_JOINTS), 0.0, float("nan")
-    planned, planned_axis = planned_door_turn(keypoints, q_target)
-    angle, centre, axis = door_turn(tool_path, planned, planned_axis, hinge_radius(keypoints))
+    angle, centre, axis = door_turn(tool_path, *planned_door_turn(keypoints, q_target))
     gap = hinge_gap(centre, keypoints)
     if abs(angle) < smallest or gap > largest_gap:
         return np.zeros(NUM_ARM_JOINTS), 0.0, gap
