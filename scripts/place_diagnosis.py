@@ -1,5 +1,5 @@
 """Why an open-and-place run of a capture object failed, traced in the simulation (true keypoints,
-contact grasp; docs/PLACE.md, "What fails").
+contact grasp; docs/PLACE.md, "Results").
 
     python scripts/place_diagnosis.py door INDEX         # closet INDEX of seed 200: who pushes the door
     python scripts/place_diagnosis.py item INDEX T0 T1   # the item's and the hand's contacts, T0-T1 s

@@ -84,12 +84,12 @@ def compartment_obstacles(kt: KeypointTrajectory, q: float, look: InteriorLook |
     that stay put, and those of the moving part (the door, the drawer's box). look: a closet's
     floor and the shelf over the goal as a look inside saw them (no shelf where the ceiling
     reaches the top); None: the floor at the goal's height, the lowest shelf the closet's
-    height allows. cloud: the fitted
-    field's points that came with the keypoints: the moving part's width from them (a drawer
-    front's half width about its goal, `drawer_half_width`; a closet door's width from its hinge,
-    `door_width`) and a closet's top and its door's top edge (`part_top`, where higher than the
-    keypoints' `hinge_top`); None, or too few points: a drawer's walls those of the narrowest
-    box, a door as wide as the handle says (`grasp.door_panel_box`), the tops at `hinge_top`."""
+    height allows. cloud: the fitted field's points that came with the keypoints: the moving
+    part's width from them (a drawer front's half width about its goal, `drawer_half_width`; a
+    closet door's width from its hinge, `door_width`) and a closet's top and its door's top edge
+    (`part_top`, where higher than the keypoints' `hinge_top`); None, or too few points: a
+    drawer's walls those of the narrowest box, a door as wide as the handle says
+    (`grasp.door_panel_box`), the tops at `hinge_top`."""
     if "goal" not in kt.names:
         raise NfrDrakeError(f"the {kt.category}'s keypoint trajectory has no goal keypoint to place at")
     if kt.category == "closet":
