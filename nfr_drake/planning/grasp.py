@@ -54,8 +54,8 @@ def handle_tangent(kt: KeypointTrajectory, q: float) -> np.ndarray:
     """Unit direction in which the handle moves for increasing q, at q, shape (3,): for a drawer
     the path's direction there (a finite difference); for a door the tangent of the handle's
     circle about the hinge line at q (hinge_bottom to hinge_top), the way the path goes. A fitted
-    path's direction at its shut end can be off the circle's by 7 degrees with the hinge within
-    3 mm (closet 4 of capture seed 901): the hand, approaching along it, pressed the door shut."""
+    path can bend at its shut end where its hinge is close (closets 4 and 6 of capture seed 901,
+    docs/PLANNING.md): the hand, approaching along the bent end, pressed the door shut."""
     dq = 0.5 * float(np.min(np.diff(kt.q_grid)))
     lo, hi = max(q - dq, kt.q_grid[0]), min(q + dq, kt.q_grid[-1])
     path = _unit(kt.point("handle", hi) - kt.point("handle", lo), "the handle path")
