@@ -12,7 +12,8 @@ samples, at rest at both ends:
    along a straight line (the way into the compartment: horizontal through a closet's front, down
    into a drawer) to the place pose: the item's bottom centre `drop_height` above the goal
    keypoint, upright;
-3. "retreat": back out along the same line (the hand may touch the item it let go of; the
+3. "retreat": back straight out along the tool's axis until the open fingers are off the item
+   (`_straight_out`), then out along the way in (the hand may touch the item it let go of; the
    approach within `approach_cone_deg` of the place's), the item left behind.
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
 hand fits under a shelf), a drawer's from the top (vertical approach: it is open from above). The
@@ -25,6 +26,7 @@ open in the plan; the simulation closes them.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +107,11 @@ class PlaceConfig:
     about the approach, clears the surface the item stands on)."""
     position_tolerance: float = 0.004
     upright_tolerance_deg: float = 12.0
+    """The held item within this of upright while carried, degrees."""
+    release_upright_deg: float = 2.0
+    """... and within this at the place, where the arm reaches so (else within
+    `upright_tolerance_deg`): released tilted, an item lands on an edge and rocks over (11 degrees
+    left one 4.7 cm from the goal)."""
     approach_cone_deg: float = 40.0
     """Side grasp at the place: the approach within this of the way into the closet (the hand may
     turn about the vertical)."""
@@ -113,6 +120,14 @@ class PlaceConfig:
     line_overshoot: float = 0.006
     """... and the tool at most this past it along its approach, m (the open fingers would push the
     item: 12 cm past it on one plan without this, and the item was nudged off its hold)."""
+    back_off_clearance: float = 0.02
+    """After the release the tool backs straight out along its axis until the fingertips (1 cm past
+    the tool origin) clear the item's near side by this much, m (`_straight_out`) ..."""
+    back_off_tolerance: float = 0.004
+    """... the release point within this of the tool's axis, m (open fingers clear a 6.7 cm item by
+    6.5 mm a side) ..."""
+    back_off_turn_deg: float = 3.0
+    """... and the tool turned at most this from its orientation at the release, degrees."""
     min_distance: float = 0.01
     collision_samples: int = 12
     """Fewest collision samples per piece (knot to knot); at most four times as many."""
@@ -285,12 +300,14 @@ def grasp_in_item(item: Item, grasp: str, cfg: PlaceConfig, flip: bool = False) 
 class _Stage:
     """One knot: named constraints on the tool frame, the scene its IK clears, the tool point it
     aims at (for its timing and IK seeds) and, if known, the tool's approach there (unit, W).
-    straight: the piece to it keeps p_W on the tool's axis ahead of the tool (`_straight_in`)."""
+    along: constraints at the inner collision samples of the piece to it, given the scene and the
+    tool point it starts from (a straight piece, `_straight_in`, `_straight_out`); None: free."""
 
     def __init__(self, name: str, scene: str, p_W: np.ndarray, constraints,
-                 approach: np.ndarray | None = None, straight: bool = False):
+                 approach: np.ndarray | None = None,
+                 along: Callable[[PlanningScene, np.ndarray], list] | None = None):
         self.name, self.scene, self.p_W, self.constraints = name, scene, np.asarray(p_W), constraints
-        self.approach, self.straight = approach, straight
+        self.approach, self.along = approach, along
 
 
 def _tool_pose(X_WG: RigidTransform, cfg: PlaceConfig, angle_deg: float = 2.0):
@@ -321,14 +338,18 @@ def _backing_out(p_W: np.ndarray, X_WG: RigidTransform, cfg: PlaceConfig):
     return make
 
 
-def _item_at(p_WI: np.ndarray, X_GI: RigidTransform, entry: np.ndarray, side: bool, cfg: PlaceConfig):
-    """The held item's origin at p_WI, upright; a side grasp's approach within the cone of `entry`."""
+def _item_at(p_WI: np.ndarray, X_GI: RigidTransform, entry: np.ndarray, side: bool, cfg: PlaceConfig,
+             upright_deg: float | None = None):
+    """The held item's origin at p_WI, upright within `upright_deg` (None: the config's
+    `upright_tolerance_deg`); a side grasp's approach within the cone of `entry`."""
+    upright = cfg.upright_tolerance_deg if upright_deg is None else upright_deg
+
     def make(sc: PlanningScene):
         W, G, ctx = sc.plant.world_frame(), sc.tool_frame, sc.plant_context
         tol = np.full(3, cfg.position_tolerance)
         out = [PositionConstraint(sc.plant, W, p_WI - tol, p_WI + tol, G, X_GI.translation(), ctx),
                AngleBetweenVectorsConstraint(sc.plant, W, _Z, G, X_GI.rotation().col(2), 0.0,
-                                             np.radians(cfg.upright_tolerance_deg), ctx)]
+                                             np.radians(upright), ctx)]
         if side:
             out.append(AngleBetweenVectorsConstraint(sc.plant, W, entry, G, np.array([0.0, 0.0, 1.0]), 0.0,
                                                      np.radians(cfg.approach_cone_deg), ctx))
@@ -423,17 +444,35 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
     return sols, ""
 
 
-def _straight_in(sc: PlanningScene, p_from: np.ndarray, p_to: np.ndarray, cfg: PlaceConfig
-                 ) -> list[PositionConstraint]:
-    """The tool on the segment from p_from to p_to (m, (3,) in W), its axis along it: p_to on the
-    tool's axis (within `cfg.line_tolerance`) ahead of the tool, at most `cfg.line_overshoot` behind
-    it (the tool does not pass its target), and p_from on the axis behind the tool."""
-    tol, length = cfg.line_tolerance, float(np.linalg.norm(p_to - p_from))
+def _on_axis(sc: PlanningScene, ahead: np.ndarray, behind: np.ndarray, cfg: PlaceConfig, tol: float
+             ) -> list[PositionConstraint]:
+    """The tool on the segment between two points (m, (3,) in W), its axis along it: `ahead` on
+    the tool's axis (within `tol`) ahead of the tool, `behind` on it behind the tool, neither
+    passed by more than `cfg.line_overshoot`."""
+    length = float(np.linalg.norm(ahead - behind))
     W, G, ctx = sc.plant.world_frame(), sc.tool_frame, sc.plant_context
     return [PositionConstraint(sc.plant, G, [-tol, -tol, -cfg.line_overshoot], [tol, tol, length + 0.01],
-                               W, p_to, ctx),
+                               W, ahead, ctx),
             PositionConstraint(sc.plant, G, [-tol, -tol, -length - 0.01], [tol, tol, cfg.line_overshoot],
-                               W, p_from, ctx)]
+                               W, behind, ctx)]
+
+
+def _straight_in(p_to: np.ndarray, cfg: PlaceConfig):
+    """`_Stage.along` of a piece forward along the tool's axis to p_to (m, (3,) in W), within
+    `cfg.line_tolerance` of the line."""
+    return lambda sc, p_from: _on_axis(sc, p_to, p_from, cfg, cfg.line_tolerance)
+
+
+def _straight_out(X_WG: RigidTransform, p_to: np.ndarray, cfg: PlaceConfig):
+    """`_Stage.along` of a piece from the tool pose X_WG backwards along the tool's axis to p_to
+    (m, (3,) in W), within `cfg.back_off_tolerance` of the line and `cfg.back_off_turn_deg` of
+    X_WG's orientation: the open fingers slide off the item they let go of (a retreat free to
+    swing dragged a mug 3.2 cm off the goal with one finger)."""
+    def along(sc: PlanningScene, _p_from: np.ndarray) -> list:
+        return [*_on_axis(sc, X_WG.translation(), p_to, cfg, cfg.back_off_tolerance),
+                OrientationConstraint(sc.plant, sc.plant.world_frame(), X_WG.rotation(), sc.tool_frame,
+                                      RotationMatrix(), np.radians(cfg.back_off_turn_deg), sc.plant_context)]
+    return along
 
 
 _RESAMPLES = 2
@@ -487,9 +526,9 @@ def _optimise_piece(scenes: dict[str, PlanningScene], stage: _Stage, q_from: np.
         described += [(f"collision clearance at s={s:.2f} ({stage.scene})",
                        trajopt.AddPathPositionConstraint(check, s))
                       for s in np.r_[np.linspace(0.0, 1.0, samples + 1)[1:], added]]
-        if stage.straight:
+        if stage.along is not None:
             described += [(f"straight to {stage.name}", trajopt.AddPathPositionConstraint(c, s))
-                          for c in _straight_in(sc, p_from, stage.p_W, cfg)
+                          for c in stage.along(sc, p_from)
                           for s in np.linspace(0.0, 1.0, samples + 1)[1:-1]]
         for name, binding in described:
             binding.evaluator().set_description(name)
@@ -614,7 +653,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         to_pick = [*off_handle,
                    _Stage("pre-pick", "to pre-pick", X_WGpre.translation(), _tool_pose(X_WGpre, cfg),
                           approach),
-                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg), approach, straight=True)]
+                   _Stage("pick", "free", X_WG.translation(), _tool_pose(X_WG, cfg), approach,
+                          _straight_in(X_WG.translation(), cfg))]
         sols_a, failed = _solve_chain(scenes, to_pick, q0, cfg)
         if sols_a is None:
             failures.append(f"IK of {failed}")
@@ -628,11 +668,16 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         points = [*high, *line]
         keep = [k for k in range(len(points))  # a carry point on the lift or pre-place is left out
                 if k >= 2 or min(np.linalg.norm(points[k] - p) for p in (p_lift, line[0])) > 1e-2]
-        carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg),
-                        approach)]
-        carry += [_Stage(names[k], "held", points[k], _item_at(points[k], X_GI, pb.entry, side, cfg),
-                         pb.entry if side else -_Z) for k in keep]
-        sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
+        for release in (cfg.release_upright_deg, cfg.upright_tolerance_deg):  # level where it can be
+            carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg),
+                            approach)]
+            carry += [_Stage(names[k], "held", points[k],
+                             _item_at(points[k], X_GI, pb.entry, side, cfg,
+                                      release if names[k] == "place" else None),
+                             pb.entry if side else -_Z) for k in keep]
+            sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
+            if sols_b is not None:
+                break
         if sols_b is None:
             failures.append(f"IK of {failed}")
             continue
@@ -641,9 +686,14 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         placed = ObstacleBox("placed item", 2 * pb.item.half_extents,
                              X_WIplace @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
         scenes["retreat"] = build_planning_scene(X_WB, everything, touching=[placed])
+        release_approach = X_WGplace.rotation().col(2)
+        off = X_WGplace.translation() - (pb.item.depth / 2 + 0.01 + cfg.back_off_clearance) * release_approach
         outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
-        retreat = [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg),
-                          X_WGplace.rotation().col(2)) for k, p in enumerate(outs, start=1)]
+        retreat = [_Stage("backing off the item", "retreat", off,
+                          _tool_pose(RigidTransform(X_WGplace.rotation(), off), cfg, cfg.back_off_turn_deg),
+                          release_approach, _straight_out(X_WGplace, off, cfg))]
+        retreat += [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg), release_approach)
+                    for k, p in enumerate(outs, start=1)]
         sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
         if sols_c is None:
             failures.append(f"IK of {failed}")
