@@ -218,6 +218,40 @@ def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
 
 
 @pytest.mark.slow
+def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
+    """Closet 3 of capture seed 200 (true compartment, door at 0.6): the item leaves the hand
+    within `release_upright_deg` of upright (the carry allows 12 degrees), and the retreat's first
+    piece keeps the release point on the tool's axis and the tool's orientation while the fingers
+    back off it, until their tips (1 cm past the tool) clear the item's near side."""
+    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
+    from nfr_drake.systems.scenario import Scenario
+
+    cfg = PlaceConfig()
+    scenario = Scenario(category="closet", seed=200, index=3, q_target=0.6)
+    obj, _ = scenario.sample_piece()
+    item = scenario.sample_item()
+    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
+    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
+    plan, _ = _place_in_front(kt, 0.6, item, obstacles, cfg)
+    tilt = np.degrees(np.arccos(plan.X_WI_place.rotation().col(2) @ [0, 0, 1]))
+    assert tilt < cfg.release_upright_deg + 0.1
+    X_WG = plan.X_WI_place @ plan.X_GI.inverse()
+    a, p_release = X_WG.rotation().col(2), X_WG.translation()
+    scene = build_planning_scene(plan.X_WB, [])
+    piece = plan.segments[2].pieces[0]
+    backed = []
+    for t in np.linspace(0.0, piece.end_time(), 200):
+        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+        X = scene.tool_frame.CalcPoseInWorld(scene.plant_context)
+        d = p_release - X.translation()
+        assert np.linalg.norm(d - (d @ a) * a) < cfg.back_off_tolerance + 1e-3
+        turn = X.rotation().InvertAndCompose(X_WG.rotation()).ToAngleAxis().angle()
+        assert np.degrees(turn) < cfg.back_off_turn_deg + 0.5
+        backed.append(d @ a)
+    assert backed[-1] > item.depth / 2 + 0.01 + cfg.back_off_clearance - 0.005
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("index,q_door", [(2, 0.6), (10, 0.5925)])
 def test_the_pick_comes_in_straight_and_stops_at_the_item(index, q_door):
     """Closets of capture seed 200, the door at q_door, the place from the first base in front that
