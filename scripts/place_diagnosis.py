@@ -4,13 +4,18 @@ contact grasp; docs/PLACE.md, "Results").
     python scripts/place_diagnosis.py door INDEX         # closet INDEX of seed 200: who pushes the door
     python scripts/place_diagnosis.py item INDEX T0 T1   # the item's and the hand's contacts, T0-T1 s
     python scripts/place_diagnosis.py carry INDEX        # the planned carry's clearance, densely
+    python scripts/place_diagnosis.py fitted INDEX [SEED] # the item at the goal, neural-field keypoints
 
 `door`: the opening alone, simulated; at each sample where the force on the door exceeds 150 N
 (and every 25th), the contact forces on it by body pair, N. `item`: the whole task; between T0 and
 T1 s of the place's simulation, the hand's position (m) and the item's contact forces by body
 pair. `carry`: the place planned as the task plans it (the opening simulated first), then the
 held item's nearest distance to the true compartment at 3000 times along the carry, cm, and the
-smallest.
+smallest. `fitted`: closet INDEX of capture SEED (default 200) through the whole pipeline as
+`eval-pipeline --task open-and-place --grasp contact` runs it (ten photos, the field's keypoints):
+the fitted keypoints' errors at the target, cm; the item's planned pose at the release (its tilt,
+degrees); every 0.1 s while the item lies within 15 cm of the true goal (horizontally), its
+position and the tool's (m) and the item's contact forces by body pair, N.
 """
 
 from __future__ import annotations
@@ -129,7 +134,45 @@ def carry(index: int) -> None:
     print(f"smallest: {100 * d:.2f} cm at {t:.2f} s into the carry, {a} - {b}")
 
 
+def fitted(index: int, seed: int) -> None:
+    from nfr_drake.eval.pipeline_eval import object_scenario
+    from nfr_drake.systems.pipeline import run_scenario
+
+    class Tracing(Simulator):
+        def AdvanceTo(self, t):
+            status = super().AdvanceTo(t)
+            plant = self.get_system().GetSubsystemByName("plant")
+            if round(100 * t) % 10 == 0 and plant.HasBodyNamed("item"):
+                context = plant.GetMyContextFromRoot(self.get_context())
+                p = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName("item")).translation()
+                if np.linalg.norm((p - goal)[:2]) < 0.15:
+                    tool = plant.GetFrameByName("panda_tool").CalcPoseInWorld(context).translation()
+                    pairs = {k: round(v, 1) for k, v in contact_forces(plant, context).items() if v > 0.2}
+                    print(f"t {t:.2f} s, item {np.round(p, 3)}, tool {np.round(tool, 3)} m: {pairs}")
+            return status
+
+    place_task.Simulator = Tracing
+    base = Scenario(category="closet", seed=seed, index=index, q_target=0.6, task="open-and-place",
+                    grasp="contact")
+    scenario = object_scenario(base, index)
+    obj, part = scenario.sample_piece()
+    goal = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0, part=part).point("goal", 0.6)
+    outcome = run_scenario(scenario)
+    task, fit, truth = outcome.task, outcome.predicted, outcome.truth
+    for name in fit.names:
+        error = 100 * (fit.point(name, 0.6) - truth.point(name, 0.6))
+        print(f"fitted {name} - true at 0.6: {np.round(error, 2)} cm")
+    if task.place is None:
+        print(task.planning_error)
+        return
+    X_WI = task.place.X_WI_place
+    tilt = np.degrees(np.arccos(X_WI.rotation().col(2)[2]))
+    print(f"planned release: item at {np.round(X_WI.translation(), 3)} m, tilted {tilt:.1f} deg")
+    print(task.simulation.summary())
+
+
 if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     {"door": lambda: door(int(args[0])), "item": lambda: item(int(args[0]), float(args[1]), float(args[2])),
-     "carry": lambda: carry(int(args[0]))}[mode]()
+     "carry": lambda: carry(int(args[0])),
+     "fitted": lambda: fitted(int(args[0]), int(args[1]) if len(args) > 1 else 200)}[mode]()
