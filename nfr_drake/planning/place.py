@@ -14,7 +14,8 @@ samples, at rest at both ends:
    keypoint, upright;
 3. "retreat": back straight out along the tool's axis until the open fingers are off the item
    (`_straight_out`), then out along the way in (the hand may touch the item it let go of; the
-   approach within `approach_cone_deg` of the place's), the item left behind.
+   approach within `approach_cone_deg` of the place's), the item left behind (without
+   `PlaceConfig.back_off`, out along the way in at once: `retreat_configs`).
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
 hand fits under a shelf), a drawer's from the top (vertical approach: it is open from above). The
 obstacles: those that stay put, those of the moving part at q_target (the hand may touch them
@@ -27,7 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
@@ -120,9 +121,14 @@ class PlaceConfig:
     line_overshoot: float = 0.006
     """... and the tool at most this past it along its approach, m (the open fingers would push the
     item: 12 cm past it on one plan without this, and the item was nudged off its hold)."""
+    back_off: bool = True
+    """Whether the tool backs straight off the item after the release (`_straight_out`) before it
+    retreats along the way in; False: it retreats at once (the hand may swing and drag the item
+    with a finger). Callers plan with it first and without it only where no base plans
+    (`retreat_configs`)."""
     back_off_clearance: float = 0.02
-    """After the release the tool backs straight out along its axis until the fingertips (1 cm past
-    the tool origin) clear the item's near side by this much, m (`_straight_out`) ..."""
+    """The back-off ends where the fingertips (1 cm past the tool origin) clear the item's near
+    side by this much, m ..."""
     back_off_tolerance: float = 0.004
     """... the release point within this of the tool's axis, m (open fingers clear a 6.7 cm item by
     6.5 mm a side) ..."""
@@ -603,6 +609,29 @@ def side_room_needed(item: Item, cfg: PlaceConfig) -> float:
     return max(item.height + cfg.drop_height + clearance, WRIST_DIAMETER + 2 * clearance)
 
 
+def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> list[_Stage]:
+    """The retreat's knots from the release pose X_WGplace: with `cfg.back_off`, backed straight
+    off the item along the tool's axis until the open fingers clear it by `back_off_clearance`
+    (`_straight_out`), then out along the way in."""
+    approach = X_WGplace.rotation().col(2)
+    p_outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
+    outs = [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg), approach)
+            for k, p in enumerate(p_outs, start=1)]
+    if not cfg.back_off:
+        return outs
+    off = X_WGplace.translation() - (pb.item.depth / 2 + 0.01 + cfg.back_off_clearance) * approach
+    back_off = _Stage("backing off the item", "retreat", off,
+                      _tool_pose(RigidTransform(X_WGplace.rotation(), off), cfg, cfg.back_off_turn_deg),
+                      approach, _straight_out(X_WGplace, off, cfg))
+    return [back_off, *outs]
+
+
+def retreat_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
+    """The place's configs to plan with in turn: cfg, then, where it backs off the item, cfg
+    without the back-off (`PlaceConfig.back_off`: where no base plans it, the free retreat)."""
+    return [cfg, replace(cfg, back_off=False)] if cfg.back_off else [cfg]
+
+
 def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
     sc.plant.SetPositions(sc.plant_context, q)
     return sc.tool_frame.CalcPoseInWorld(sc.plant_context)
@@ -686,14 +715,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         placed = ObstacleBox("placed item", 2 * pb.item.half_extents,
                              X_WIplace @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
         scenes["retreat"] = build_planning_scene(X_WB, everything, touching=[placed])
-        release_approach = X_WGplace.rotation().col(2)
-        off = X_WGplace.translation() - (pb.item.depth / 2 + 0.01 + cfg.back_off_clearance) * release_approach
-        outs = [X_WGplace.translation() - f * pb.entry_depth * pb.entry for f in (0.5, 1.0)]
-        retreat = [_Stage("backing off the item", "retreat", off,
-                          _tool_pose(RigidTransform(X_WGplace.rotation(), off), cfg, cfg.back_off_turn_deg),
-                          release_approach, _straight_out(X_WGplace, off, cfg))]
-        retreat += [_Stage(f"retreat {k}", "retreat", p, _backing_out(p, X_WGplace, cfg), release_approach)
-                    for k, p in enumerate(outs, start=1)]
+        retreat = _retreat(X_WGplace, pb, cfg)
         sols_c, failed = _solve_chain(scenes, retreat, sols_b[-1], cfg)
         if sols_c is None:
             failures.append(f"IK of {failed}")

@@ -51,6 +51,7 @@ from nfr_drake.planning.place import (
     place_reach_points,
     plan_place,
     ready_posture,
+    retreat_configs,
 )
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.systems.articulation import (
@@ -412,21 +413,23 @@ of it, which one base seldom does; a drawer's box is reached from where its hand
 
 def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
-    """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`)."""
+    """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`),
+    with the back-off off the item on every base before without it (`retreat_configs`)."""
     errors = []
-    for reach in PLACE_REACH[kt.category]:
-        try:
-            plan = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
-                                     must_reach=place_reach_points(kt, q_target, item, place_config))
-            table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
-                                       ITEM_REACH[GRASP_OF[kt.category]])
-            q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
-            problem = place_problem(kt, q_target, item, X_WI, table, obstacles, place_config)
-            place = plan_place(plan.X_WB, q_end, problem, place_config, plan.waypoints[-1])
-            return plan, place, table
-        except PlanningError as err:
-            errors.append(f"base within {reach:.2f} m of the goal: {err}")
-    raise PlanningError("; ".join(errors))
+    for cfg in retreat_configs(place_config):
+        for reach in PLACE_REACH[kt.category]:
+            try:
+                plan = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
+                                         must_reach=place_reach_points(kt, q_target, item, cfg))
+                table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
+                                           ITEM_REACH[GRASP_OF[kt.category]])
+                q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+                problem = place_problem(kt, q_target, item, X_WI, table, obstacles, cfg)
+                place = plan_place(plan.X_WB, q_end, problem, cfg, plan.waypoints[-1])
+                return plan, place, table
+            except PlanningError as err:
+                errors.append(f"base within {reach:.2f} m of the goal: {err}")
+    raise PlanningError("; ".join(dict.fromkeys(errors)))
 
 
 DOOR_MARGIN = 0.03
@@ -464,18 +467,19 @@ def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt:
 def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig,
                     floor: float | None = None) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
-    the first that plans), and its table; `floor`: the goal's height where measured (m in W;
+    the first that plans, with the back-off off the item on every base before without it:
+    `retreat_configs`), and its table; `floor`: the goal's height where measured (m in W;
     `place_problem`)."""
     boxes = [*obstacles[0], *obstacles[1]]
     errors = []
-    for X_WB in place_bases(kt, q, boxes):
-        try:
-            table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
-            problem = place_problem(kt, q, item, X_WI, table, obstacles, place_config, X_WB.translation(),
-                                    floor)
-            return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, place_config), table
-        except PlanningError as err:
-            errors.append(str(err))
+    for cfg in retreat_configs(place_config):
+        for X_WB in place_bases(kt, q, boxes):
+            try:
+                table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
+                problem = place_problem(kt, q, item, X_WI, table, obstacles, cfg, X_WB.translation(), floor)
+                return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, cfg), table
+            except PlanningError as err:
+                errors.append(str(err))
     raise PlanningError("no base in front of the open compartment plans the place: "
                         + ("; ".join(dict.fromkeys(errors)) or "none clears it"))
 

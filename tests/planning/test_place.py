@@ -30,6 +30,7 @@ from nfr_drake.world.items import Item, sample_item
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.obstacles import distance_to_box
 from nfr_drake.world.plan import ObstacleBox
+from nfr_drake.world.robot import FINGER_OPEN
 
 
 @pytest.mark.parametrize("category,seed,q_target,reach", [
@@ -222,7 +223,9 @@ def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
     """Closet 3 of capture seed 200 (true compartment, door at 0.6): the item leaves the hand
     within `release_upright_deg` of upright (the carry allows 12 degrees), and the retreat's first
     piece keeps the release point on the tool's axis and the tool's orientation while the fingers
-    back off it, until their tips (1 cm past the tool) clear the item's near side."""
+    back off it, until their tips (1 cm past the tool) clear the item's near side. Between the
+    piece's collision samples, where `back_off_tolerance` is not imposed, the release point stays
+    off the axis by less than the open fingers' clearance of the item on either side."""
     from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
     from nfr_drake.systems.scenario import Scenario
 
@@ -244,11 +247,34 @@ def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
         scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
         X = scene.tool_frame.CalcPoseInWorld(scene.plant_context)
         d = p_release - X.translation()
-        assert np.linalg.norm(d - (d @ a) * a) < cfg.back_off_tolerance + 1e-3
+        assert np.linalg.norm(d - (d @ a) * a) < FINGER_OPEN - item.width / 2
         turn = X.rotation().InvertAndCompose(X_WG.rotation()).ToAngleAxis().angle()
         assert np.degrees(turn) < cfg.back_off_turn_deg + 0.5
         backed.append(d @ a)
     assert backed[-1] > item.depth / 2 + 0.01 + cfg.back_off_clearance - 0.005
+
+
+@pytest.mark.slow
+def test_where_no_base_backs_off_the_item_the_retreat_is_free():
+    """Closet 3 of capture seed 200 (true compartment, door at 0.6) with a back-off no arm can
+    make (2 m behind the release): no base plans it, and the place is planned with the free
+    retreat (`retreat_configs`), its first piece out along the way in."""
+    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
+    from nfr_drake.systems.scenario import Scenario
+
+    scenario = Scenario(category="closet", seed=200, index=3, q_target=0.6)
+    obj, _ = scenario.sample_piece()
+    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
+    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
+    plan, _ = _place_in_front(kt, 0.6, scenario.sample_item(), obstacles, PlaceConfig(back_off_clearance=2.0))
+    retreat = plan.segments[2]
+    assert retreat.name == "retreat" and len(retreat.pieces) == 2
+    scene = build_planning_scene(plan.X_WB, [])
+    first = retreat.pieces[0]
+    scene.plant.SetPositions(scene.plant_context, first.value(first.end_time()).ravel())
+    p_first = scene.tool_frame.CalcPoseInWorld(scene.plant_context).translation()
+    X_WG = plan.X_WI_place @ plan.X_GI.inverse()
+    assert np.linalg.norm(p_first - X_WG.translation()) > 0.1  # half the way in, not a 2 m back-off
 
 
 @pytest.mark.slow
