@@ -15,7 +15,7 @@ samples, at rest at both ends:
 3. "retreat": back straight out along the tool's axis until the open fingers are off the item
    (`_straight_out`), then out along the way in (the hand may touch the item it let go of; the
    approach within `approach_cone_deg` of the place's), the item left behind (without
-   `PlaceConfig.back_off`, out along the way in at once: `retreat_configs`).
+   `PlaceConfig.back_off`, out along the way in at once: `fallback_configs`).
 Grasps: a closet's item is held from the side (horizontal approach, finger pads vertical: the
 hand fits under a shelf), a drawer's from the top (vertical approach: it is open from above). The
 obstacles: those that stay put, those of the moving part at q_target (the hand may touch them
@@ -125,7 +125,7 @@ class PlaceConfig:
     """Whether the tool backs straight off the item after the release (`_straight_out`) before it
     retreats along the way in; False: it retreats at once (the hand may swing and drag the item
     with a finger). Callers plan with it first and without it only where no base plans
-    (`retreat_configs`)."""
+    (`fallback_configs`)."""
     back_off_clearance: float = 0.02
     """The back-off ends where the fingertips (1 cm past the tool origin) clear the item's near
     side by this much, m ..."""
@@ -626,10 +626,18 @@ def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> l
     return [back_off, *outs]
 
 
-def retreat_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
-    """The place's configs to plan with in turn: cfg, then, where it backs off the item, cfg
-    without the back-off (`PlaceConfig.back_off`: where no base plans it, the free retreat)."""
-    return [cfg, replace(cfg, back_off=False)] if cfg.back_off else [cfg]
+def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
+    """The place's configs to plan with in turn, each on every base before the next: cfg; without
+    the back-off off the item (`PlaceConfig.back_off`); and that with the item released within
+    the carry's `upright_tolerance_deg` wherever it plans (not only where the level release finds
+    no IK: a level release can leave the pieces between the knots no trajectory)."""
+    free = replace(cfg, back_off=False)
+    loose = replace(free, release_upright_deg=max(cfg.release_upright_deg, cfg.upright_tolerance_deg))
+    configs = []
+    for c in (cfg, free, loose):
+        if c not in configs:
+            configs.append(c)
+    return configs
 
 
 def _tool_pose_at(sc: PlanningScene, q: np.ndarray) -> RigidTransform:
@@ -697,7 +705,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         points = [*high, *line]
         keep = [k for k in range(len(points))  # a carry point on the lift or pre-place is left out
                 if k >= 2 or min(np.linalg.norm(points[k] - p) for p in (p_lift, line[0])) > 1e-2]
-        for release in (cfg.release_upright_deg, cfg.upright_tolerance_deg):  # level where it can be
+        for release in dict.fromkeys((cfg.release_upright_deg, cfg.upright_tolerance_deg)):  # level first
             carry = [_Stage("lift", "held off table", X_WGlift.translation(), _tool_pose(X_WGlift, cfg),
                             approach)]
             carry += [_Stage(names[k], "held", points[k],

@@ -46,12 +46,12 @@ from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
     PlacePlan,
+    fallback_configs,
     place_bases,
     place_problem,
     place_reach_points,
     plan_place,
     ready_posture,
-    retreat_configs,
 )
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
 from nfr_drake.systems.articulation import (
@@ -414,9 +414,9 @@ of it, which one base seldom does; a drawer's box is reached from where its hand
 def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
     """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`),
-    with the back-off off the item on every base before without it (`retreat_configs`)."""
+    each of the place's `fallback_configs` on every base before the next."""
     errors = []
-    for cfg in retreat_configs(place_config):
+    for cfg in fallback_configs(place_config):
         for reach in PLACE_REACH[kt.category]:
             try:
                 plan = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
@@ -467,12 +467,12 @@ def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt:
 def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig,
                     floor: float | None = None) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
-    the first that plans, with the back-off off the item on every base before without it:
-    `retreat_configs`), and its table; `floor`: the goal's height where measured (m in W;
+    the first that plans, each of the place's `fallback_configs` on every base before the next),
+    and its table; `floor`: the goal's height where measured (m in W;
     `place_problem`)."""
     boxes = [*obstacles[0], *obstacles[1]]
     errors = []
-    for cfg in retreat_configs(place_config):
+    for cfg in fallback_configs(place_config):
         for X_WB in place_bases(kt, q, boxes):
             try:
                 table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])

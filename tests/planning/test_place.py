@@ -1,5 +1,7 @@
 """The place planner, from ground-truth keypoint trajectories and keypoint-derived obstacles."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform
@@ -17,6 +19,7 @@ from nfr_drake.planning.compartment import (
 from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
+    fallback_configs,
     place_bases,
     place_problem,
     place_reach_points,
@@ -254,11 +257,20 @@ def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
     assert backed[-1] > item.depth / 2 + 0.01 + cfg.back_off_clearance - 0.005
 
 
+def test_the_fallback_configs_give_up_the_back_off_then_the_level_release():
+    cfg = PlaceConfig()
+    configs = fallback_configs(cfg)
+    assert [(c.back_off, c.release_upright_deg) for c in configs] == [
+        (True, cfg.release_upright_deg), (False, cfg.release_upright_deg), (False, cfg.upright_tolerance_deg)]
+    assert all(replace(c, back_off=True, release_upright_deg=cfg.release_upright_deg) == cfg for c in configs)
+    assert fallback_configs(configs[-1]) == [configs[-1]]
+
+
 @pytest.mark.slow
 def test_where_no_base_backs_off_the_item_the_retreat_is_free():
     """Closet 3 of capture seed 200 (true compartment, door at 0.6) with a back-off no arm can
     make (2 m behind the release): no base plans it, and the place is planned with the free
-    retreat (`retreat_configs`), its first piece out along the way in."""
+    retreat (`fallback_configs`), its first piece out along the way in."""
     from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
     from nfr_drake.systems.scenario import Scenario
 
