@@ -735,8 +735,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
             if pieces is None and name == "to pick":  # the straight pick: pre-pick on the pick's branch
                 pre, _ = _solve_chain(scenes, stages[-2:-1], sols[-1], cfg)
                 if pre is not None and not np.allclose(pre[0], sols[-2], atol=1e-3):
-                    failures.append(failed)
-                    pieces, failed = _pieces(scenes, stages, [*sols[:-2], pre[0], sols[-1]], q, p, cfg)
+                    pieces, again = _pieces(scenes, stages, [*sols[:-2], pre[0], sols[-1]], q, p, cfg)
+                    failed = f"{failed}; again from the pick's branch: {again}"
             if pieces is None:
                 failures.append(failed)
                 break
