@@ -414,13 +414,26 @@ of it, which one base seldom does; a drawer's box is reached from where its hand
 def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
     """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`),
-    each of the place's `fallback_configs` on every base before the next."""
-    errors = []
+    each of the place's `fallback_configs` on every base before the next (the opening planned
+    once per base: what it must reach, `place_reach_points`, is the same for all of them)."""
+    errors, openings = [], {}
+
+    def opening(reach: float) -> PlanResult:  # one per reach: the fallbacks keep what it must reach
+        if reach not in openings:
+            try:
+                openings[reach] = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
+                                                    must_reach=place_reach_points(kt, q_target, item,
+                                                                                  place_config))
+            except PlanningError as err:
+                openings[reach] = err
+        if isinstance(openings[reach], PlanningError):
+            raise openings[reach]
+        return openings[reach]
+
     for cfg in fallback_configs(place_config):
         for reach in PLACE_REACH[kt.category]:
             try:
-                plan = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
-                                         must_reach=place_reach_points(kt, q_target, item, cfg))
+                plan = opening(reach)
                 table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
                                            ITEM_REACH[GRASP_OF[kt.category]])
                 q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
