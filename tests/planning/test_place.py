@@ -221,6 +221,31 @@ def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
         plan_place(X_WB, np.zeros(9), problem)
 
 
+def _place_in_true_closet(index: int, q_door: float, cfg: PlaceConfig):
+    """The place planned in closet `index` of capture seed 200 with its door at q_door, the
+    true compartment as obstacles, from the first base in front that plans: (plan, item)."""
+    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
+    from nfr_drake.systems.scenario import Scenario
+
+    scenario = Scenario(category="closet", seed=200, index=index, q_target=0.6)
+    obj, _ = scenario.sample_piece()
+    item = scenario.sample_item()
+    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
+    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), q_door)
+    plan, _ = _place_in_front(kt, q_door, item, obstacles, cfg)
+    return plan, item
+
+
+def _tool_poses(plan, piece, count: int = 200) -> list[RigidTransform]:
+    """The tool's poses in W at `count` times along one piece of `plan`."""
+    scene = build_planning_scene(plan.X_WB, [])
+    poses = []
+    for t in np.linspace(0.0, piece.end_time(), count):
+        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
+        poses.append(scene.tool_frame.CalcPoseInWorld(scene.plant_context))
+    return poses
+
+
 @pytest.mark.slow
 def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
     """Closet 3 of capture seed 200 (true compartment, door at 0.6): the item leaves the hand
@@ -229,26 +254,14 @@ def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
     back off it, until their tips (1 cm past the tool) clear the item's near side. Between the
     piece's collision samples, where `back_off_tolerance` is not imposed, the release point stays
     off the axis by less than the open fingers' clearance of the item on either side."""
-    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
-    from nfr_drake.systems.scenario import Scenario
-
     cfg = PlaceConfig()
-    scenario = Scenario(category="closet", seed=200, index=3, q_target=0.6)
-    obj, _ = scenario.sample_piece()
-    item = scenario.sample_item()
-    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
-    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
-    plan, _ = _place_in_front(kt, 0.6, item, obstacles, cfg)
+    plan, item = _place_in_true_closet(3, 0.6, cfg)
     tilt = np.degrees(np.arccos(plan.X_WI_place.rotation().col(2) @ [0, 0, 1]))
     assert tilt < cfg.release_upright_deg + 0.1
     X_WG = plan.X_WI_place @ plan.X_GI.inverse()
     a, p_release = X_WG.rotation().col(2), X_WG.translation()
-    scene = build_planning_scene(plan.X_WB, [])
-    piece = plan.segments[2].pieces[0]
     backed = []
-    for t in np.linspace(0.0, piece.end_time(), 200):
-        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
-        X = scene.tool_frame.CalcPoseInWorld(scene.plant_context)
+    for X in _tool_poses(plan, plan.segments[2].pieces[0]):
         d = p_release - X.translation()
         assert np.linalg.norm(d - (d @ a) * a) < FINGER_OPEN - item.width / 2
         turn = X.rotation().InvertAndCompose(X_WG.rotation()).ToAngleAxis().angle()
@@ -271,20 +284,10 @@ def test_where_no_base_backs_off_the_item_the_retreat_is_free():
     """Closet 3 of capture seed 200 (true compartment, door at 0.6) with a back-off no arm can
     make (2 m behind the release): no base plans it, and the place is planned with the free
     retreat (`fallback_configs`), its first piece out along the way in."""
-    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
-    from nfr_drake.systems.scenario import Scenario
-
-    scenario = Scenario(category="closet", seed=200, index=3, q_target=0.6)
-    obj, _ = scenario.sample_piece()
-    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
-    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), 0.6)
-    plan, _ = _place_in_front(kt, 0.6, scenario.sample_item(), obstacles, PlaceConfig(back_off_clearance=2.0))
+    plan, _ = _place_in_true_closet(3, 0.6, PlaceConfig(back_off_clearance=2.0))
     retreat = plan.segments[2]
     assert retreat.name == "retreat" and len(retreat.pieces) == 2
-    scene = build_planning_scene(plan.X_WB, [])
-    first = retreat.pieces[0]
-    scene.plant.SetPositions(scene.plant_context, first.value(first.end_time()).ravel())
-    p_first = scene.tool_frame.CalcPoseInWorld(scene.plant_context).translation()
+    p_first = _tool_poses(plan, retreat.pieces[0])[-1].translation()
     X_WG = plan.X_WI_place @ plan.X_GI.inverse()
     assert np.linalg.norm(p_first - X_WG.translation()) > 0.1  # half the way in, not a 2 m back-off
 
@@ -299,22 +302,11 @@ def test_the_pick_comes_in_straight_and_stops_at_the_item(index, q_door):
     hold. Closet 10, the door where its opening by contact leaves it: the pick's IK lay on another
     branch of the arm than the pre-pick's (joint 1 at 0.23 against 2.47 rad), no straight piece
     joins them, and no base planned until the pre-pick is re-solved from the pick's posture."""
-    from nfr_drake.systems.place_task import _place_in_front, door_band, true_compartment
-    from nfr_drake.systems.scenario import Scenario
-
-    scenario = Scenario(category="closet", seed=200, index=index, q_target=0.6)
-    obj, _ = scenario.sample_piece()
-    item = scenario.sample_item()
-    kt = KeypointTrajectory.from_articulated_object(obj, scenario.X_WO, 0.0)
-    obstacles = door_band(lambda q: true_compartment(obj, scenario.X_WO, q), q_door)
-    plan, _ = _place_in_front(kt, q_door, item, obstacles, PlaceConfig())
+    plan, _ = _place_in_true_closet(index, q_door, PlaceConfig())
     X_WG = plan.X_WI_pick @ plan.X_GI.inverse()
     a, p_pick = X_WG.rotation().col(2), X_WG.translation()
-    scene = build_planning_scene(plan.X_WB, [])
-    piece = plan.segments[0].pieces[-1]
-    for t in np.linspace(0.0, piece.end_time(), 200):
-        scene.plant.SetPositions(scene.plant_context, piece.value(t).ravel())
-        d = scene.tool_frame.CalcPoseInWorld(scene.plant_context).translation() - p_pick
+    for X in _tool_poses(plan, plan.segments[0].pieces[-1]):
+        d = X.translation() - p_pick
         assert np.linalg.norm(d - (d @ a) * a) < 0.015
         assert d @ a < 0.007
 
