@@ -14,7 +14,8 @@ a stand-in for segmenting the object out of a real photo. Perceiving the "room",
 geometry of the plant (floor, walls, other furniture, clutter, the robot) under the lights given,
 a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo (with
 `mask_crop`, a second look at the crop around the object's box estimated from the first masks,
-`segmentation.crop.posed_close_look`), and the fit sees the photos with everything off the
+`segmentation.crop.posed_close_look`, and at the crop around its carcass's box for the carcass's
+amodal masks, `posed_carcass_look`), and the fit sees the photos with everything off the
 object's mask painted in the training background (`paint_background`; off the region where the
 estimated carcass can lie, only the pixels the segmenter is sure of kept, `paint_thresholds`; or,
 `room_loss` "masked", only the pixels on the mask count in its loss).
@@ -71,7 +72,7 @@ from nfr_drake.perception.object_pose import (
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import posed_close_look
+from nfr_drake.perception.segmentation.crop import posed_carcass_look, posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -117,7 +118,8 @@ class NfrPerceptionSystem(LeafSystem):
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
     `mask_crop`, those of its second look at the crop around the object's box in each view,
-    `posed_close_look`; when its masks give no pose, the first look's), and
+    `posed_close_look`; when its masks give no pose, the first look's; the amodal carcass masks
+    that give the pose likewise, `posed_carcass_look`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
     only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
     object alone), every pixel counting in the loss.
@@ -255,7 +257,10 @@ class NfrPerceptionSystem(LeafSystem):
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
         carcass = None
-        if self._segmenter is not None and self._segmenter.config.amodal:
+        if self._segmenter is not None and self._segmenter.config.amodal and self._mask_crop:
+            carcass = posed_carcass_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
+                                         self._cameras, self._model.category, self._hull_config)
+        elif self._segmenter is not None and self._segmenter.config.amodal:
             carcass = [self._segmenter.carcass_amodal(image) for image in images]
         estimate, amodal, warnings = estimate_object_pose_carcass_first(
             masks, carcass, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras, self._hull_config,

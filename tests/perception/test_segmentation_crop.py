@@ -168,3 +168,37 @@ def test_eval_segmenter_crops_each_articulation_with_its_own_cameras(tmp_path, m
         assert masks[i].shape == (32, 32)
         np.testing.assert_array_equal(images[v], data.image(i)[0])
         np.testing.assert_allclose(X_WCs[v], rec.X_OC[a, v])
+
+
+class BrightCarcass(Segmenter):
+    """A stand-in network whose amodal carcass output is where the image is bright."""
+
+    def __init__(self):
+        super().__init__(SMALL)
+        self.seen: list[tuple[int, int]] = []
+
+    def _probabilities(self, image: np.ndarray) -> np.ndarray:
+        self.seen.append(image.shape[:2])
+        p = (image.mean(-1) > 128).astype(np.float32)
+        return np.stack([1.0 - p, p, 0 * p, 0 * p, p], -1)
+
+
+def test_the_carcass_second_look_keeps_the_carcass_and_drops_spill_beyond_its_box():
+    rng = np.random.default_rng(4)
+    box = np.array([-0.4, 0.6, -0.2, 0.4, 0.6, 0.45])
+    photos, trues, X_WCs = _box_photos(rng, box)
+    net = BrightCarcass()
+    first = [net.carcass_amodal(photo) > 0.5 for photo in photos]
+    masks = crop.posed_carcass_look(net, photos, X_WCs, [CAMERA] * len(photos), category="closet")
+    iou = lambda a, b: np.count_nonzero(a & b) / np.count_nonzero(a | b)  # noqa: E731
+    assert all(iou(f, t) < 0.85 for f, t in zip(first, trues, strict=True))
+    assert all(iou(m > 0.5, t) > 0.9 for m, t in zip(masks, trues, strict=True))
+    assert len(net.seen) == 3 * len(photos)
+
+
+def test_the_carcass_second_look_keeps_the_first_where_it_gives_no_pose():
+    net = BrightCarcass()
+    dark = [np.full((128, 128, 3), 30, np.uint8) for _ in range(4)]
+    X_WCs = [look_at(np.array([2.0, y, 1.0]), np.zeros(3)) for y in (-1.0, -0.3, 0.3, 1.0)]
+    masks = crop.posed_carcass_look(net, dark, X_WCs, [CAMERA] * 4)
+    assert all(not m.any() for m in masks) and len(net.seen) == 4

@@ -8,6 +8,8 @@ sweep when open (`reach`), projected into each view and widened by `margin`, is 
 view, which the segmenter looks at again at its input size (`Segmenter.object_mask(box=...)`,
 the mask 0 outside the crop). Without a pose (the first masks agree on no object) each view gets
 the single-photo second look (`Segmenter.close_look`: the crop around its own first mask).
+The carcass's amodal masks get the same second look (`posed_carcass_look`), at the crop around the
+carcass's box from the first amodal masks, not grown forward (the carcass has no fronts).
 """
 
 from __future__ import annotations
@@ -62,3 +64,22 @@ def posed_close_look(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.nd
         return [net.close_look(image, size=size, margin=margin) for image in images]
     boxes = view_boxes(estimate.box, X_WCs, cameras, [image.shape[:2] for image in images], margin, reach)
     return [net.close_look(image, box, size, margin) for image, box in zip(images, boxes, strict=True)]
+
+
+def posed_carcass_look(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
+                       cameras: list[PinholeCamera], category: str | None = None,
+                       hull: HullConfig | None = None, size: int | None = SEGMENT_PX,
+                       margin: float = CROP_MARGIN) -> list[np.ndarray]:
+    """The carcass's amodal mask (H, W) float32 in [0, 1] per uint8 RGB photo (H, W, 3)
+    (`Segmenter.carcass_amodal`), looked at again in the crop around the carcass's floor box that
+    the first look's amodal masks give (`estimate_object_pose(amodal=True)`; `reach` 0); the
+    first look's masks where they give no pose, and in views the box lies behind. Arguments as in
+    `posed_close_look`."""
+    first = [net.carcass_amodal(image, size) for image in images]
+    try:
+        estimate = estimate_object_pose(first, X_WCs, cameras, hull or HullConfig(), category, amodal=True)
+    except ObjectPoseError:
+        return first
+    boxes = view_boxes(estimate.box, X_WCs, cameras, [image.shape[:2] for image in images], margin, reach=0.0)
+    return [mask if box is None else net.carcass_amodal(image, size, box)
+            for image, mask, box in zip(images, first, boxes, strict=True)]
