@@ -228,6 +228,8 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
     monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
     monkeypatch.setattr(perception_module, "posed_close_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
+    monkeypatch.setattr(perception_module, "posed_carcass_look",
+                        lambda net, images, *args: [net.carcass_amodal(i) for i in images])
     calls = []
 
     class Stop(Exception):
