@@ -436,6 +436,27 @@ def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray]
             for image in images]
 
 
+def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str
+                  ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+    """The segmenter's object masks and amodal carcass masks (H, W) per uint8 RGB photo (H, W, 3)
+    of a capture whose poses are in a floor frame, each from the crop stage (a second look at the
+    crop around the box the first look gives: `posed_close_look`, `posed_carcass_look`, as
+    `eval-pipeline --mask-crop`), run on the photos shrunk to `MASK_SIZE_PX` and scaled back up;
+    the carcass None for a model without that output."""
+    from nfr_drake.perception.segmentation.crop import posed_carcass_look, posed_close_look
+    from nfr_drake.perception.segmentation.model import load_segmenter
+
+    net, _ = load_segmenter(segmenter)
+    small = [shrunk(image) for image in images]
+    X_WCs, cameras = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
+    looks = [posed_close_look(net, small, X_WCs, cameras, category)]
+    if net.config.amodal:
+        looks.append(posed_carcass_look(net, small, X_WCs, cameras, category))
+    full = [[cv2.resize(m, image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
+             for m, image in zip(look, images, strict=True)] for look in looks]
+    return full[0], full[1] if net.config.amodal else None
+
+
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
                    images: list[np.ndarray], handle: TriangulatedHandle | None,
                    room_masks: list[np.ndarray] | None = None) -> dict | None:
@@ -618,6 +639,7 @@ def infer_command(
     estimate_pose: bool = False,
     masks: Literal["segmenter", "background"] = "segmenter",
     segmenter: Path = Path("models/segmenter"),
+    mask_crop: bool = False,
     room_loss: RoomLoss = "background",
     part: int | None = None,
     furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
@@ -646,6 +668,9 @@ def infer_command(
             its amodal carcass output when it has one) or "background" (an object alone before a
             uniform background).
         segmenter: the segmenter's model folder (`nfr-drake train-segmenter`).
+        mask_crop: with --masks segmenter, its masks and its carcass's from a second look at the
+            crop around the box the first look gives in each photo (as `eval-pipeline`'s crop
+            stage; off by default here: docs/ROOMS.md, tutorial 3).
         room_loss: with --estimate-pose, the pixels off the object's mask are painted in the
             training background ("background": the field's silhouette must match the mask) or
             left out of the image loss ("masked").
@@ -685,8 +710,11 @@ def infer_command(
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
         photos = cap.load_images()
-        views = object_masks(photos, segmenter if masks == "segmenter" else None)
-        carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
+        if masks == "segmenter" and mask_crop:
+            views, carcass = cropped_masks(photos, cap, segmenter, fitted.category)
+        else:
+            views = object_masks(photos, segmenter if masks == "segmenter" else None)
+            carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
         result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
                                               room=masks == "segmenter", carcass=carcass)
         pose = np.array(result.extra["object_pose"]["X_WO"])

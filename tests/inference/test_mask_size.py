@@ -130,3 +130,30 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
     assert (image[10:30, 20:40] == 50).all()
     assert (image[0, 0] == (235 if room_loss == "background" else 50)).all()
     assert seen["masked_loss"] is (room_loss == "masked")
+
+
+@pytest.mark.parametrize("amodal", [True, False])
+def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(monkeypatch, tmp_path, amodal):
+    from nfr_drake.perception.segmentation import crop
+
+    seen = []
+
+    def look(name: str, value: float):
+        def stage(net, images, X_WCs, cameras, category):
+            seen.append((name, images[0].shape, len(X_WCs), category))
+            return [np.full(image.shape[:2], value, np.float32) for image in images]
+        return stage
+
+    monkeypatch.setattr(crop, "posed_close_look", look("visible", 1.0))
+    monkeypatch.setattr(crop, "posed_carcass_look", look("carcass", 0.5))
+    net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
+    monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
+    views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
+                                         tmp_path, "drawer")
+    looks = ["visible", "carcass"] if amodal else ["visible"]
+    assert seen == [(name, (192, 256, 3), 3, "drawer") for name in looks]
+    assert [m.shape for m in views] == [(768, 1024)] * 3 and views[0].min() == 1.0
+    if amodal:
+        assert [m.shape for m in carcass] == [(768, 1024)] * 3 and carcass[0].max() == 0.5
+    else:
+        assert carcass is None
