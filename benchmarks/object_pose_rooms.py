@@ -4,6 +4,7 @@
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --setting alone
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter --crop
 
 Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `seed`; one articulation
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
@@ -13,7 +14,8 @@ probabilities (with `--crop`, those of the crop stage: `segmentation.crop.posed_
 second look at the crop around the box of the pose from the first masks). With `--amodal` the
 masks are the carcass's amodal masks instead (the carcass alone as if nothing hid it, no fronts):
 the true ones (`carcass_amodal`, `data.amodal`) or the segmenter's amodal output
-(`Segmenter.carcass_amodal`), and the box is fitted as the carcass (`amodal=True`). With `--setting alone`
+(`Segmenter.carcass_amodal`; with `--crop` its second look, `posed_carcass_look`, as the
+pipeline's), and the box is fitted as the carcass (`amodal=True`). With `--setting alone`
 the object of `nfr-drake captures` (seed `seed`, index i) stands alone before the training
 renders' background, photographed by `views` cameras of the paper's distribution
 (`CameraDistribution`) at a q drawn as the rooms' (shut with probability 0.4, else uniform), its
@@ -65,8 +67,8 @@ def _alone(category: str, seed: int, index: int, views: int, size: int, amodal: 
 def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 128, seed: int = 900,
          setting: str = "room", segmenter: Path | None = None, crop: bool = False,
          amodal: bool = False) -> None:
-    if amodal and crop:
-        raise SystemExit("--amodal measures the first look's masks: no --crop")
+    if crop and segmenter is None:
+        raise SystemExit("--crop is the segmenter's second look: give --segmenter")
     if setting == "alone" and segmenter is not None:
         raise SystemExit("--setting alone measures the true labels: no --segmenter")
     net = None
@@ -88,6 +90,10 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
                 masks = [m.astype(np.float32) for m in arrays["carcass_amodal"][0]]
             elif net is None:
                 masks = [(label > 0).astype(np.float32) for label in arrays["label"][0]]
+            elif amodal and crop:
+                from nfr_drake.perception.segmentation.crop import posed_carcass_look
+
+                masks = posed_carcass_look(net, list(arrays["rgb"][0]), list(X_OC), [camera] * views, category)
             elif amodal:
                 masks = [net.carcass_amodal(rgb) for rgb in arrays["rgb"][0]]
             elif crop:
