@@ -24,16 +24,17 @@ CAMERA = PinholeCamera.from_fov(128, 128, math.radians(50.0))
 
 
 class Bright(Segmenter):
-    """A stand-in network: the object is where the image is bright; records the sizes it is fed."""
+    """A stand-in network: the object and its amodal carcass are where the image is bright;
+    records the sizes it is fed."""
 
     def __init__(self):
         super().__init__(SMALL)
         self.seen: list[tuple[int, int]] = []
 
-    def class_probabilities(self, image: np.ndarray) -> np.ndarray:
+    def _probabilities(self, image: np.ndarray) -> np.ndarray:
         self.seen.append(image.shape[:2])
         p = (image.mean(-1) > 128).astype(np.float32)
-        return np.stack([1.0 - p, p, 0 * p, 0 * p], -1)
+        return np.stack([1.0 - p, p, 0 * p, 0 * p, p], -1)
 
 
 def _square_image(size: int, x0: int, y0: int, side: int) -> np.ndarray:
@@ -170,24 +171,11 @@ def test_eval_segmenter_crops_each_articulation_with_its_own_cameras(tmp_path, m
         np.testing.assert_allclose(X_WCs[v], rec.X_OC[a, v])
 
 
-class BrightCarcass(Segmenter):
-    """A stand-in network whose amodal carcass output is where the image is bright."""
-
-    def __init__(self):
-        super().__init__(SMALL)
-        self.seen: list[tuple[int, int]] = []
-
-    def _probabilities(self, image: np.ndarray) -> np.ndarray:
-        self.seen.append(image.shape[:2])
-        p = (image.mean(-1) > 128).astype(np.float32)
-        return np.stack([1.0 - p, p, 0 * p, 0 * p, p], -1)
-
-
 def test_the_carcass_second_look_keeps_the_carcass_and_drops_spill_beyond_its_box():
     rng = np.random.default_rng(4)
     box = np.array([-0.4, 0.6, -0.2, 0.4, 0.6, 0.45])
     photos, trues, X_WCs = _box_photos(rng, box)
-    net = BrightCarcass()
+    net = Bright()
     first = [net.carcass_amodal(photo) > 0.5 for photo in photos]
     masks = crop.posed_carcass_look(net, photos, X_WCs, [CAMERA] * len(photos), category="closet")
     iou = lambda a, b: np.count_nonzero(a & b) / np.count_nonzero(a | b)  # noqa: E731
@@ -197,7 +185,7 @@ def test_the_carcass_second_look_keeps_the_carcass_and_drops_spill_beyond_its_bo
 
 
 def test_the_carcass_second_look_keeps_the_first_where_it_gives_no_pose():
-    net = BrightCarcass()
+    net = Bright()
     dark = [np.full((128, 128, 3), 30, np.uint8) for _ in range(4)]
     X_WCs = [look_at(np.array([2.0, y, 1.0]), np.zeros(3)) for y in (-1.0, -0.3, 0.3, 1.0)]
     masks = crop.posed_carcass_look(net, dark, X_WCs, [CAMERA] * 4)
