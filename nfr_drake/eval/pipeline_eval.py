@@ -254,7 +254,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         room_loss: with `--perceive room`, the photos' pixels off the object's mask are painted in
             the training background ("background") or left out of the fit's loss ("masked").
         mask_crop: with `--perceive room`, the segmenter's second, close look at the crop around
-            the object's box estimated from its first masks (`Scenario.mask_crop`).
+            the object's box estimated from its first masks, and at the crop around its carcass's
+            box for the amodal carcass masks that give the pose (`Scenario.mask_crop`).
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).

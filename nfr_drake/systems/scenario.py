@@ -121,7 +121,8 @@ class Scenario:
     mask), or "masked", left out of the image loss (`systems.perception.RoomLoss`)."""
     mask_crop: bool = True
     """Perceiving a room, whether the segmenter takes a second, close look at the crop around the
-    object's box estimated from its first masks (`perception.segmentation.crop`)."""
+    object's box estimated from its first masks, and at the crop around its carcass's box for the
+    amodal carcass masks that give the pose (`perception.segmentation.crop`)."""
     part: int = -1
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning
