@@ -4,7 +4,8 @@
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --setting alone
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter
-    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter --crop
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter \
+        --crop
 
 Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `seed`; one articulation
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
@@ -93,7 +94,8 @@ def main(category: str = "closet", rooms: int = 12, views: int = 8, size: int = 
             elif amodal and crop:
                 from nfr_drake.perception.segmentation.crop import posed_carcass_look
 
-                masks = posed_carcass_look(net, list(arrays["rgb"][0]), list(X_OC), [camera] * views, category)
+                masks = posed_carcass_look(net, list(arrays["rgb"][0]), list(X_OC), [camera] * views,
+                                           category)
             elif amodal:
                 masks = [net.carcass_amodal(rgb) for rgb in arrays["rgb"][0]]
             elif crop:

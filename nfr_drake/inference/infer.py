@@ -410,6 +410,12 @@ def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,
             "views": [list(h.views) for h in handles]}
 
 
+def _at_photo_size(masks: list[np.ndarray], images: list[np.ndarray]) -> list[np.ndarray]:
+    """Masks made on shrunk photos (`shrunk`), scaled back to their photos' sizes (H, W)."""
+    return [cv2.resize(m, image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
+            for m, image in zip(masks, images, strict=True)]
+
+
 def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.ndarray]:
     """Object probability (H, W) per uint8 RGB image (H, W, 3): the segmenter's in `segmenter` (a
     model folder; run on the image shrunk to `MASK_SIZE_PX` and scaled back up), or, with None, the
@@ -419,8 +425,7 @@ def object_masks(images: list[np.ndarray], segmenter: Path | None) -> list[np.nd
     from nfr_drake.perception.segmentation.model import load_segmenter
 
     net, _ = load_segmenter(segmenter)
-    return [cv2.resize(net.object_mask(shrunk(image)), image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
-            for image in images]
+    return _at_photo_size([net.object_mask(shrunk(image)) for image in images], images)
 
 
 def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray] | None:
@@ -432,8 +437,7 @@ def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray]
     net, _ = load_segmenter(segmenter)
     if not net.config.amodal:
         return None
-    return [cv2.resize(net.carcass_amodal(shrunk(image)), image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
-            for image in images]
+    return _at_photo_size([net.carcass_amodal(shrunk(image)) for image in images], images)
 
 
 def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str
@@ -449,12 +453,10 @@ def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path
     net, _ = load_segmenter(segmenter)
     small = [shrunk(image) for image in images]
     X_WCs, cameras = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
-    looks = [posed_close_look(net, small, X_WCs, cameras, category)]
-    if net.config.amodal:
-        looks.append(posed_carcass_look(net, small, X_WCs, cameras, category))
-    full = [[cv2.resize(m, image.shape[1::-1], interpolation=cv2.INTER_LINEAR)
-             for m, image in zip(look, images, strict=True)] for look in looks]
-    return full[0], full[1] if net.config.amodal else None
+    views = _at_photo_size(posed_close_look(net, small, X_WCs, cameras, category), images)
+    if not net.config.amodal:
+        return views, None
+    return views, _at_photo_size(posed_carcass_look(net, small, X_WCs, cameras, category), images)
 
 
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,

@@ -257,11 +257,10 @@ class NfrPerceptionSystem(LeafSystem):
         if self._X_WO is not None:
             return self._X_WO, {"estimated": False}, []
         carcass = None
-        if self._segmenter is not None and self._segmenter.config.amodal and self._mask_crop:
-            carcass = posed_carcass_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
-                                         self._cameras, self._model.category, self._hull_config)
-        elif self._segmenter is not None and self._segmenter.config.amodal:
-            carcass = [self._segmenter.carcass_amodal(image) for image in images]
+        if self._segmenter is not None and self._segmenter.config.amodal:
+            carcass = (posed_carcass_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
+                                          self._cameras, self._model.category, self._hull_config)
+                       if self._mask_crop else [self._segmenter.carcass_amodal(image) for image in images])
         estimate, amodal, warnings = estimate_object_pose_carcass_first(
             masks, carcass, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras, self._hull_config,
             self._model.category)
