@@ -4,8 +4,8 @@
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --setting alone
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal
     python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter
-    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal --segmenter models/segmenter \
-        --crop
+    python benchmarks/object_pose_rooms.py --category closet --rooms 12 --amodal \
+        --segmenter models/segmenter --crop
 
 Room i of `nfr-drake generate-rooms` (its spec with `--style heldout`, seed `seed`; one articulation
 of `views` cameras, `size` px) is rendered in memory; its camera poses are moved into a floor frame
