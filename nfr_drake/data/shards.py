@@ -182,14 +182,21 @@ def completed_objects(root: Path) -> list[int]:
 
 
 def process_alive(pid: int) -> bool:
-    """Whether a process with this id runs on this machine."""
+    """Whether a process with this id runs on this machine; a zombie (killed, not yet reaped by
+    its parent) does not."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:  # alive, another user's
+        pass
+    if not Path("/proc/self/stat").exists():  # no procfs (not Linux): cannot tell a zombie
         return True
-    return True
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:  # ended meanwhile
+        return False
+    return state not in ("Z", "X")
 
 
 def remove_partial(root: Path, indices: set[int]) -> None:

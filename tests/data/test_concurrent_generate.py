@@ -3,6 +3,7 @@ dataset.json is created once, whole."""
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -29,21 +30,28 @@ def test_a_second_run_on_a_folder_being_written_refuses(tmp_path, capsys):
 
 
 def test_only_the_partial_folders_of_dead_runs_are_cleaned(tmp_path):
-    """An orphaned worker of a killed run (alive) keeps its temporary folder; a dead run's goes."""
+    """An orphaned worker of a killed run (alive) keeps its temporary folder; a dead run's goes,
+    and so does a killed one's that its parent has not reaped yet (a zombie)."""
     live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
+    zombie = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    zombie.kill()
+    while Path(f"/proc/{zombie.pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+        time.sleep(0.01)
     try:
         objects = tmp_path / OBJECTS_DIR
-        for pid in (live.pid, dead.pid):
+        for pid in (live.pid, dead.pid, zombie.pid):
             (objects / f".obj_000001.tmp-{pid}").mkdir(parents=True)
         generate_dataset(SPEC, tmp_path, workers=1, progress=False)
         assert (objects / f".obj_000001.tmp-{live.pid}").is_dir()
         assert not (objects / f".obj_000001.tmp-{dead.pid}").exists()
+        assert not (objects / f".obj_000001.tmp-{zombie.pid}").exists()
         assert completed_objects(tmp_path) == [0, 1]
     finally:
         live.kill()
         live.wait()
+        zombie.wait()
 
 
 def test_dataset_json_written_meanwhile_by_another_run_is_not_overwritten(tmp_path, monkeypatch):
