@@ -135,10 +135,6 @@ class PlaceConfig:
     back_off_turn_deg: float = 3.0
     """... and the tool turned at most this from its orientation at the release, degrees."""
     min_distance: float = 0.01
-    tight_min_distance: float = 0.005
-    """The clearance of the last fallback (`fallback_configs`), m: a side-held item under a shelf
-    12-13 cm over the goal leaves the wrist (`WRIST_DIAMETER`) under 1.3 cm either side. At or
-    above `min_distance`: no such fallback."""
     collision_samples: int = 12
     """Fewest collision samples per piece (knot to knot); at most four times as many."""
     collision_step: float = 0.03
@@ -632,19 +628,13 @@ def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> l
 
 def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
     """The place's configs to plan with in turn, each on every base before the next: cfg; without
-    the back-off off the item (`PlaceConfig.back_off`); that with the item released within the
-    carry's `upright_tolerance_deg` wherever it plans (not only where the level release finds no
-    IK: a level release can leave the pieces between the knots no trajectory); and that at
-    `tight_min_distance`, the item dropped from as far above it as `drop_height` is above
-    `min_distance` (where that is less than `min_distance`)."""
+    the back-off off the item (`PlaceConfig.back_off`); and that with the item released within
+    the carry's `upright_tolerance_deg` wherever it plans (not only where the level release finds
+    no IK: a level release can leave the pieces between the knots no trajectory)."""
     free = replace(cfg, back_off=False)
     loose = replace(free, release_upright_deg=max(cfg.release_upright_deg, cfg.upright_tolerance_deg))
-    tight = loose
-    if cfg.tight_min_distance < cfg.min_distance:
-        tight = replace(loose, min_distance=cfg.tight_min_distance,
-                        drop_height=cfg.drop_height - cfg.min_distance + cfg.tight_min_distance)
     configs = []
-    for c in (cfg, free, loose, tight):
+    for c in (cfg, free, loose):
         if c not in configs:
             configs.append(c)
     return configs
