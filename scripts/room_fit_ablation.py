@@ -29,8 +29,10 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``pipeline_region``: ``pipeline`` painted at p <= 0.9 off the region the shut object can occupy
   in the estimated pose (its carcass box and fronts grown by a margin) and at p <= 0.5 on it
-  (`paint_thresholds`, the pipeline's painting since commit d55c294); ``pipeline_region_refined``:
-  that, the pose then refined (the pipeline of `eval-pipeline --perceive room` now);
+  (`paint_thresholds`, the pipeline's painting from commit d55c294); ``pipeline_region_refined``:
+  that, the pose then refined; ``pipeline_fronts_refined``: the pipeline's painting
+  (`paint_off_object`: ``pipeline_region`` with the pixels beyond the open fronts' reach all
+  painted), the pose then refined (the pipeline of `eval-pipeline --perceive room` now);
   ``pipeline_region_reach``:
   that region grown toward the cameras by the fronts' reach (the carcass's larger side: a drawer
   pulls out by less than its depth, a door swings out by its width);
@@ -72,7 +74,13 @@ from nfr_drake.data.rooms import Room
 from nfr_drake.data.visualize import image_grid
 from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import SURE_THRESHOLD, infer, paint_background, paint_thresholds
+from nfr_drake.inference.infer import (
+    SURE_THRESHOLD,
+    infer,
+    paint_background,
+    paint_off_object,
+    paint_thresholds,
+)
 from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.nfr.render import render_images
 from nfr_drake.perception.handle_triangulation import locate_handle
@@ -84,7 +92,8 @@ from nfr_drake.world.keypoints import KeypointTrajectory
 SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet", "seg_mask_masked",
             "pipeline", "pipeline_refined", "seg_mask_p90", "pipeline_p90", "seg_mask_blend",
             "seg_mask_blend_nodet",
-            "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined")
+            "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined",
+            "pipeline_fronts_refined")
 VISIBLE_DEPTH_M = 0.02
 """A silhouette pixel is visible in the room when the room's depth there is within this of the
 object's alone."""
@@ -206,10 +215,12 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
         truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
         handle_W = truth.point("handle", truth.q_current)
         sure = paint_background(room, seg, threshold=SURE_THRESHOLD)
-        region = region_reach = None
+        region = region_reach = fronts = None
         if X_WO_hat is not None:
             region = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=False)
             region_reach = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=True)
+            fronts = paint_off_object(room, seg, [X.GetAsMatrix4() for X in perception.camera_poses],
+                                      perception.cameras, X_WO_hat.GetAsMatrix4(), np.asarray(pose["size"]))
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
                 "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
                 "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
@@ -224,7 +235,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                 "pipeline_blend": (blend(room, seg), seg, X_WO_hat, False, True),
                 "pipeline_region": (region, seg, X_WO_hat, False, True),
                 "pipeline_region_reach": (region_reach, seg, X_WO_hat, False, True),
-                "pipeline_region_refined": (region, seg, X_WO_hat, False, True)}
+                "pipeline_region_refined": (region, seg, X_WO_hat, False, True),
+                "pipeline_fronts_refined": (fronts, seg, X_WO_hat, False, True)}
         detector = fitted.handle_detector
         maps = detector.detect(room)
         fired = [m.probability > 0.5 for m in maps]

@@ -166,6 +166,11 @@ PAINT_MARGIN_M = 0.03
 """How far beyond the estimated carcass box and its fronts the object's pixels may lie, m, in
 `paint_thresholds`: the pose's error (median 1.4-2.3 cm in rooms) and the masks' soft edges."""
 
+OPEN_FRONT_SIDE_M = 0.08
+"""How far an open front stands out beyond the carcass's sides and its own reach, m, in
+`paint_thresholds`: a door opened 90 degrees lies beside its hinge side with its thickness and
+its handle (up to 2.5 + 5.5 cm); a drawer's handle stands out past its front."""
+
 
 def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
@@ -185,33 +190,49 @@ def paint_background(images: list[np.ndarray], masks: list[np.ndarray],
 
 def paint_thresholds(X_WO: np.ndarray, size: np.ndarray, X_WCs: list[np.ndarray],
                      cameras: list[PinholeCamera], shapes: list[tuple[int, int]],
-                     reach_m: float = 0.0) -> list[np.ndarray]:
+                     reach_m: float = 0.0, front_reach_m: float | None = None) -> list[np.ndarray]:
     """`paint_background`'s threshold (H, W) float32 per view (camera at X_WC (4, 4), image of
     shape (H, W)): `PAINT_THRESHOLD` where the object can lie, `SURE_THRESHOLD` elsewhere, so that
     the segmenter's unsure spill beside the object is painted and the object's own edges are kept.
     Where it can lie: the estimated carcass (X_WO (4, 4): O on the floor under the carcass's
     centre, +x out of the front; size (3,): depth, width, height, m) with its fronts
     (`HullConfig.front_thickness_m`), grown by `PAINT_MARGIN_M` on every side but the floor and by
-    `reach_m` more along +x (where open fronts reach)."""
+    `reach_m` more along +x. With `front_reach_m` (how far open fronts reach out of the front, m),
+    `SURE_THRESHOLD` holds only where they can lie (that far in front of it, `OPEN_FRONT_SIDE_M`
+    wider on either side and further out) and nothing is kept beyond: a pixel whose ray passes
+    neither box shows something else (a neighbour beside the object, the floor behind it)."""
     depth, width, height = np.asarray(size, float)
-    x0 = -depth / 2 - PAINT_MARGIN_M
-    x1 = depth / 2 + HullConfig.front_thickness_m + PAINT_MARGIN_M + reach_m
-    centre_W = X_WO[:3, :3] @ np.array([(x0 + x1) / 2, 0.0, 0.0]) + X_WO[:3, 3]
-    box = np.array([centre_W[0], centre_W[1], np.arctan2(X_WO[1, 0], X_WO[0, 0]), x1 - x0,
-                    width + 2 * PAINT_MARGIN_M, height + PAINT_MARGIN_M])
-    return [np.where(box_silhouette(box, X_WC, camera, shape) > 0.5, PAINT_THRESHOLD,
-                     SURE_THRESHOLD).astype(np.float32)
-            for X_WC, camera, shape in zip(X_WCs, cameras, shapes, strict=True)]
+    front = depth / 2 + HullConfig.front_thickness_m
+    yaw = np.arctan2(X_WO[1, 0], X_WO[0, 0])
+
+    def floor_box(x0: float, x1: float, half_width: float, top: float) -> np.ndarray:
+        centre_W = X_WO[:3, :3] @ np.array([(x0 + x1) / 2, 0.0, 0.0]) + X_WO[:3, 3]
+        return np.array([centre_W[0], centre_W[1], yaw, x1 - x0, 2 * half_width, top])
+
+    carcass = floor_box(-depth / 2 - PAINT_MARGIN_M, front + PAINT_MARGIN_M + reach_m,
+                        width / 2 + PAINT_MARGIN_M, height + PAINT_MARGIN_M)
+    fronts = None if front_reach_m is None else floor_box(
+        -depth / 2 - PAINT_MARGIN_M, front + front_reach_m + OPEN_FRONT_SIDE_M,
+        width / 2 + PAINT_MARGIN_M + OPEN_FRONT_SIDE_M, height + PAINT_MARGIN_M)
+    thresholds = []
+    for X_WC, camera, shape in zip(X_WCs, cameras, shapes, strict=True):
+        elsewhere = SURE_THRESHOLD if fronts is None else np.where(
+            box_silhouette(fronts, X_WC, camera, shape) > 0.5, SURE_THRESHOLD, 1.0)
+        thresholds.append(np.where(box_silhouette(carcass, X_WC, camera, shape) > 0.5, PAINT_THRESHOLD,
+                                   elsewhere).astype(np.float32))
+    return thresholds
 
 
 def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
                      cameras: list[PinholeCamera], X_WO: np.ndarray, size: np.ndarray | None,
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
-    """`paint_background` at the thresholds of the estimated carcass's region (`paint_thresholds`;
-    X_WO (4, 4), size (3,) m) or, for a pose given without a size (None), at `PAINT_THRESHOLD`
-    everywhere."""
+    """`paint_background` at the thresholds of the estimated carcass's region and its fronts'
+    reach, the carcass's larger side (`paint_thresholds`; X_WO (4, 4), size (3,) m: a door as wide
+    as the carcass opened 90 degrees, a drawer pulled out by most of its depth) or, for a pose given
+    without a size (None), at `PAINT_THRESHOLD` everywhere."""
     threshold = PAINT_THRESHOLD if size is None else paint_thresholds(
-        X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images])
+        X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images],
+        front_reach_m=float(max(size[0], size[1])))
     return paint_background(images, masks, background_rgb, threshold)
 
 

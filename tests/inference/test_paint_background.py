@@ -90,3 +90,22 @@ def test_spill_off_the_region_is_painted_and_the_edge_on_it_kept():
     np.testing.assert_array_equal(painted[edge], photo[edge])
     np.testing.assert_array_equal(painted[sure], photo[sure])
     np.testing.assert_array_equal(painted[spill], background)
+
+
+def test_beyond_where_open_fronts_reach_even_sure_pixels_are_painted():
+    """With the fronts' reach (0.5 m here): the carcass at PAINT_THRESHOLD, the floor in front of
+    it (where a front opens) at SURE_THRESHOLD, and a neighbour 0.7 m to the side, which no front
+    reaches, painted even where the segmenter is sure of it (p 0.99)."""
+    X_WC, camera = _camera_before_object()
+    front = _pixel([0.2, 0.0, 0.15], X_WC, camera)
+    ahead = _pixel([0.5, 0.0, 0.0], X_WC, camera)
+    neighbour = _pixel([-0.1, 0.7, 0.0], X_WC, camera)
+    thresholds = paint_thresholds(np.eye(4), np.array([0.4, 0.5, 0.3]), [X_WC], [camera], [(64, 64)],
+                                  front_reach_m=0.5)
+    assert thresholds[0][front] == PAINT_THRESHOLD and thresholds[0][ahead] == SURE_THRESHOLD
+    mask = np.full((64, 64), 0.99, np.float32)
+    photo = np.full((64, 64, 3), 40, np.uint8)
+    painted = paint_background([photo], [mask], threshold=thresholds)[0]
+    background = np.round(255 * np.asarray(DEFAULT_BACKGROUND_RGB)).astype(np.uint8)
+    np.testing.assert_array_equal(painted[ahead], photo[ahead])
+    np.testing.assert_array_equal(painted[neighbour], background)
