@@ -213,6 +213,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           perceive: Literal["alone", "room"] = "alone",
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
+                          paintings: tuple[Literal["region", "fronts", "sure"], ...] = ("region",),
                           mask_crop: bool = True, objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           regrasps: int = SimulationConfig.regrasps,
@@ -253,6 +254,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         segmenter: the segmenter's model folder (with `--perceive room`).
         room_loss: with `--perceive room`, the photos' pixels off the object's mask are painted in
             the training background ("background") or left out of the fit's loss ("masked").
+        paintings: with `--room-loss background`, one fit per painting of the photos, the most
+            confident kept (`Scenario.paintings`).
         mask_crop: with `--perceive room`, the segmenter's second, close look at the crop around
             the object's box estimated from its first masks, and at the crop around its carcass's
             box for the amodal carcass masks that give the pose (`Scenario.mask_crop`).
@@ -271,7 +274,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     q_target=1.0 if q_target is None else q_target, keypoints=keypoints, fit=fit,
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
-                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss, mask_crop=mask_crop,
+                    perceive=perceive, segmenter=str(segmenter), room_loss=room_loss,
+                    paintings=list(paintings), mask_crop=mask_crop,
                     simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps,
                                                 second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):

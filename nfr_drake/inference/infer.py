@@ -223,16 +223,28 @@ def paint_thresholds(X_WO: np.ndarray, size: np.ndarray, X_WCs: list[np.ndarray]
     return thresholds
 
 
+Painting = Literal["region", "fronts", "sure"]
+"""How `paint_off_object` paints a room photo: "region", at the thresholds of the estimated
+carcass's region (`paint_thresholds`); "fronts", those with nothing kept beyond where the open
+fronts reach (the carcass's larger side: a door as wide as the carcass opened 90 degrees, a drawer
+pulled out by most of its depth); "sure", at `SURE_THRESHOLD` everywhere."""
+
+
 def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
                      cameras: list[PinholeCamera], X_WO: np.ndarray, size: np.ndarray | None,
-                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB) -> list[np.ndarray]:
-    """`paint_background` at the thresholds of the estimated carcass's region and its fronts'
-    reach, the carcass's larger side (`paint_thresholds`; X_WO (4, 4), size (3,) m: a door as wide
-    as the carcass opened 90 degrees, a drawer pulled out by most of its depth) or, for a pose given
-    without a size (None), at `PAINT_THRESHOLD` everywhere."""
-    threshold = PAINT_THRESHOLD if size is None else paint_thresholds(
-        X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images],
-        front_reach_m=float(max(size[0], size[1])))
+                     background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
+                     painting: Painting = "region") -> list[np.ndarray]:
+    """`paint_background` as `painting` says (X_WO (4, 4), size (3,) m: the estimated carcass);
+    for a pose given without a size (None), "region" and "fronts" paint at `PAINT_THRESHOLD`
+    everywhere."""
+    if painting == "sure":
+        threshold = SURE_THRESHOLD
+    elif size is None:
+        threshold = PAINT_THRESHOLD
+    else:
+        reach = float(max(size[0], size[1])) if painting == "fronts" else None
+        threshold = paint_thresholds(X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images],
+                                     front_reach_m=reach)
     return paint_background(images, masks, background_rgb, threshold)
 
 

@@ -28,7 +28,7 @@ instead.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 import torch
@@ -59,6 +59,7 @@ from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
     FittedModel,
     KeypointSource,
+    Painting,
     RoomLoss,
     infer,
     infer_parts,
@@ -120,9 +121,11 @@ class NfrPerceptionSystem(LeafSystem):
     `mask_crop`, those of its second look at the crop around the object's box in each view,
     `posed_close_look`; when its masks give no pose, the first look's; the amodal carcass masks
     that give the pose likewise, `posed_carcass_look`), and
-    the fit sees the photos painted in `background_rgb` off them (`room_loss` "background") or
-    only the pixels on them (`room_loss` "masked"); without, the pixels off `background_rgb` (the
-    object alone), every pixel counting in the loss.
+    the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
+    each of `paintings` says, `paint_off_object`: one fit per painting, the one with the highest
+    P(handle within 2 cm) kept, `extra["paintings"]` saying which and each one's P; a model with
+    several parts takes the first painting) or only the pixels on them (`room_loss` "masked");
+    without, the pixels off `background_rgb` (the object alone), every pixel counting in the loss.
     X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
     (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate
     before the refinement X_WO_estimated, the refinement's report; `extra["warnings"]` names a
@@ -145,7 +148,8 @@ class NfrPerceptionSystem(LeafSystem):
                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
                  segmenter: Segmenter | None = None, part: int | None = None,
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
-                 room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48):
+                 room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
+                 paintings: tuple[Painting, ...] = ("region",)):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -160,6 +164,9 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
+        if not paintings or any(p not in get_args(Painting) for p in paintings):
+            raise ValueError(f"paintings: one or more of {', '.join(get_args(Painting))}, got {paintings}")
+        self._paintings = tuple(dict.fromkeys(paintings))
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
         self.fit_count = 0
@@ -286,16 +293,26 @@ class NfrPerceptionSystem(LeafSystem):
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
         masked = self._segmenter is not None and self._room_loss == "masked"
+        painted = {None: images}
         if self._segmenter is not None and not masked:  # a given pose comes without a carcass size
-            images = paint_off_object(images, masks, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
-                                      X_WO.GetAsMatrix4(), pose.get("size"), self._background_rgb)
+            paintings = self._paintings[:1] if self._model.num_slots > 1 else self._paintings
+            painted = {name: paint_off_object(images, masks, [X.GetAsMatrix4() for X in self._X_WCs],
+                                              self._cameras, X_WO.GetAsMatrix4(), pose.get("size"),
+                                              self._background_rgb, name) for name in paintings}
         if self._model.num_slots > 1:
-            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
+            photos = next(iter(painted.values()))
+            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, photos,
                                     self._part(context), masks if masked else None)
         else:
-            result, outcome = infer(self._model, capture, self._fit_config, self._q_grid, images,
-                                    self._keypoint_source, masks=masks if self._segmenter else None,
-                                    masked_loss=masked, refine_pose=self._X_WO is None)
+            fits = {name: infer(self._model, capture, self._fit_config, self._q_grid, photos,
+                                self._keypoint_source, masks=masks if self._segmenter else None,
+                                masked_loss=masked, refine_pose=self._X_WO is None)
+                    for name, photos in painted.items()}
+            chosen = max(fits, key=lambda name: _confidence_p(fits[name][0]))
+            result, outcome = fits[chosen]
+            if len(fits) > 1:
+                ps = {name: _confidence_p(r) for name, (r, _) in fits.items()}
+                result.extra["paintings"] = {"chosen": chosen, "p_handle_within_2cm": ps}
             if self._X_WO is None:  # the estimate, and the field's refinement of it
                 X_WO_refined, refined = refined_object_pose(X_WO.GetAsMatrix4(), result, outcome)
                 X_WO = RigidTransform(X_WO_refined)
@@ -353,6 +370,12 @@ class NfrPerceptionSystem(LeafSystem):
         output.set_value(SemanticCloud(X_WO.multiply(points_O.T.astype(float)).T, classes, result.q))
 
 
+def _confidence_p(result: FitResult) -> float:
+    """The fit's P(handle within 2 cm), -1 without one (no calibration, no handle)."""
+    p = (result.confidence or {}).get("p_handle_within_2cm")
+    return -1.0 if p is None else float(p)
+
+
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:
     """Remove the perception role of every geometry of `plant` outside model instance `keep`, so
     render engines (RgbdSensors) see that model alone; Meshcat (illustration role) and contact
@@ -376,7 +399,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      keypoint_source: KeypointSource = "head", scene: PerceptionScene = "alone",
                      segmenter: Path = SEGMENTER_DIR, part: int | None = None,
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
-                     room_loss: RoomLoss = "background", mask_crop: bool = True) -> NfrPerceptionSystem:
+                     room_loss: RoomLoss = "background", mask_crop: bool = True,
+                     paintings: tuple[Painting, ...] = ("region",)) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
@@ -402,7 +426,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
         keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
-        room_loss=room_loss, mask_crop=mask_crop))
+        room_loss=room_loss, mask_crop=mask_crop, paintings=paintings))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

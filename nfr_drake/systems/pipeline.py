@@ -169,7 +169,8 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
     perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
                                   X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
                                   scenario.perceive, Path(scenario.segmenter), part,
-                                  room_loss=scenario.room_loss, mask_crop=scenario.mask_crop)
+                                  room_loss=scenario.room_loss, mask_crop=scenario.mask_crop,
+                                  paintings=tuple(scenario.paintings))
     diagram = builder.Build()
     simulator = Simulator(diagram)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),

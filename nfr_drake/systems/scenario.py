@@ -14,6 +14,7 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import Painting
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
     SEED_DOMAIN_TRAIN,
@@ -34,6 +35,7 @@ TASKS = ("open", "open-and-place")
 OBJECT_POSE_SOURCES = ("given", "estimated")
 PERCEPTION_SCENES = ("alone", "room")
 ROOM_LOSSES = ("background", "masked")
+PAINTINGS = typing.get_args(Painting)
 
 
 @dataclass
@@ -119,6 +121,10 @@ class Scenario:
     """Perceiving a room, what the fit does with the photos' pixels off the object's mask:
     "background", painted in the training background (the field's silhouette must match the
     mask), or "masked", left out of the image loss (`systems.perception.RoomLoss`)."""
+    paintings: list[str] = field(default_factory=lambda: ["region"])
+    """Perceiving a room with `room_loss` "background", how the photos are painted: one fit per
+    painting ("region", "fronts", "sure": `inference.infer.Painting`), the one with the highest
+    P(handle within 2 cm) kept (`NfrPerceptionSystem`)."""
     mask_crop: bool = True
     """Perceiving a room, whether the segmenter takes a second, close look at the crop around the
     object's box estimated from its first masks, and at the crop around its carcass's box for the
@@ -155,6 +161,9 @@ class Scenario:
                               f"got {self.perceive!r}")
         if self.room_loss not in ROOM_LOSSES:
             raise ConfigError(f"room_loss must be one of {', '.join(ROOM_LOSSES)}, got {self.room_loss!r}")
+        if not self.paintings or any(p not in PAINTINGS for p in self.paintings):
+            raise ConfigError(f"paintings must be one or more of {', '.join(PAINTINGS)}, "
+                              f"got {self.paintings}")
         if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
             raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:

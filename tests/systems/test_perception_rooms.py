@@ -77,7 +77,7 @@ def test_a_room_placed_at_X_PW_is_the_same_room_moved():
                                        atol=1e-12)
 
 
-def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT):
+def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, paintings=("region",)):
     obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
     scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
                         object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
@@ -94,7 +94,8 @@ def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT):
     plant.Finalize()
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
-                              X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER)
+                              X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER,
+                              paintings=paintings)
     return builder.Build(), system
 
 
@@ -143,6 +144,37 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
     for image, mask in zip(images, masks, strict=True):
         off = mask < 0.01
         assert off.any() and np.abs(image[off].astype(float) - background).max() <= 3
+
+
+def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch):
+    """Two paintings ("region", then "sure"): two fits on differently painted photos (the sure one
+    paints more), the one whose P(handle within 2 cm) is higher kept, and the result says which."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    calls, given_p = [], iter([0.3, 0.8])
+    real_infer = perception_module.infer
+
+    def spy(*args, **kwargs):
+        result, outcome = real_infer(*args, **kwargs)
+        result.confidence = {**(result.confidence or {}), "p_handle_within_2cm": next(given_p)}
+        calls.append((args[4], result))
+        return result, outcome
+
+    monkeypatch.setattr(perception_module, "infer", spy)
+    diagram, system = _perception_scene(model_dir, "room", X_WO, paintings=("region", "sure"))
+    context = diagram.CreateDefaultContext()
+    Simulator(diagram, context).Initialize()
+    assert system.fit_count == 1 and len(calls) == 2
+    background = np.round(255 * np.array(DEFAULT_BACKGROUND_RGB))
+    painted = [sum(int((np.abs(i.astype(float) - background).max(-1) <= 3).sum()) for i in images)
+               for images, _ in calls]
+    assert painted[1] >= painted[0]
+    result = system.get_fit_result_output_port().Eval(system.GetMyContextFromRoot(context))
+    assert result.confidence["p_handle_within_2cm"] == 0.8 and result.q == calls[1][1].q
+    assert result.extra["paintings"] == {"chosen": "sure",
+                                         "p_handle_within_2cm": {"region": 0.3, "sure": 0.8}}
+    with pytest.raises(ValueError, match="paintings"):
+        _perception_scene(model_dir, "room", X_WO, paintings=("brush",))
 
 
 def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, monkeypatch):
