@@ -23,6 +23,7 @@ from tqdm import tqdm
 from nfr_drake.cpu import set_torch_threads
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
+from nfr_drake.inference.infer import PAINTINGS
 from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.pipeline import run_scenario
 from nfr_drake.systems.place_task import PlaceTaskOutcome
@@ -213,7 +214,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           perceive: Literal["alone", "room"] = "alone",
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
-                          paintings: tuple[Literal["region", "fronts", "sure"], ...] = ("region",),
+                          paintings: tuple[Literal["region", "fronts", "sure"], ...] = PAINTINGS,
                           mask_crop: bool = True, objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           regrasps: int = SimulationConfig.regrasps,

@@ -6,7 +6,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import cv2
 import numpy as np
@@ -228,6 +228,10 @@ Painting = Literal["region", "fronts", "sure"]
 carcass's region (`paint_thresholds`); "fronts", those with nothing kept beyond where the open
 fronts reach (the carcass's larger side: a door as wide as the carcass opened 90 degrees, a drawer
 pulled out by most of its depth); "sure", at `SURE_THRESHOLD` everywhere."""
+
+PAINTINGS: tuple[Painting, ...] = get_args(Painting)
+"""Every painting: room perception fits each and keeps the most confident fit
+(`systems.perception.NfrPerceptionSystem`; docs/ROOMS.md, "Several paintings")."""
 
 
 def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],

@@ -28,7 +28,7 @@ instead.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal, get_args
+from typing import Literal
 
 import numpy as np
 import torch
@@ -57,6 +57,7 @@ from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.forward import semantic_point_cloud
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
+    PAINTINGS,
     FittedModel,
     KeypointSource,
     Painting,
@@ -149,7 +150,7 @@ class NfrPerceptionSystem(LeafSystem):
                  segmenter: Segmenter | None = None, part: int | None = None,
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                  room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
-                 paintings: tuple[Painting, ...] = ("region",)):
+                 paintings: tuple[Painting, ...] = PAINTINGS):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -164,8 +165,8 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
-        if not paintings or any(p not in get_args(Painting) for p in paintings):
-            raise ValueError(f"paintings: one or more of {', '.join(get_args(Painting))}, got {paintings}")
+        if not paintings or any(p not in PAINTINGS for p in paintings):
+            raise ValueError(f"paintings: one or more of {', '.join(PAINTINGS)}, got {paintings}")
         self._paintings = tuple(dict.fromkeys(paintings))
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
@@ -400,7 +401,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      segmenter: Path = SEGMENTER_DIR, part: int | None = None,
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                      room_loss: RoomLoss = "background", mask_crop: bool = True,
-                     paintings: tuple[Painting, ...] = ("region",)) -> NfrPerceptionSystem:
+                     paintings: tuple[Painting, ...] = PAINTINGS) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines

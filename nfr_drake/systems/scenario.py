@@ -14,7 +14,7 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import Painting
+from nfr_drake.inference.infer import PAINTINGS
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
     SEED_DOMAIN_TRAIN,
@@ -35,7 +35,6 @@ TASKS = ("open", "open-and-place")
 OBJECT_POSE_SOURCES = ("given", "estimated")
 PERCEPTION_SCENES = ("alone", "room")
 ROOM_LOSSES = ("background", "masked")
-PAINTINGS = typing.get_args(Painting)
 
 
 @dataclass
@@ -121,10 +120,10 @@ class Scenario:
     """Perceiving a room, what the fit does with the photos' pixels off the object's mask:
     "background", painted in the training background (the field's silhouette must match the
     mask), or "masked", left out of the image loss (`systems.perception.RoomLoss`)."""
-    paintings: list[str] = field(default_factory=lambda: ["region"])
+    paintings: list[str] = field(default_factory=lambda: list(PAINTINGS))
     """Perceiving a room with `room_loss` "background", how the photos are painted: one fit per
-    painting ("region", "fronts", "sure": `inference.infer.Painting`), the one with the highest
-    P(handle within 2 cm) kept (`NfrPerceptionSystem`)."""
+    painting ("region", "fronts", "sure": `inference.infer.Painting`; by default all three), the
+    one with the highest P(handle within 2 cm) kept (`NfrPerceptionSystem`)."""
     mask_crop: bool = True
     """Perceiving a room, whether the segmenter takes a second, close look at the crop around the
     object's box estimated from its first masks, and at the crop around its carcass's box for the
