@@ -338,16 +338,49 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     return result, outcome
 
 
+def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
+                  images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
+                  X_WO: np.ndarray, size: np.ndarray | None, paintings: tuple[Painting, ...] = PAINTINGS,
+                  keypoint_source: KeypointSource = "head", room: bool = True, refine_pose: bool = False,
+                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB
+                  ) -> tuple[FitResult, FitOutcome]:
+    """`infer` (`capture` in the object's frame O) on the photos `images` painted off the object's
+    `masks` each way `paintings` says (`paint_off_object`: the cameras X_WCs (4, 4) and the
+    estimated carcass X_WO (4, 4), `size` (3,) m or None, in one frame W), the fit with the
+    highest P(handle within 2 cm) kept (the first where none has a P); with more than one
+    painting the result's `extra["paintings"]` says which was kept and each one's P (docs/ROOMS.md,
+    "Several paintings")."""
+    if not paintings or any(p not in PAINTINGS for p in paintings):
+        raise NfrDrakeError(f"paintings: one or more of {', '.join(PAINTINGS)}, got {paintings}")
+    cameras = [frame.camera for frame in capture.frames]
+    fits = {name: infer(fitted, capture, fit_config, q_grid,
+                        paint_off_object(images, masks, X_WCs, cameras, X_WO, size, background_rgb, name),
+                        keypoint_source, masks=masks, masked_loss=False, room=room, refine_pose=refine_pose)
+            for name in dict.fromkeys(paintings)}
+
+    def p_of(result: FitResult) -> float:
+        p = (result.confidence or {}).get("p_handle_within_2cm")
+        return -1.0 if p is None else float(p)
+
+    chosen = max(fits, key=lambda name: p_of(fits[name][0]))
+    result, outcome = fits[chosen]
+    if len(fits) > 1:
+        result.extra["paintings"] = {"chosen": chosen,
+                                     "p_handle_within_2cm": {name: p_of(r) for name, (r, _) in fits.items()}}
+    return result, outcome
+
+
 def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
                    q_grid: np.ndarray, masks: list[np.ndarray], room_loss: RoomLoss = "background",
                    keypoint_source: KeypointSource = "head", room: bool = True,
-                   carcass: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome, CaptureSet]:
+                   carcass: list[np.ndarray] | None = None, paintings: tuple[Painting, ...] = ("region",)
+                   ) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), or
     from the carcass's amodal masks `carcass` when given (`carcass_masks`: the box is the carcass;
     when they give no pose, from `masks`, with a warning), the
-    fit runs in that O (the pixels off the masks painted in the training background, at the
-    thresholds of the estimated carcass's region, `paint_thresholds`, or left out of the image loss,
+    fit runs in that O (the pixels off the masks painted in the training background as each of
+    `paintings` says, the most confident fit kept, `infer_painted`, or left out of the image loss,
     `room_loss`; `room`: the masks are a room segmenter's, the confidence's
     silhouette, see `infer`; the pose then refined with the fitted field, `FitConfig.refine_pose`),
     and the result's positions are moved into W (`extra["object_pose"]`: X_WO, the estimate before
@@ -367,10 +400,12 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 
     in_O = in_frame(estimate.X_WO)
     if room_loss == "background":
-        images = paint_off_object(images, masks, [f.X_OC for f in capture.frames],
-                                  [f.camera for f in capture.frames], estimate.X_WO, estimate.size)
-    result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
-                            room_loss == "masked", room, refine_pose=True)
+        result, outcome = infer_painted(fitted, in_O, fit_config, q_grid, images, masks,
+                                        [f.X_OC for f in capture.frames], estimate.X_WO, estimate.size,
+                                        paintings, keypoint_source, room, refine_pose=True)
+    else:
+        result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
+                                masked_loss=True, room=room, refine_pose=True)
     X_WO, pose = refined_object_pose(estimate.X_WO, result, outcome)
     if outcome.X_OP is not None:  # the fit ended in the refined frame
         in_O = in_frame(X_WO)
@@ -680,6 +715,7 @@ def infer_command(
     segmenter: Path = Path("models/segmenter"),
     mask_crop: bool = False,
     room_loss: RoomLoss = "background",
+    paintings: tuple[Painting, ...] = ("region",),
     part: int | None = None,
     furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
     threads: int | None = None,
@@ -713,6 +749,9 @@ def infer_command(
         room_loss: with --estimate-pose, the pixels off the object's mask are painted in the
             training background ("background": the field's silhouette must match the mask) or
             left out of the image loss ("masked").
+        paintings: with --room-loss background, how the photos are painted, one fit each, the
+            most confident kept (`infer_painted`; "region" alone by default here, as tutorial 3
+            was measured; `eval-pipeline` fits all three).
         part: a model with several parts (furniture): the part whose q, keypoints and trajectory
             are the result's single-part fields (default: the first part found); every part found
             is listed under `parts`.
@@ -755,7 +794,8 @@ def infer_command(
             views = object_masks(photos, segmenter if masks == "segmenter" else None)
             carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
         result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
-                                              room=masks == "segmenter", carcass=carcass)
+                                              room=masks == "segmenter", carcass=carcass,
+                                              paintings=paintings)
         pose = np.array(result.extra["object_pose"]["X_WO"])
         print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "
               f"{np.degrees(np.arctan2(pose[1, 0], pose[0, 0])):.1f} deg; size (depth x width x "

@@ -63,6 +63,7 @@ from nfr_drake.inference.infer import (
     Painting,
     RoomLoss,
     infer,
+    infer_painted,
     infer_parts,
     paint_off_object,
     refined_object_pose,
@@ -294,26 +295,25 @@ class NfrPerceptionSystem(LeafSystem):
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
         capture = CaptureSet(Path("drake_cameras"), frames)
         masked = self._segmenter is not None and self._room_loss == "masked"
-        painted = {None: images}
-        if self._segmenter is not None and not masked:  # a given pose comes without a carcass size
-            paintings = self._paintings[:1] if self._model.num_slots > 1 else self._paintings
-            painted = {name: paint_off_object(images, masks, [X.GetAsMatrix4() for X in self._X_WCs],
-                                              self._cameras, X_WO.GetAsMatrix4(), pose.get("size"),
-                                              self._background_rgb, name) for name in paintings}
+        painting = self._segmenter is not None and not masked  # a given pose comes without a size
+        X_WCs = [X.GetAsMatrix4() for X in self._X_WCs]
         if self._model.num_slots > 1:
-            photos = next(iter(painted.values()))
-            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, photos,
+            if painting:
+                images = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
+                                          pose.get("size"), self._background_rgb, self._paintings[0])
+            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
                                     self._part(context), masks if masked else None)
         else:
-            fits = {name: infer(self._model, capture, self._fit_config, self._q_grid, photos,
-                                self._keypoint_source, masks=masks if self._segmenter else None,
-                                masked_loss=masked, refine_pose=self._X_WO is None)
-                    for name, photos in painted.items()}
-            chosen = max(fits, key=lambda name: _confidence_p(fits[name][0]))
-            result, outcome = fits[chosen]
-            if len(fits) > 1:
-                ps = {name: _confidence_p(r) for name, (r, _) in fits.items()}
-                result.extra["paintings"] = {"chosen": chosen, "p_handle_within_2cm": ps}
+            if painting:
+                result, outcome = infer_painted(self._model, capture, self._fit_config, self._q_grid, images,
+                                                masks, X_WCs, X_WO.GetAsMatrix4(), pose.get("size"),
+                                                self._paintings, self._keypoint_source,
+                                                refine_pose=self._X_WO is None,
+                                                background_rgb=self._background_rgb)
+            else:
+                result, outcome = infer(self._model, capture, self._fit_config, self._q_grid, images,
+                                        self._keypoint_source, masks=masks if self._segmenter else None,
+                                        masked_loss=masked, refine_pose=self._X_WO is None)
             if self._X_WO is None:  # the estimate, and the field's refinement of it
                 X_WO_refined, refined = refined_object_pose(X_WO.GetAsMatrix4(), result, outcome)
                 X_WO = RigidTransform(X_WO_refined)
@@ -369,12 +369,6 @@ class NfrPerceptionSystem(LeafSystem):
         z = torch.as_tensor(np.asarray(result.z))
         points_O, classes = semantic_point_cloud(self._model.model, z, result.q, views)
         output.set_value(SemanticCloud(X_WO.multiply(points_O.T.astype(float)).T, classes, result.q))
-
-
-def _confidence_p(result: FitResult) -> float:
-    """The fit's P(handle within 2 cm), -1 without one (no calibration, no handle)."""
-    p = (result.confidence or {}).get("p_handle_within_2cm")
-    return -1.0 if p is None else float(p)
 
 
 def render_only(plant: MultibodyPlant, scene_graph: SceneGraph, keep: ModelInstanceIndex) -> None:

@@ -17,6 +17,7 @@ from nfr_drake.data.camera_placement import CameraDistribution
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.rooms import RoomDistribution, sample_room
 from nfr_drake.errors import ConfigError
+from nfr_drake.inference import infer as infer_module
 from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.perception import object_pose as object_pose_module
@@ -116,13 +117,13 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
     # The fit gets the segmenter's masks, one per view, of the image's size, and the photos painted
     # in the training background off them (the whole image in the loss).
     calls = []
-    real_infer = perception_module.infer
+    real_infer = infer_module.infer
 
     def spy(*args, **kwargs):
         calls.append((args[4], kwargs))
         return real_infer(*args, **kwargs)
 
-    monkeypatch.setattr(perception_module, "infer", spy)
+    monkeypatch.setattr(infer_module, "infer", spy)
     looks = []
     real_look = perception_module.posed_close_look
 
@@ -152,7 +153,7 @@ def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
     calls, given_p = [], iter([0.3, 0.8])
-    real_infer = perception_module.infer
+    real_infer = infer_module.infer
 
     def spy(*args, **kwargs):
         result, outcome = real_infer(*args, **kwargs)
@@ -160,7 +161,7 @@ def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch
         calls.append((args[4], result))
         return result, outcome
 
-    monkeypatch.setattr(perception_module, "infer", spy)
+    monkeypatch.setattr(infer_module, "infer", spy)
     diagram, system = _perception_scene(model_dir, "room", X_WO, paintings=("region", "sure"))
     context = diagram.CreateDefaultContext()
     Simulator(diagram, context).Initialize()
@@ -271,7 +272,7 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
         calls.append(kwargs)
         raise Stop
 
-    monkeypatch.setattr(perception_module, "infer", infer)
+    monkeypatch.setattr(infer_module, "infer", infer)
     diagram, _ = _perception_scene(model_dir, "room", X_WO, known=False)
     with pytest.raises(Stop):
         Simulator(diagram).Initialize()
