@@ -626,6 +626,13 @@ def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> l
     return [back_off, *outs]
 
 
+class PlaceUnreachable(PlanningError):
+    """`plan_place` failed before the retreat for every hand flip: no room under a shelf over the
+    goal, or no IK for a knot up to the place. The `fallback_configs` change only the back-off off
+    the item and the release's tilt, whose IK the first config already tries, so on the same base
+    they fail the same: callers skip that base for them."""
+
+
 def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
     """The place's configs to plan with in turn, each on every base before the next: cfg; without
     the back-off off the item (`PlaceConfig.back_off`); and that with the item released within
@@ -656,13 +663,14 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
     straight bound unchanged.
     Raises PlanningError when a side-held item has too little room over the goal
     (`side_room_needed`), else naming the stage or the constraints that failed, for each grasp tried
-    (the hand either way round about its approach)."""
+    (the hand either way round about its approach); `PlaceUnreachable` where the fallback configs
+    cannot do better (no room, or no IK up to the place for either hand)."""
     cfg = config or PlaceConfig()
     t0 = time.perf_counter()
     pb = problem
     side = pb.grasp == "side"
     if side and (room := free_height(pb.fixed, pb.goal)) < side_room_needed(pb.item, cfg):
-        raise PlanningError(f"{100 * room:.1f} cm free over the goal: a side-held item needs "
+        raise PlaceUnreachable(f"{100 * room:.1f} cm free over the goal: a side-held item needs "
                             f"{100 * side_room_needed(pb.item, cfg):.1f} cm (the item, the wrist); "
                             "no other grasp reaches in under a shelf")
     item_box = ObstacleBox("item", 2 * pb.item.half_extents,
@@ -676,7 +684,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         _Stage("backing off the handle", "off handle", handle.p_WH - cfg.retreat_distance * handle.approach_W,
                _tool_at(handle.p_WH - cfg.retreat_distance * handle.approach_W, 0.01), handle.approach_W)]
     p_place = pb.goal + cfg.drop_height * _Z
-    failures = []
+    failures, placed_ik = [], False
     for flip in (False, True):
         X_IG = grasp_in_item(pb.item, pb.grasp, cfg, flip)
         X_GI = X_IG.inverse()
@@ -718,6 +726,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         if sols_b is None:
             failures.append(f"IK of {failed}")
             continue
+        placed_ik = True
         X_WGplace = _tool_pose_at(scenes["free"], sols_b[-1])
         X_WIplace = X_WGplace @ X_GI
         placed = ObstacleBox("placed item", 2 * pb.item.half_extents,
@@ -747,4 +756,5 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
             X_WGend = _tool_pose_at(scenes["free"], carry_end)
             return PlacePlan(segments, X_WB, X_GI, pb.X_WI, X_WGend @ X_GI, pb.goal,
                              time.perf_counter() - t0)
-    raise PlanningError("no feasible pick and place: " + "; ".join(dict.fromkeys(failures)))
+    raise (PlanningError if placed_ik else PlaceUnreachable)(
+        "no feasible pick and place: " + "; ".join(dict.fromkeys(failures)))

@@ -46,6 +46,7 @@ from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
     PlacePlan,
+    PlaceUnreachable,
     fallback_configs,
     place_bases,
     place_problem,
@@ -415,7 +416,9 @@ def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, co
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
     """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`),
     each of the place's `fallback_configs` on every base before the next (the opening planned
-    once per base: what it must reach, `place_reach_points`, is the same for all of them)."""
+    once per base: what it must reach, `place_reach_points`, is the same for all of them; a base
+    where the opening, the table or the place up to the release failed, `PlaceUnreachable`, is not
+    tried again)."""
     errors, openings = [], {}
 
     def opening(reach: float) -> PlanResult:  # one per reach: the fallbacks keep what it must reach
@@ -430,17 +433,24 @@ def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, co
             raise openings[reach]
         return openings[reach]
 
+    unreachable = set()  # reaches where the place failed as no fallback config can mend
     for cfg in fallback_configs(place_config):
         for reach in PLACE_REACH[kt.category]:
+            if reach in unreachable:
+                continue
+            placing = False
             try:
                 plan = opening(reach)
                 table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
                                            ITEM_REACH[GRASP_OF[kt.category]])
                 q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
                 problem = place_problem(kt, q_target, item, X_WI, table, obstacles, cfg)
+                placing = True
                 place = plan_place(plan.X_WB, q_end, problem, cfg, plan.waypoints[-1])
                 return plan, place, table
             except PlanningError as err:
+                if not placing or isinstance(err, PlaceUnreachable):  # every fallback fails so here
+                    unreachable.add(reach)
                 errors.append(f"base within {reach:.2f} m of the goal: {err}")
     raise PlanningError("; ".join(dict.fromkeys(errors)))
 
@@ -480,18 +490,25 @@ def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt:
 def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig,
                     floor: float | None = None) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
-    the first that plans, each of the place's `fallback_configs` on every base before the next),
-    and its table; `floor`: the goal's height where measured (m in W;
-    `place_problem`)."""
+    the first that plans, each of the place's `fallback_configs` on every base before the next,
+    but those where the table or the place up to the release failed, `PlaceUnreachable`), and its
+    table; `floor`: the goal's height where measured (m in W; `place_problem`)."""
     boxes = [*obstacles[0], *obstacles[1]]
-    errors = []
+    bases = place_bases(kt, q, boxes)
+    errors, unreachable = [], set()  # bases where the place failed as no fallback config can mend
     for cfg in fallback_configs(place_config):
-        for X_WB in place_bases(kt, q, boxes):
+        for k, X_WB in enumerate(bases):
+            if k in unreachable:
+                continue
+            placing = False
             try:
                 table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
                 problem = place_problem(kt, q, item, X_WI, table, obstacles, cfg, X_WB.translation(), floor)
+                placing = True
                 return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, cfg), table
             except PlanningError as err:
+                if not placing or isinstance(err, PlaceUnreachable):  # every fallback fails so here
+                    unreachable.add(k)
                 errors.append(str(err))
     raise PlanningError("no base in front of the open compartment plans the place: "
                         + ("; ".join(dict.fromkeys(errors)) or "none clears it"))

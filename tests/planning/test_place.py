@@ -19,6 +19,7 @@ from nfr_drake.planning.compartment import (
 from nfr_drake.planning.place import (
     PLACE_REACH,
     PlaceConfig,
+    PlaceUnreachable,
     fallback_configs,
     place_bases,
     place_problem,
@@ -217,8 +218,9 @@ def test_a_side_held_item_under_a_low_shelf_is_refused_in_one_line():
     X_WB = place_bases(kt, 0.6, [*obstacles[0], *obstacles[1]])[0]
     table, X_WI = table_beside(X_WB, [*obstacles[0], *obstacles[1]], ITEM_REACH["side"])
     problem = place_problem(kt, 0.6, item, X_WI, table, obstacles, toward=X_WB.translation())
-    with pytest.raises(PlanningError, match=r"cm free over the goal: a side-held item needs 12\.6 cm"):
+    with pytest.raises(PlaceUnreachable, match=r"cm free over the goal: a side-held item needs 12\.6 cm"):
         plan_place(X_WB, np.zeros(9), problem)
+    assert issubclass(PlaceUnreachable, PlanningError)
 
 
 def _place_in_true_closet(index: int, q_door: float, cfg: PlaceConfig):

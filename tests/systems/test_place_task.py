@@ -185,3 +185,33 @@ def test_the_place_avoids_the_door_where_it_was_measured_and_either_side():
     kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
     opening = SimpleNamespace(p_W_handle=np.stack([kt.point("handle", 0.0), kt.point("handle", 0.57)]))
     assert measured_articulation(kt, opening) == pytest.approx(0.57, abs=0.005)
+
+
+def test_a_base_no_fallback_can_mend_is_not_tried_again(monkeypatch):
+    """`_place_in_front` tries the place's fallback configs on every base in turn, but a base where
+    the place failed up to the release (`PlaceUnreachable`) only with the first: the fallbacks
+    change only the back-off and the release's tilt, and would fail there the same."""
+    from nfr_drake.planning.place import PlaceUnreachable, fallback_configs
+    from nfr_drake.planning.planner import PlanningError
+    from nfr_drake.systems import place_task
+
+    bases = [RigidTransform([1.0, 0.0, 0.0]), RigidTransform([0.0, 1.0, 0.0])]
+    tried = []
+
+    def plan_place(X_WB, q0, problem, cfg):
+        tried.append((int(X_WB.translation()[1]), cfg))
+        if X_WB.translation()[1] == 0.0:
+            raise PlaceUnreachable("IK of pre-place")
+        raise PlanningError("trajectory optimisation to place")
+
+    monkeypatch.setattr(place_task, "place_bases", lambda kt, q, boxes: bases)
+    monkeypatch.setattr(place_task, "table_beside", lambda X_WB, boxes, reach: (None, RigidTransform()))
+    monkeypatch.setattr(place_task, "place_problem", lambda *args: None)
+    monkeypatch.setattr(place_task, "ready_posture", lambda X_WB, p: None)
+    monkeypatch.setattr(place_task, "plan_place", plan_place)
+    configs = fallback_configs(place_task.PlaceConfig())
+    with pytest.raises(PlanningError, match="IK of pre-place; trajectory optimisation to place"):
+        place_task._place_in_front(SimpleNamespace(category="closet"), 0.6, None, ([], []),
+                                   place_task.PlaceConfig())
+    assert [base for base, _ in tried] == [0] + [1] * len(configs)
+    assert [cfg for base, cfg in tried if base == 1] == configs
