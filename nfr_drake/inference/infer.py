@@ -346,8 +346,9 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
                   ) -> tuple[FitResult, FitOutcome]:
     """`infer` (`capture` in the object's frame O) on the photos `images` painted off the object's
     `masks` each way `paintings` says (`paint_off_object`: the cameras X_WCs (4, 4) and the
-    estimated carcass X_WO (4, 4), `size` (3,) m or None, in one frame W), the fit with the
-    highest P(handle within 2 cm) kept (the first where none has a P); with more than one
+    estimated carcass X_WO (4, 4), `size` (3,) m or None, in one frame W; without a size "fronts"
+    paints as "region"), the fit with the highest P(handle within 2 cm) kept (the first where
+    none has a P); with more than one
     painting the result's `extra["paintings"]` says which was kept and each one's P (docs/ROOMS.md,
     "Several paintings")."""
     if not paintings or any(p not in PAINTINGS for p in paintings):
@@ -356,7 +357,7 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
     fits = {name: infer(fitted, capture, fit_config, q_grid,
                         paint_off_object(images, masks, X_WCs, cameras, X_WO, size, background_rgb, name),
                         keypoint_source, masks=masks, masked_loss=False, room=room, refine_pose=refine_pose)
-            for name in dict.fromkeys(paintings)}
+            for name in dict.fromkeys("region" if size is None and p == "fronts" else p for p in paintings)}
 
     def p_of(result: FitResult) -> float:
         p = (result.confidence or {}).get("p_handle_within_2cm")

@@ -124,9 +124,9 @@ class NfrPerceptionSystem(LeafSystem):
     `posed_close_look`; when its masks give no pose, the first look's; the amodal carcass masks
     that give the pose likewise, `posed_carcass_look`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
-    each of `paintings` says, `paint_off_object`: one fit per painting, the one with the highest
-    P(handle within 2 cm) kept, `extra["paintings"]` saying which and each one's P; a model with
-    several parts takes the first painting) or only the pixels on them (`room_loss` "masked");
+    each of `paintings` says: one fit per painting, the one with the highest P(handle within 2 cm)
+    kept, `infer_painted`; a model with several parts takes the first painting) or only the
+    pixels on them (`room_loss` "masked");
     without, the pixels off `background_rgb` (the object alone), every pixel counting in the loss.
     X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
     (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate

@@ -176,6 +176,12 @@ def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch
                                          "p_handle_within_2cm": {"region": 0.3, "sure": 0.8}}
     with pytest.raises(ValueError, match="paintings"):
         _perception_scene(model_dir, "room", X_WO, paintings=("brush",))
+    # A given pose comes without a carcass size: "fronts" paints as "region", one fit for both.
+    calls.clear()
+    given_p = iter([0.5])
+    diagram, system = _perception_scene(model_dir, "room", X_WO, paintings=("region", "fronts"))
+    Simulator(diagram).Initialize()
+    assert len(calls) == 1
 
 
 def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, monkeypatch):
