@@ -29,10 +29,11 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   only the pixels the segmenter is sure of are kept (docs/ROOMS.md, "Shut drawers fitted open");
 - ``pipeline_region``: ``pipeline`` painted at p <= 0.9 off the region the shut object can occupy
   in the estimated pose (its carcass box and fronts grown by a margin) and at p <= 0.5 on it
-  (`paint_thresholds`, the pipeline's painting from commit d55c294); ``pipeline_region_refined``:
-  that, the pose then refined; ``pipeline_fronts_refined``: the pipeline's painting
-  (`paint_off_object`: ``pipeline_region`` with the pixels beyond the open fronts' reach all
-  painted), the pose then refined (the pipeline of `eval-pipeline --perceive room` now);
+  (`paint_thresholds`, the pipeline's one painting from commit d55c294 to 5538832);
+  ``pipeline_region_refined``: that, the pose then refined (the pipeline's "region" painting);
+  ``pipeline_fronts_refined``: ``pipeline_region_refined`` with the pixels beyond the open fronts'
+  reach all painted (`paint_off_object(..., painting="fronts")`; the pipeline fits its three
+  paintings and keeps the most confident fit, docs/ROOMS.md, "Several paintings");
   ``pipeline_region_reach``:
   that region grown toward the cameras by the fronts' reach (the carcass's larger side: a drawer
   pulls out by less than its depth, a door swings out by its width);
@@ -220,7 +221,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             region = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=False)
             region_reach = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=True)
             fronts = paint_off_object(room, seg, [X.GetAsMatrix4() for X in perception.camera_poses],
-                                      perception.cameras, X_WO_hat.GetAsMatrix4(), np.asarray(pose["size"]))
+                                      perception.cameras, X_WO_hat.GetAsMatrix4(), np.asarray(pose["size"]),
+                                      painting="fronts")
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
                 "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
                 "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
