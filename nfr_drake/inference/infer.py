@@ -18,7 +18,7 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet, read_capture_set
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.visualize import colorize_labels, image_grid, plot_handle_paths
-from nfr_drake.errors import NfrDrakeError
+from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.confidence import (
     CONFIDENCE_FILE,
     ROOM_CONFIDENCE_FILE,
@@ -234,6 +234,14 @@ PAINTINGS: tuple[Painting, ...] = get_args(Painting)
 (`systems.perception.NfrPerceptionSystem`; docs/ROOMS.md, "Several paintings")."""
 
 
+def checked_paintings(paintings) -> tuple[Painting, ...]:
+    """`paintings` as a tuple without repeats; ConfigError unless one or more of `PAINTINGS`."""
+    paintings = tuple(paintings)
+    if not paintings or any(p not in PAINTINGS for p in paintings):
+        raise ConfigError(f"paintings must be one or more of {', '.join(PAINTINGS)}, got {list(paintings)}")
+    return tuple(dict.fromkeys(paintings))
+
+
 def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
                      cameras: list[PinholeCamera], X_WO: np.ndarray, size: np.ndarray | None,
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
@@ -351,13 +359,12 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
     none has a P); with more than one
     painting the result's `extra["paintings"]` says which was kept and each one's P (docs/ROOMS.md,
     "Several paintings")."""
-    if not paintings or any(p not in PAINTINGS for p in paintings):
-        raise NfrDrakeError(f"paintings: one or more of {', '.join(PAINTINGS)}, got {paintings}")
     cameras = [frame.camera for frame in capture.frames]
     fits = {name: infer(fitted, capture, fit_config, q_grid,
                         paint_off_object(images, masks, X_WCs, cameras, X_WO, size, background_rgb, name),
                         keypoint_source, masks=masks, masked_loss=False, room=room, refine_pose=refine_pose)
-            for name in dict.fromkeys("region" if size is None and p == "fronts" else p for p in paintings)}
+            for name in checked_paintings("region" if size is None and p == "fronts" else p
+                                          for p in checked_paintings(paintings))}
 
     def p_of(result: FitResult) -> float:
         p = (result.confidence or {}).get("p_handle_within_2cm")

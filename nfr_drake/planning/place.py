@@ -627,10 +627,11 @@ def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> l
 
 
 class PlaceUnreachable(PlanningError):
-    """`plan_place` failed before the retreat for every hand flip: no room under a shelf over the
-    goal, or no IK for a knot up to the place. The `fallback_configs` change only the back-off off
-    the item and the release's tilt, whose IK the first config already tries, so on the same base
-    they fail the same: callers skip that base for them."""
+    """The place fails from this base whatever the fallback config: `plan_place` failed before the
+    retreat for every hand flip (no room under a shelf over the goal, no IK for a knot up to the
+    place), or the base has no opening or table. The `fallback_configs` change only the back-off
+    off the item and the release's tilt, whose IK the first config already tries, so on the same
+    base they fail the same: callers skip that base for them."""
 
 
 def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
@@ -671,8 +672,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
     side = pb.grasp == "side"
     if side and (room := free_height(pb.fixed, pb.goal)) < side_room_needed(pb.item, cfg):
         raise PlaceUnreachable(f"{100 * room:.1f} cm free over the goal: a side-held item needs "
-                            f"{100 * side_room_needed(pb.item, cfg):.1f} cm (the item, the wrist); "
-                            "no other grasp reaches in under a shelf")
+                               f"{100 * side_room_needed(pb.item, cfg):.1f} cm (the item, the wrist); "
+                               "no other grasp reaches in under a shelf")
     item_box = ObstacleBox("item", 2 * pb.item.half_extents,
                            pb.X_WI @ RigidTransform([0.0, 0.0, pb.item.height / 2]))
     everything = [*pb.fixed, *pb.moving, pb.table]
@@ -684,7 +685,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         _Stage("backing off the handle", "off handle", handle.p_WH - cfg.retreat_distance * handle.approach_W,
                _tool_at(handle.p_WH - cfg.retreat_distance * handle.approach_W, 0.01), handle.approach_W)]
     p_place = pb.goal + cfg.drop_height * _Z
-    failures, placed_ik = [], False
+    failures, reached_place = [], False
     for flip in (False, True):
         X_IG = grasp_in_item(pb.item, pb.grasp, cfg, flip)
         X_GI = X_IG.inverse()
@@ -726,7 +727,7 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
         if sols_b is None:
             failures.append(f"IK of {failed}")
             continue
-        placed_ik = True
+        reached_place = True
         X_WGplace = _tool_pose_at(scenes["free"], sols_b[-1])
         X_WIplace = X_WGplace @ X_GI
         placed = ObstacleBox("placed item", 2 * pb.item.half_extents,
@@ -756,5 +757,5 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
             X_WGend = _tool_pose_at(scenes["free"], carry_end)
             return PlacePlan(segments, X_WB, X_GI, pb.X_WI, X_WGend @ X_GI, pb.goal,
                              time.perf_counter() - t0)
-    raise (PlanningError if placed_ik else PlaceUnreachable)(
+    raise (PlanningError if reached_place else PlaceUnreachable)(
         "no feasible pick and place: " + "; ".join(dict.fromkeys(failures)))

@@ -62,6 +62,7 @@ from nfr_drake.inference.infer import (
     KeypointSource,
     Painting,
     RoomLoss,
+    checked_paintings,
     infer,
     infer_painted,
     infer_parts,
@@ -166,9 +167,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
-        if not paintings or any(p not in PAINTINGS for p in paintings):
-            raise ValueError(f"paintings: one or more of {', '.join(PAINTINGS)}, got {paintings}")
-        self._paintings = tuple(dict.fromkeys(paintings))
+        self._paintings = checked_paintings(paintings)
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
         self.fit_count = 0

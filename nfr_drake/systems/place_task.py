@@ -13,6 +13,7 @@ table stands beside the place's base.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -412,47 +413,53 @@ of it, which one base seldom does; a drawer's box is reached from where its hand
 (there the base moves only when no one base serves both)."""
 
 
+def _first_that_plans(place_config: PlaceConfig, candidates: list, attempt: Callable, label: Callable,
+                      failed: str = "") -> tuple:
+    """`attempt(cfg, candidate)` with each of the place's `fallback_configs` on every candidate (a
+    base, or a reach) before the next config; the first result. A candidate where it raised
+    `PlaceUnreachable` is not tried again: the fallbacks change only the back-off off the item and
+    the release's tilt, and would fail there the same. Raises PlanningError: `failed`, then each
+    failure after `label(candidate)`."""
+    errors, unreachable = [], set()
+    for cfg in fallback_configs(place_config):
+        for k, candidate in enumerate(candidates):
+            if k in unreachable:
+                continue
+            try:
+                return attempt(cfg, candidate)
+            except PlaceUnreachable as err:
+                unreachable.add(k)
+                errors.append(f"{label(candidate)}{err}")
+            except PlanningError as err:
+                errors.append(f"{label(candidate)}{err}")
+    raise PlanningError(failed + ("; ".join(dict.fromkeys(errors)) or "none clears it"))
+
+
 def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, config: PlannerConfig,
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
-    """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`),
-    each of the place's `fallback_configs` on every base before the next (the opening planned
-    once per base: what it must reach, `place_reach_points`, is the same for all of them; a base
-    where the opening, the table or the place up to the release failed, `PlaceUnreachable`, is not
-    tried again)."""
-    errors, openings = [], {}
+    """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`,
+    `_first_that_plans`; the opening planned once per base: what it must reach,
+    `place_reach_points`, is the same for every config; a base without an opening or a table is
+    not tried again)."""
+    openings = {}
 
-    def opening(reach: float) -> PlanResult:  # one per reach: the fallbacks keep what it must reach
-        if reach not in openings:
-            try:
-                openings[reach] = plan_articulation(kt, q_target, config=replace(config, place_reach=reach),
-                                                    must_reach=place_reach_points(kt, q_target, item,
-                                                                                  place_config))
-            except PlanningError as err:
-                openings[reach] = err
-        if isinstance(openings[reach], PlanningError):
-            raise openings[reach]
-        return openings[reach]
+    def attempt(cfg: PlaceConfig, reach: float) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
+        try:
+            if reach not in openings:
+                openings[reach] = plan_articulation(
+                    kt, q_target, config=replace(config, place_reach=reach),
+                    must_reach=place_reach_points(kt, q_target, item, place_config))
+            plan = openings[reach]
+            table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
+                                       ITEM_REACH[GRASP_OF[kt.category]])
+            problem = place_problem(kt, q_target, item, X_WI, table, obstacles, cfg)
+        except PlanningError as err:  # the same for every config
+            raise PlaceUnreachable(str(err)) from err
+        q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
+        return plan, plan_place(plan.X_WB, q_end, problem, cfg, plan.waypoints[-1]), table
 
-    unreachable = set()  # reaches where the place failed as no fallback config can mend
-    for cfg in fallback_configs(place_config):
-        for reach in PLACE_REACH[kt.category]:
-            if reach in unreachable:
-                continue
-            placing = False
-            try:
-                plan = opening(reach)
-                table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
-                                           ITEM_REACH[GRASP_OF[kt.category]])
-                q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
-                problem = place_problem(kt, q_target, item, X_WI, table, obstacles, cfg)
-                placing = True
-                place = plan_place(plan.X_WB, q_end, problem, cfg, plan.waypoints[-1])
-                return plan, place, table
-            except PlanningError as err:
-                if not placing or isinstance(err, PlaceUnreachable):  # every fallback fails so here
-                    unreachable.add(reach)
-                errors.append(f"base within {reach:.2f} m of the goal: {err}")
-    raise PlanningError("; ".join(dict.fromkeys(errors)))
+    return _first_that_plans(place_config, PLACE_REACH[kt.category], attempt,
+                             lambda reach: f"base within {reach:.2f} m of the goal: ")
 
 
 DOOR_MARGIN = 0.03
@@ -490,28 +497,20 @@ def look_inside(obj: ArticulatedObject, X_WO: RigidTransform, q_true: float, kt:
 def _place_in_front(kt: KeypointTrajectory, q: float, item: Item, obstacles, place_config: PlaceConfig,
                     floor: float | None = None) -> tuple[PlacePlan, ObstacleBox]:
     """The place from a base re-placed in front of the compartment opened to q (`place_bases`,
-    the first that plans, each of the place's `fallback_configs` on every base before the next,
-    but those where the table or the place up to the release failed, `PlaceUnreachable`), and its
+    the first that plans, `_first_that_plans`; a base without a table is not tried again), and its
     table; `floor`: the goal's height where measured (m in W; `place_problem`)."""
     boxes = [*obstacles[0], *obstacles[1]]
-    bases = place_bases(kt, q, boxes)
-    errors, unreachable = [], set()  # bases where the place failed as no fallback config can mend
-    for cfg in fallback_configs(place_config):
-        for k, X_WB in enumerate(bases):
-            if k in unreachable:
-                continue
-            placing = False
-            try:
-                table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
-                problem = place_problem(kt, q, item, X_WI, table, obstacles, cfg, X_WB.translation(), floor)
-                placing = True
-                return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, cfg), table
-            except PlanningError as err:
-                if not placing or isinstance(err, PlaceUnreachable):  # every fallback fails so here
-                    unreachable.add(k)
-                errors.append(str(err))
-    raise PlanningError("no base in front of the open compartment plans the place: "
-                        + ("; ".join(dict.fromkeys(errors)) or "none clears it"))
+
+    def attempt(cfg: PlaceConfig, X_WB: RigidTransform) -> tuple[PlacePlan, ObstacleBox]:
+        try:
+            table, X_WI = table_beside(X_WB, boxes, ITEM_REACH[GRASP_OF[kt.category]])
+            problem = place_problem(kt, q, item, X_WI, table, obstacles, cfg, X_WB.translation(), floor)
+        except PlanningError as err:  # the same for every config
+            raise PlaceUnreachable(str(err)) from err
+        return plan_place(X_WB, ready_posture(X_WB, X_WI.translation()), problem, cfg), table
+
+    return _first_that_plans(place_config, place_bases(kt, q, boxes), attempt, lambda X_WB: "",
+                             "no base in front of the open compartment plans the place: ")
 
 
 def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float, q_target: float, item: Item,

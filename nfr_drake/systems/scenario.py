@@ -14,7 +14,7 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
-from nfr_drake.inference.infer import PAINTINGS
+from nfr_drake.inference.infer import PAINTINGS, checked_paintings
 from nfr_drake.objects import (
     SEED_DOMAIN_CAPTURE,
     SEED_DOMAIN_TRAIN,
@@ -160,9 +160,7 @@ class Scenario:
                               f"got {self.perceive!r}")
         if self.room_loss not in ROOM_LOSSES:
             raise ConfigError(f"room_loss must be one of {', '.join(ROOM_LOSSES)}, got {self.room_loss!r}")
-        if not self.paintings or any(p not in PAINTINGS for p in self.paintings):
-            raise ConfigError(f"paintings must be one or more of {', '.join(PAINTINGS)}, "
-                              f"got {self.paintings}")
+        checked_paintings(self.paintings)
         if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
             raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:
