@@ -73,10 +73,11 @@ from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import (
     HullConfig,
     ObjectPoseError,
+    ObjectPoseEstimate,
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import posed_carcass_look, posed_close_look
+from nfr_drake.perception.segmentation.crop import aimed_looks, posed_carcass_look, posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -121,9 +122,11 @@ class NfrPerceptionSystem(LeafSystem):
     asked for; None for a model with several parts).
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
-    `mask_crop`, those of its second look at the crop around the object's box in each view,
-    `posed_close_look`; when its masks give no pose, the first look's; the amodal carcass masks
-    that give the pose likewise, `posed_carcass_look`), and
+    `mask_crop` and an estimated pose, first the aimed look, `aimed_looks`: the amodal carcass in
+    the crop around where the cameras aim gives the pose, the object's masks come from the crop
+    around it; where that gives no pose, a second look at the crop around the object's box from
+    whole photos in each view, `posed_close_look`; when those masks give no pose, the first
+    look's; the amodal carcass masks that give the pose likewise, `posed_carcass_look`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
     each of `paintings` says: one fit per painting, the one with the highest P(handle within 2 cm)
     kept, `infer_painted`; a model with several parts takes the first painting) or only the
@@ -272,13 +275,37 @@ class NfrPerceptionSystem(LeafSystem):
         estimate, amodal, warnings = estimate_object_pose_carcass_first(
             masks, carcass, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras, self._hull_config,
             self._model.category)
+        return self._estimated(estimate, amodal, warnings)
+
+    def _estimated(self, estimate: ObjectPoseEstimate, amodal: bool, warnings: list[str]
+                   ) -> tuple[RigidTransform, dict, list[str]]:
+        """X_WO of an estimate, what the result's extra says of it, and warnings (a size outside
+        the model's category added)."""
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
                 {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
                  "amodal": amodal}, warnings + ([problem] if problem else []))
 
-    def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
-        images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
+    def _aimed(self, images: list[np.ndarray]
+               ) -> tuple[list[np.ndarray], RigidTransform, dict, list[str]] | None:
+        """As `_whole_photo_pose`, from the aimed look (`aimed_looks`; the extra's `aimed` True), or
+        None where it does not apply (a given pose, no segmenter or no crop stage) or gives no pose."""
+        if self._X_WO is not None or self._segmenter is None or not self._mask_crop:
+            return None
+        looked = aimed_looks(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
+                             self._model.category, self._hull_config)
+        if looked is None:
+            return None
+        masks, _, estimate = looked
+        X_WO, pose, warnings = self._estimated(estimate, True, [])
+        return masks, X_WO, pose | {"aimed": True}, warnings
+
+    def _whole_photo_pose(self, images: list[np.ndarray]
+                          ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
+        """The object's masks (None without a segmenter when the pose is given), X_WO, what the
+        result's extra says of it (an estimate's `aimed` False), and warnings, from looks at the
+        whole photos (`_masks`, `_object_pose`; the first look's when the crop stage's masks give
+        no pose)."""
         masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
         try:
             X_WO, pose, warnings = self._object_pose(masks, images)
@@ -289,6 +316,11 @@ class NfrPerceptionSystem(LeafSystem):
             X_WO, pose, warnings = self._object_pose(masks, images)
             warnings.append("the crop stage's masks agree on no object; the segmenter's first look "
                             "gave the pose and the masks")
+        return masks, X_WO, pose | ({"aimed": False} if pose["estimated"] else {}), warnings
+
+    def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
+        images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
+        masks, X_WO, pose, warnings = self._aimed(images) or self._whole_photo_pose(images)
         X_OW = X_WO.inverse()
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]

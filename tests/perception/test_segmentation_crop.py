@@ -2,6 +2,7 @@
 square around a mask, the crop of each posed view around the object's floor box."""
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -9,7 +10,12 @@ import pytest
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
-from nfr_drake.perception.object_pose import box_corners_W, project_points
+from nfr_drake.perception.object_pose import (
+    box_corners_W,
+    category_size_ranges,
+    estimate_object_pose,
+    project_points,
+)
 from nfr_drake.perception.segmentation import crop
 from nfr_drake.perception.segmentation.model import (
     SEGMENT_PX,
@@ -190,3 +196,76 @@ def test_the_carcass_second_look_keeps_the_first_where_it_gives_no_pose():
     X_WCs = [look_at(np.array([2.0, y, 1.0]), np.zeros(3)) for y in (-1.0, -0.3, 0.3, 1.0)]
     masks = crop.posed_carcass_look(net, dark, X_WCs, [CAMERA] * 4)
     assert all(not m.any() for m in masks) and len(net.seen) == 4
+
+
+def test_the_aim_is_where_the_optical_axes_meet():
+    rng = np.random.default_rng(5)
+    target = np.array([0.4, -0.7, 0.35])
+    X_WCs = [look_at(target + [2.0 * math.cos(a), 2.0 * math.sin(a), 0.9], target)
+             for a in (-0.8, -0.2, 0.5, 0.9)]
+    np.testing.assert_allclose(crop.aim_point(X_WCs), target, atol=1e-9)
+    jittered = [look_at(X[:3, 3], target + rng.normal(0.0, 0.03, 3)) for X in X_WCs]
+    assert np.linalg.norm(crop.aim_point(jittered) - target) < 0.06
+    # views from one direction meet nowhere in particular; a point behind the cameras is no aim
+    parallel = [look_at(np.array([2.0, y, 1.0]), np.array([0.0, y, 1.0])) for y in (-0.5, 0.0, 0.5)]
+    assert crop.aim_point(parallel) is None
+    away = [look_at(X[:3, 3], 2 * X[:3, 3] - target) for X in X_WCs]
+    assert crop.aim_point(away) is None
+
+
+def test_the_aimed_box_is_the_categorys_middle_size_under_the_aim_facing_the_cameras():
+    target = np.array([1.0, 0.5, 0.3])
+    X_WCs = [look_at(target + [2.0, 2.0 * s, 0.8], target) for s in (-0.4, 0.0, 0.4)]
+    box = crop.aimed_box(X_WCs, "drawer")
+    (d0, d1), (w0, w1), (h0, h1) = category_size_ranges("drawer")
+    np.testing.assert_allclose(box[:2], target[:2], atol=1e-9)
+    assert box[2] == pytest.approx(0.0, abs=1e-9)  # +x toward the cameras
+    np.testing.assert_allclose(box[3:], [(d0 + d1) / 2, (w0 + w1) / 2, np.clip(0.6, h0, h1)])
+
+
+class Largest(Bright):
+    """A stand-in network that takes the most prominent piece in view for the object: the largest
+    bright region of its input is the object and its amodal carcass."""
+
+    def _probabilities(self, image: np.ndarray) -> np.ndarray:
+        count, labels, stats, _ = cv2.connectedComponentsWithStats((image.mean(-1) > 128).astype(np.uint8))
+        p = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))) if count > 1 else labels < 0
+        p = p.astype(np.float32)
+        return np.stack([1.0 - p, p, 0 * p, 0 * p, p], -1)
+
+
+def test_the_aimed_look_finds_the_object_the_cameras_aim_at_not_the_one_beside_it():
+    """Two bright floor boxes, the cameras aimed at the smaller, a network that takes the largest
+    piece in view for the object: from whole photos the pose is the larger neighbour's; the aimed
+    look's pose is the aimed-at box's, and its masks cover it."""
+    rng = np.random.default_rng(6)
+    target = np.array([0.0, 0.0, 0.0, 0.4, 0.45, 0.5])
+    neighbour = np.array([0.0, 0.95, 0.0, 0.5, 0.7, 0.8])
+    centre = np.array([0.0, 0.0, 0.25])
+    photos, trues, X_WCs = [], [], []
+    for _ in range(8):
+        az, el, dist = rng.uniform(-0.8, 0.8), rng.uniform(0.3, 0.7), rng.uniform(2.0, 2.5)
+        X_WC = look_at(centre + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
+                                                 math.sin(el)]), centre + rng.normal(0.0, 0.03, 3))
+        masks = []
+        for box in (target, neighbour):
+            uv, _ = project_points(box_corners_W(box), X_WC, CAMERA)
+            mask = np.zeros((128, 128), np.uint8)
+            cv2.fillConvexPoly(mask, cv2.convexHull(np.round((uv - 0.5) * 16).astype(np.int32)), 1, shift=4)
+            masks.append(mask > 0)
+        photo = np.full((128, 128, 3), 30, np.uint8)
+        photo[masks[0] | masks[1]] = 220
+        photos.append(photo)
+        trues.append(masks[0] & ~masks[1])  # what of the target the neighbour leaves in view
+        X_WCs.append(X_WC)
+    net = Largest()
+    net.config = replace(net.config, amodal=True)
+    whole = estimate_object_pose([net.carcass_amodal(p) for p in photos], X_WCs, [CAMERA] * 8,
+                                 category="drawer", amodal=True)
+    assert np.linalg.norm(whole.box[:2] - neighbour[:2]) < 0.1  # whole photos: the neighbour
+    masks, carcass, estimate = crop.aimed_looks(net, photos, X_WCs, [CAMERA] * 8, "drawer")
+    assert np.linalg.norm(estimate.box[:2] - target[:2]) < 0.06  # the neighbour lies 0.95 m away
+    assert len(masks) == len(carcass) == 8
+    covered = [np.count_nonzero((m > 0.5) & t) / np.count_nonzero(t)
+               for m, t in zip(masks, trues, strict=True)]
+    assert min(covered) > 0.9

@@ -225,7 +225,7 @@ def test_an_estimated_pose_is_refined_and_the_port_gives_the_refined_one(model_d
     refinement's X_OP."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
-    fit = replace(TINY_FIT, pose_max_shift_m=0.5)  # the tiny model's move is kept, not refused
+    fit = replace(TINY_FIT, pose_max_shift_m=0.5, pose_max_yaw_deg=45.0)  # the tiny model's move is kept
     diagram, system = _perception_scene(model_dir, "room", X_WO, known=False, fit=fit)
     simulator = Simulator(diagram)
     simulator.Initialize()
@@ -242,9 +242,9 @@ def test_an_estimated_pose_is_refined_and_the_port_gives_the_refined_one(model_d
 
 @pytest.mark.parametrize("carcass_gives_a_pose", [True, False])
 def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monkeypatch, carcass_gives_a_pose):
-    """A segmenter with the amodal carcass output: the pose is fitted to it (amodal=True, the box
-    is the carcass), or, when those masks give none, to the visible masks; the fit gets the
-    visible masks."""
+    """A segmenter with the amodal carcass output, where the aimed look gives no pose: the pose is
+    fitted to the carcass's masks from the whole photos (amodal=True, the box is the carcass), or,
+    when those masks give none, to the visible masks; the fit gets the visible masks."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
     carcass = []
@@ -269,6 +269,7 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
     monkeypatch.setattr(perception_module, "posed_carcass_look",
                         lambda net, images, *args: [net.carcass_amodal(i) for i in images])
+    monkeypatch.setattr(perception_module, "aimed_looks", lambda *args: None)  # it gives no pose
     calls = []
 
     class Stop(Exception):
@@ -286,6 +287,39 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
     expected = [([0.75] * 3, True)] + ([] if carcass_gives_a_pose else [([pytest.approx(0.3)] * 3, False)])
     assert poses_from == expected
     assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.3] * 3)  # the fit's masks
+
+
+def test_the_aimed_look_gives_the_pose_and_the_fits_masks(model_dir, monkeypatch):
+    """With an estimated pose and the crop stage, the aimed look's pose and masks are the fit's
+    (the whole photos are not looked at), and the result says the pose was aimed."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    box = np.array([1.1, 0.3, 0.5, 0.5, 0.6, 0.9])
+    looked = []
+
+    def aimed(net, images, X_WCs, cameras, category, hull):
+        looked.append((len(images), category))
+        masks = [np.full(i.shape[:2], 0.4, np.float32) for i in images]
+        return masks, masks, ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6))
+
+    whole = []
+    monkeypatch.setattr(perception_module, "aimed_looks", aimed)
+    monkeypatch.setattr(perception_module, "posed_close_look", lambda *args: whole.append(1))
+    calls = []
+
+    class Stop(Exception):
+        pass
+
+    def infer(*args, **kwargs):
+        calls.append(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(infer_module, "infer", infer)
+    diagram, _ = _perception_scene(model_dir, "room", X_WO, known=False)
+    with pytest.raises(Stop):
+        Simulator(diagram).Initialize()
+    assert looked == [(3, "closet")] and not whole
+    assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.4] * 3)
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):

@@ -10,6 +10,13 @@ the mask 0 outside the crop). Without a pose (the first masks agree on no object
 the single-photo second look (`Segmenter.close_look`: the crop around its own first mask).
 The carcass's amodal masks get the same second look (`posed_carcass_look`), at the crop around the
 carcass's box from the first amodal masks, not grown forward (the carcass has no fronts).
+
+The aimed look (`aimed_looks`) starts where the cameras aim instead of from whole photos: the object
+is the one the views are pointed at (`aim_point`, where their optical axes meet), so the carcass's
+amodal masks are looked at in the crop around a box of the category's middle size there
+(`aimed_box`), the pose comes from those masks, and the object's masks from the crop around that
+pose's box. A whole photo also holds the furniture beside the object, which the segmenter can take
+for it (a drawer unit beside a drawer); the crop around the aim leaves most of it out.
 """
 
 from __future__ import annotations
@@ -20,7 +27,9 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.perception.object_pose import (
     HullConfig,
     ObjectPoseError,
+    ObjectPoseEstimate,
     box_image_rect,
+    category_size_ranges,
     estimate_object_pose,
 )
 from nfr_drake.perception.segmentation.model import CROP_MARGIN, SEGMENT_PX, Box, Segmenter, square_around
@@ -29,6 +38,10 @@ REACH = 0.5
 """How far the crop's box reaches in front of the fitted floor box, as a fraction of the box's
 larger horizontal side: an open door sweeps up to its width forward, a drawer up to its depth,
 and the floor box settles on the carcass."""
+
+AIM_MIN_SPREAD_DEG = 10.0
+"""Cameras have an aim (`aim_point`) only when their viewing directions spread about this much: the
+optical axes of views from one direction meet nowhere in particular."""
 
 
 def view_boxes(box: np.ndarray, X_WCs: list[np.ndarray], cameras: list[PinholeCamera],
@@ -83,3 +96,59 @@ def posed_carcass_look(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.
     boxes = view_boxes(estimate.box, X_WCs, cameras, [image.shape[:2] for image in images], margin, reach=0.0)
     return [mask if box is None else net.carcass_amodal(image, size, box)
             for image, mask, box in zip(images, first, boxes, strict=True)]
+
+
+def aim_point(X_WCs: list[np.ndarray], min_spread_deg: float = AIM_MIN_SPREAD_DEG) -> np.ndarray | None:
+    """Where the cameras aim: the point nearest all their optical axes (least squares), (3,) in the
+    frame of the poses X_WCs ((4, 4) each, OpenCV axes: +z the optical axis), m. None when the axes
+    are nearly parallel (their directions spread less than about `min_spread_deg`) or the point lies
+    behind a camera."""
+    origins = np.stack([np.asarray(X, float)[:3, 3] for X in X_WCs])
+    axes = np.stack([np.asarray(X, float)[:3, 2] for X in X_WCs])
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    across = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]  # projections across each axis
+    A, b = across.sum(0), np.einsum("nij,nj->i", across, origins)
+    # two axes an angle t apart give A's smallest eigenvalue 1 - cos t over the 2 views
+    if np.linalg.eigvalsh(A)[0] / len(X_WCs) < (1.0 - np.cos(np.radians(min_spread_deg))) / 2.0:
+        return None
+    point = np.linalg.solve(A, b)
+    return point if np.all(np.einsum("ni,ni->n", point - origins, axes) > 0.0) else None
+
+
+def aimed_box(X_WCs: list[np.ndarray], category: str) -> np.ndarray | None:
+    """The floor box (x, y, yaw, depth, width, height; m, rad, in the floor frame of X_WCs) that the
+    aimed look crops around: the category's middle carcass depth and width centred under the
+    cameras' `aim_point`, +x toward the cameras' mean position, as tall as twice the aim's height
+    (the cameras aim at the object's middle) within the category's heights. None without an aim."""
+    aim = aim_point(X_WCs)
+    if aim is None:
+        return None
+    (d0, d1), (w0, w1), (h0, h1) = category_size_ranges(category)
+    toward = np.mean([np.asarray(X, float)[:2, 3] for X in X_WCs], 0) - aim[:2]
+    return np.array([aim[0], aim[1], np.arctan2(toward[1], toward[0]), (d0 + d1) / 2, (w0 + w1) / 2,
+                     np.clip(2.0 * aim[2], h0, h1)])
+
+
+def aimed_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
+                cameras: list[PinholeCamera], category: str, hull: HullConfig | None = None,
+                size: int | None = SEGMENT_PX, margin: float = CROP_MARGIN, reach: float = REACH
+                ) -> tuple[list[np.ndarray], list[np.ndarray], ObjectPoseEstimate] | None:
+    """The aimed look of the module docstring: the object's masks and its carcass's amodal masks,
+    (H, W) float32 in [0, 1] per uint8 RGB photo (H, W, 3), and the pose estimated from the latter
+    (`estimate_object_pose(amodal=True)`). The carcass is looked at in the crop around `aimed_box`
+    (the whole photo in views it lies behind), the object in the crop around the pose's box grown
+    forward by `reach`. None when the cameras have no aim, the segmenter has no amodal output or
+    its masks there give no pose. Other arguments as in `posed_close_look`."""
+    box = aimed_box(X_WCs, category)
+    if box is None or not net.config.amodal:
+        return None
+    shapes = [image.shape[:2] for image in images]
+    crops = view_boxes(box, X_WCs, cameras, shapes, margin, reach=0.0)
+    carcass = [net.carcass_amodal(image, size, crop) for image, crop in zip(images, crops, strict=True)]
+    try:
+        estimate = estimate_object_pose(carcass, X_WCs, cameras, hull or HullConfig(), category, amodal=True)
+    except ObjectPoseError:
+        return None
+    crops = view_boxes(estimate.box, X_WCs, cameras, shapes, margin, reach)
+    return ([net.close_look(image, crop, size, margin) for image, crop in zip(images, crops, strict=True)],
+            carcass, estimate)
