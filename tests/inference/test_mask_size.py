@@ -146,6 +146,7 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
 
     monkeypatch.setattr(crop, "posed_close_look", look("visible", 1.0))
     monkeypatch.setattr(crop, "posed_carcass_look", look("carcass", 0.5))
+    monkeypatch.setattr(crop, "aimed_looks", lambda *args: None)  # no aim, or no pose there
     net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
     views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
@@ -157,3 +158,24 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
         assert [m.shape for m in carcass] == [(768, 1024)] * 3 and carcass[0].max() == 0.5
     else:
         assert carcass is None
+
+
+def test_the_aimed_look_sees_shrunk_photos_and_its_masks_come_first(monkeypatch, tmp_path):
+    from nfr_drake.perception.segmentation import crop
+
+    seen = []
+
+    def aimed(net, images, X_WCs, cameras, category):
+        seen.append((images[0].shape, len(X_WCs), category))
+        return ([np.full(i.shape[:2], 0.25, np.float32) for i in images],
+                [np.full(i.shape[:2], 0.75, np.float32) for i in images], None)
+
+    monkeypatch.setattr(crop, "aimed_looks", aimed)
+    monkeypatch.setattr(crop, "posed_close_look", lambda *args: pytest.fail("whole photos looked at"))
+    net = type("Net", (), {"config": type("Config", (), {"amodal": True})()})()
+    monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
+    views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
+                                         tmp_path, "drawer")
+    assert seen == [((192, 256, 3), 3, "drawer")]
+    assert [m.shape for m in views] == [(768, 1024)] * 3 and views[0].max() == 0.25
+    assert [m.shape for m in carcass] == [(768, 1024)] * 3 and carcass[0].min() == 0.75
