@@ -37,24 +37,11 @@ from nfr_drake.perception.object_pose import ObjectPoseError, background_mask, e
 from nfr_drake.perception.segmentation.crop import posed_close_look
 from nfr_drake.perception.segmentation.evaluation import mask_iou
 from nfr_drake.perception.segmentation.model import load_segmenter
-from nfr_drake.systems.pipeline import perception_simulator
+from nfr_drake.systems.pipeline import perception_photos
 from nfr_drake.systems.scenario import Scenario
 
 SETTINGS = ("true", "first", "close", "posed")
 """Masks: the true ones, the first look, the single-photo second look, the posed crop stage."""
-
-
-def photos(scenario: Scenario):
-    """uint8 RGB photos (H, W, 3) of the scenario's perception cameras, their poses (4, 4) in W
-    and intrinsics."""
-    simulator, perception = perception_simulator(scenario, scenario.sample_object())
-    diagram, context = simulator.get_system(), simulator.get_context()
-    images = []
-    for i in range(len(perception.cameras)):
-        sensor = diagram.GetSubsystemByName(f"nfr_camera_{i}")
-        image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context))
-        images.append(image.data[..., :3].copy())
-    return images, [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras
 
 
 def pose_error(masks, X_WCs, cameras, category: str, X_WO: np.ndarray) -> tuple[float, float]:
@@ -73,7 +60,7 @@ def extent(category: str, n: int, seed: int) -> None:
     for index in range(n):
         scenario = Scenario(category=category, model=f"models/{category}", seed=seed, index=index,
                             object_pose="estimated", perceive="alone")
-        for image in photos(scenario)[0]:
+        for image in perception_photos(scenario)[0]:
             rows, cols = np.nonzero(background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5)
             sides.append(max(np.ptp(rows), np.ptp(cols)) / max(image.shape[:2]))
             areas.append(rows.size / (image.shape[0] * image.shape[1]))
@@ -93,8 +80,8 @@ def main(category: str = "closet", n: int = 20, seed: int = 200, segmenter: Path
         started = time.perf_counter()
         scenario = Scenario(category=category, model=f"models/{category}", seed=seed, index=index,
                             object_pose="estimated", perceive="room", segmenter=str(segmenter))
-        room, X_WCs, cameras = photos(scenario)
-        alone, _, _ = photos(replace(scenario, perceive="alone"))
+        room, X_WCs, cameras = perception_photos(scenario)
+        alone, _, _ = perception_photos(replace(scenario, perceive="alone"))
         true = [background_mask(image, DEFAULT_BACKGROUND_RGB) for image in alone]
         masks = {"true": true, "first": [net.object_mask(image) for image in room],
                  "close": [net.close_look(image) for image in room],

@@ -24,17 +24,8 @@ from nfr_drake.inference.infer import paint_background
 from nfr_drake.perception.object_pose import estimate_object_pose
 from nfr_drake.perception.segmentation.crop import view_boxes
 from nfr_drake.perception.segmentation.model import load_segmenter
-from nfr_drake.systems.pipeline import perception_simulator
+from nfr_drake.systems.pipeline import perception_photos
 from nfr_drake.systems.scenario import Scenario
-
-
-def photos(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray], list]:
-    """uint8 RGB photos of the scenario's perception cameras, their poses X_WC (4, 4) and intrinsics."""
-    simulator, perception = perception_simulator(scenario, scenario.sample_object())
-    diagram, context = simulator.get_system(), simulator.get_context()
-    sensors = [diagram.GetSubsystemByName(f"nfr_camera_{i}") for i in range(len(perception.cameras))]
-    return ([s.color_image_output_port().Eval(s.GetMyContextFromRoot(context)).data[..., :3].copy()
-             for s in sensors], [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras)
 
 
 def _overlay(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -47,8 +38,8 @@ def main(category: str = "closet", seed: int = 200, index: int = 0, views: int =
          segmenter: Path = Path(Scenario.segmenter)) -> None:
     scenario = Scenario(category=category, model=f"models/{category}", seed=seed, index=index,
                         object_pose="estimated", perceive="room", segmenter=str(segmenter))
-    room, X_WCs, cameras = photos(scenario)
-    alone = photos(replace(scenario, perceive="alone"))[0][:views]
+    room, X_WCs, cameras = perception_photos(scenario)
+    alone = perception_photos(replace(scenario, perceive="alone"))[0][:views]
     net, _ = load_segmenter(segmenter)
     first = [net.object_mask(image) for image in room]
     # the crop stage (`posed_close_look`), step by step to draw its crops

@@ -77,7 +77,7 @@ from nfr_drake.perception.object_pose import (
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import aimed_looks, posed_carcass_look, posed_close_look
+from nfr_drake.perception.segmentation.crop import aimed_at, aimed_looks, posed_carcass_look, posed_close_look
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -89,6 +89,11 @@ PerceptionScene = Literal["alone", "room"]
 """What the perception cameras see: the object "alone" before the training background (the
 paper's setting), or the whole "room" (every geometry of the plant), the object found by a
 segmenter."""
+
+
+AIMED_LOOK = ("the whole photos' masks gave a pose whose box does not hold the cameras' aim point (another "
+              "piece taken for the object); the aimed look gave the pose and the masks")
+"""The result's warning when the aimed look replaced the whole photos' pose."""
 
 
 class NfrPerceptionSystem(LeafSystem):
@@ -122,11 +127,11 @@ class NfrPerceptionSystem(LeafSystem):
     asked for; None for a model with several parts).
 
     Object masks: with a `segmenter` (a `Segmenter`, photos of a room), its probabilities (with
-    `mask_crop` and an estimated pose, first the aimed look, `aimed_looks`: the amodal carcass in
-    the crop around where the cameras aim gives the pose, the object's masks come from the crop
-    around it; where that gives no pose, a second look at the crop around the object's box from
-    whole photos in each view, `posed_close_look`; when those masks give no pose, the first
-    look's; the amodal carcass masks that give the pose likewise, `posed_carcass_look`), and
+    `mask_crop`, those of its second look at the crop around the object's box from whole photos
+    in each view, `posed_close_look`; when those masks give no pose, the first look's; the amodal
+    carcass masks that give the pose likewise, `posed_carcass_look`; with an estimated pose whose
+    floor box does not hold the cameras' aim point, or none, the aimed look's, `aimed_looks`,
+    where it gives one: the extra's `aimed`, and a warning), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
     each of `paintings` says: one fit per painting, the one with the highest P(handle within 2 cm)
     kept, `infer_painted`; a model with several parts takes the first painting) or only the
@@ -134,7 +139,7 @@ class NfrPerceptionSystem(LeafSystem):
     without, the pixels off `background_rgb` (the object alone), every pixel counting in the loss.
     X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
     (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate
-    before the refinement X_WO_estimated, the refinement's report; `extra["warnings"]` names a
+    before the refinement X_WO_estimated, its floor box, the refinement's report; `extra["warnings"]` names a
     size outside the model's category). The fit runs in an initialisation event and whenever
     `refit` is called; outputs read the stored result. `fit_count` counts fits.
     `keypoint_source` picks the keypoint head or the fitted geometry (see
@@ -284,7 +289,7 @@ class NfrPerceptionSystem(LeafSystem):
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
                 {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
-                 "amodal": amodal}, warnings + ([problem] if problem else []))
+                 "box": estimate.box.tolist(), "amodal": amodal}, warnings + ([problem] if problem else []))
 
     def _aimed(self, images: list[np.ndarray]
                ) -> tuple[list[np.ndarray], RigidTransform, dict, list[str]] | None:
@@ -318,9 +323,29 @@ class NfrPerceptionSystem(LeafSystem):
                             "gave the pose and the masks")
         return masks, X_WO, pose | ({"aimed": False} if pose["estimated"] else {}), warnings
 
+    def _looked(self, images: list[np.ndarray]
+                ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
+        """As `_whole_photo_pose`; with an estimated pose and the crop stage, the aimed look's
+        (`_aimed`) where the whole photos' floor box does not hold the cameras' aim point (their
+        masks took another piece for the object, `aimed_at`) or they give no pose."""
+        try:
+            looked = self._whole_photo_pose(images)
+        except ObjectPoseError:
+            aimed = self._aimed(images)
+            if aimed is None:
+                raise
+            return aimed
+        box = looked[2].get("box")
+        if box is None or aimed_at(np.array(box), [X.GetAsMatrix4() for X in self._X_WCs]):
+            return looked
+        aimed = self._aimed(images)
+        if aimed is None:
+            return looked
+        return aimed[:3] + (aimed[3] + [AIMED_LOOK],)
+
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
-        masks, X_WO, pose, warnings = self._aimed(images) or self._whole_photo_pose(images)
+        masks, X_WO, pose, warnings = self._looked(images)
         X_OW = X_WO.inverse()
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]

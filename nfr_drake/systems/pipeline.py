@@ -178,6 +178,19 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
     return simulator, perception
 
 
+def perception_photos(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray], list[PinholeCamera]]:
+    """What the scenario's perception cameras see of its object (`perception_simulator`; nothing
+    is fitted): uint8 RGB photos (H, W, 3), the cameras' poses X_WC (4, 4) in W and intrinsics."""
+    simulator, perception = perception_simulator(scenario, scenario.sample_object())
+    diagram, context = simulator.get_system(), simulator.get_context()
+    images = []
+    for i in range(len(perception.cameras)):
+        sensor = diagram.GetSubsystemByName(f"nfr_camera_{i}")
+        image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context))
+        images.append(image.data[..., :3].copy())
+    return images, [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras
+
+
 def perception_room(scenario: Scenario, obj: ArticulatedObject, X_WCs: list[RigidTransform]) -> Room:
     """The room the perception cameras at X_WCs see `obj` in (frame W of the room = O): drawn from
     the scenario's seed and index (`sample_room`, held-out textures and lights, the cameras'

@@ -147,6 +147,11 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
     monkeypatch.setattr(crop, "posed_close_look", look("visible", 1.0))
     monkeypatch.setattr(crop, "posed_carcass_look", look("carcass", 0.5))
     monkeypatch.setattr(crop, "aimed_looks", lambda *args: None)  # no aim, or no pose there
+
+    def no_pose(*args, **kwargs):
+        raise object_pose.ObjectPoseError("object pose: the masks agree on no object")
+
+    monkeypatch.setattr(infer, "estimate_object_pose_carcass_first", no_pose)
     net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
     views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
@@ -160,7 +165,11 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
         assert carcass is None
 
 
-def test_the_aimed_look_sees_shrunk_photos_and_its_masks_come_first(monkeypatch, tmp_path):
+@pytest.mark.parametrize("holds_aim", [True, False, None])
+def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_path, holds_aim):
+    """The crop stage's masks are kept when their pose's box holds the cameras' aim point; when it
+    does not, or they give no pose (None), the aimed look's (on the shrunk photos)."""
+    from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
     from nfr_drake.perception.segmentation import crop
 
     seen = []
@@ -170,12 +179,26 @@ def test_the_aimed_look_sees_shrunk_photos_and_its_masks_come_first(monkeypatch,
         return ([np.full(i.shape[:2], 0.25, np.float32) for i in images],
                 [np.full(i.shape[:2], 0.75, np.float32) for i in images], None)
 
+    def estimate(*args, **kwargs):
+        if holds_aim is None:
+            raise ObjectPoseError("object pose: the masks agree on no object")
+        box = np.array([1.0, 0.0, 0.0, 0.5, 0.6, 0.9])
+        return ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6)), True, []
+
     monkeypatch.setattr(crop, "aimed_looks", aimed)
-    monkeypatch.setattr(crop, "posed_close_look", lambda *args: pytest.fail("whole photos looked at"))
+    monkeypatch.setattr(crop, "aimed_at", lambda box, X_WCs: bool(holds_aim))
+    monkeypatch.setattr(crop, "posed_close_look",
+                        lambda net, images, *args: [np.ones(i.shape[:2], np.float32) for i in images])
+    monkeypatch.setattr(crop, "posed_carcass_look",
+                        lambda net, images, *args: [np.full(i.shape[:2], 0.5, np.float32) for i in images])
+    monkeypatch.setattr(infer, "estimate_object_pose_carcass_first", estimate)
     net = type("Net", (), {"config": type("Config", (), {"amodal": True})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
     views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
                                          tmp_path, "drawer")
-    assert seen == [((192, 256, 3), 3, "drawer")]
-    assert [m.shape for m in views] == [(768, 1024)] * 3 and views[0].max() == 0.25
-    assert [m.shape for m in carcass] == [(768, 1024)] * 3 and carcass[0].min() == 0.75
+    assert [m.shape for m in views] == [(768, 1024)] * 3 and [m.shape for m in carcass] == [(768, 1024)] * 3
+    if holds_aim:
+        assert not seen and views[0].min() == 1.0 and carcass[0].max() == 0.5
+    else:
+        assert seen == [((192, 256, 3), 3, "drawer")]
+        assert views[0].max() == 0.25 and carcass[0].min() == 0.75

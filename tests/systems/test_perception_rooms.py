@@ -289,9 +289,11 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
     assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.3] * 3)  # the fit's masks
 
 
-def test_the_aimed_look_gives_the_pose_and_the_fits_masks(model_dir, monkeypatch):
-    """With an estimated pose and the crop stage, the aimed look's pose and masks are the fit's
-    (the whole photos are not looked at), and the result says the pose was aimed."""
+@pytest.mark.parametrize("whole", ["holds the aim", "off the aim", "no pose"])
+def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypatch, whole):
+    """With an estimated pose and the crop stage, the whole photos' pose and masks are the fit's
+    when their floor box holds the cameras' aim point; when it does not, or they give no pose,
+    the aimed look's, and the result says so."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
     box = np.array([1.1, 0.3, 0.5, 0.5, 0.6, 0.9])
@@ -302,24 +304,34 @@ def test_the_aimed_look_gives_the_pose_and_the_fits_masks(model_dir, monkeypatch
         masks = [np.full(i.shape[:2], 0.4, np.float32) for i in images]
         return masks, masks, ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6))
 
-    whole = []
-    monkeypatch.setattr(perception_module, "aimed_looks", aimed)
-    monkeypatch.setattr(perception_module, "posed_close_look", lambda *args: whole.append(1))
-    calls = []
+    def estimate(masks, X_WCs, cameras, config, category, amodal=False):
+        if whole == "no pose":
+            raise ObjectPoseError("object pose: the masks agree on no object")
+        return ObjectPoseEstimate.from_box(box + [0.0 if whole == "holds the aim" else 0.8, 0, 0, 0, 0, 0],
+                                           0.0, 1, np.zeros(6))
 
-    class Stop(Exception):
-        pass
+    monkeypatch.setattr(perception_module, "aimed_looks", aimed)
+    monkeypatch.setattr(perception_module, "aimed_at", lambda b, X_WCs: bool(np.allclose(b, box)))
+    monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
+    monkeypatch.setattr(perception_module, "posed_close_look",
+                        lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
+    monkeypatch.setattr(perception_module, "posed_carcass_look",
+                        lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
+    fitted = []
 
     def infer(*args, **kwargs):
-        calls.append(kwargs)
-        raise Stop
+        fitted.append(kwargs)
+        raise ObjectPoseError("stop here")  # not the pose's: raised by the fit
 
     monkeypatch.setattr(infer_module, "infer", infer)
-    diagram, _ = _perception_scene(model_dir, "room", X_WO, known=False)
-    with pytest.raises(Stop):
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False)
+    with pytest.raises(ObjectPoseError, match="stop here"):
         Simulator(diagram).Initialize()
-    assert looked == [(3, "closet")] and not whole
-    assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.4] * 3)
+    masks = [float(m.mean()) for m in fitted[0]["masks"]]
+    if whole == "holds the aim":
+        assert not looked and masks == pytest.approx([0.3] * 3)
+    else:
+        assert looked == [(3, "closet")] and masks == pytest.approx([0.4] * 3)
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):

@@ -11,12 +11,13 @@ the single-photo second look (`Segmenter.close_look`: the crop around its own fi
 The carcass's amodal masks get the same second look (`posed_carcass_look`), at the crop around the
 carcass's box from the first amodal masks, not grown forward (the carcass has no fronts).
 
-The aimed look (`aimed_looks`) starts where the cameras aim instead of from whole photos: the object
-is the one the views are pointed at (`aim_point`, where their optical axes meet), so the carcass's
-amodal masks are looked at in the crop around a box of the category's middle size there
+The object is the one the cameras aim at (`aim_point`, where their optical axes meet). A whole
+photo also holds the furniture beside the object, which the segmenter can take for it (a drawer
+unit beside a drawer); a pose whose floor box does not hold the aim point (`aimed_at`) is then not
+the object's. The aimed look (`aimed_looks`) starts at the aim instead of from whole photos: the
+carcass's amodal masks are looked at in the crop around a box of the category's middle size there
 (`aimed_box`), the pose comes from those masks, and the object's masks from the crop around that
-pose's box. A whole photo also holds the furniture beside the object, which the segmenter can take
-for it (a drawer unit beside a drawer); the crop around the aim leaves most of it out.
+pose's box; the crop around the aim leaves most of a neighbour out.
 """
 
 from __future__ import annotations
@@ -113,6 +114,18 @@ def aim_point(X_WCs: list[np.ndarray], min_spread_deg: float = AIM_MIN_SPREAD_DE
         return None
     point = np.linalg.solve(A, b)
     return point if np.all(np.einsum("ni,ni->n", point - origins, axes) > 0.0) else None
+
+
+def aimed_at(box: np.ndarray, X_WCs: list[np.ndarray]) -> bool:
+    """Whether the floor box (x, y, yaw, depth, width, height; m, rad) holds the cameras'
+    `aim_point` in its footprint; True when they have no aim (nothing to contradict the box)."""
+    aim = aim_point(X_WCs)
+    if aim is None:
+        return True
+    x, y, yaw, depth, width, _ = np.asarray(box, float)
+    dx, dy = aim[0] - x, aim[1] - y
+    along, across = np.cos(yaw) * dx + np.sin(yaw) * dy, -np.sin(yaw) * dx + np.cos(yaw) * dy
+    return bool(abs(along) <= depth / 2 and abs(across) <= width / 2)
 
 
 def aimed_box(X_WCs: list[np.ndarray], category: str) -> np.ndarray | None:
