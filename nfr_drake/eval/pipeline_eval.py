@@ -215,7 +215,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           segmenter: Path = Path(Scenario.segmenter),
                           room_loss: Literal["background", "masked"] = "background",
                           paintings: tuple[Literal["region", "fronts", "sure"], ...] = PAINTINGS,
-                          mask_crop: bool = True, objects: tuple[int, ...] = (),
+                          mask_crop: bool = True,
+                          aimed_look: Literal["off-aim", "always", "never"] = "off-aim",
+                          objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           regrasps: int = SimulationConfig.regrasps,
                           turn_max_hinge_gap: float = SimulationConfig.second_turn_max_hinge_gap,
@@ -260,6 +262,10 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         mask_crop: with `--perceive room`, the segmenter's second, close look at the crop around
             the object's box estimated from its first masks, and at the crop around its carcass's
             box for the amodal carcass masks that give the pose (`Scenario.mask_crop`).
+        aimed_look: with `--mask-crop` and `--object-pose estimated`, when the look at the crop
+            around where the cameras aim gives the pose and masks: "off-aim" (where the whole
+            photos' pose is not of the object aimed at, or none), "always" or "never"
+            (`Scenario.aimed_look`).
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
@@ -276,7 +282,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     image_size=image_size,
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss,
-                    paintings=list(paintings), mask_crop=mask_crop,
+                    paintings=list(paintings), mask_crop=mask_crop, aimed_look=aimed_look,
                     simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps,
                                                 second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):

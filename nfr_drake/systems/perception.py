@@ -77,7 +77,13 @@ from nfr_drake.perception.object_pose import (
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import aimed_at, aimed_looks, posed_carcass_look, posed_close_look
+from nfr_drake.perception.segmentation.crop import (
+    AimedLook,
+    aimed_at,
+    aimed_looks,
+    posed_carcass_look,
+    posed_close_look,
+)
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -131,7 +137,7 @@ class NfrPerceptionSystem(LeafSystem):
     in each view, `posed_close_look`; when those masks give no pose, the first look's; the amodal
     carcass masks that give the pose likewise, `posed_carcass_look`; with an estimated pose whose
     floor box does not hold the cameras' aim point, or none, the aimed look's, `aimed_looks`,
-    where it gives one: the extra's `aimed`, and a warning), and
+    where it gives one: the extra's `aimed`, and a warning; `aimed_look`, `crop.AimedLook`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
     each of `paintings` says: one fit per painting, the one with the highest P(handle within 2 cm)
     kept, `infer_painted`; a model with several parts takes the first painting) or only the
@@ -160,6 +166,7 @@ class NfrPerceptionSystem(LeafSystem):
                  segmenter: Segmenter | None = None, part: int | None = None,
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                  room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
+                 aimed_look: AimedLook = "off-aim",
                  paintings: tuple[Painting, ...] = PAINTINGS):
         super().__init__()
         self._keypoint_source = keypoint_source
@@ -175,6 +182,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
+        self._aimed_look = aimed_look
         self._paintings = checked_paintings(paintings)
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
@@ -295,7 +303,8 @@ class NfrPerceptionSystem(LeafSystem):
                ) -> tuple[list[np.ndarray], RigidTransform, dict, list[str]] | None:
         """As `_whole_photo_pose`, from the aimed look (`aimed_looks`; the extra's `aimed` True), or
         None where it does not apply (a given pose, no segmenter or no crop stage) or gives no pose."""
-        if self._X_WO is not None or self._segmenter is None or not self._mask_crop:
+        if (self._X_WO is not None or self._segmenter is None or not self._mask_crop
+                or self._aimed_look == "never"):
             return None
         looked = aimed_looks(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
                              self._model.category, self._hull_config)
@@ -326,8 +335,13 @@ class NfrPerceptionSystem(LeafSystem):
     def _looked(self, images: list[np.ndarray]
                 ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
         """As `_whole_photo_pose`; with an estimated pose and the crop stage, the aimed look's
-        (`_aimed`) where the whole photos' floor box does not hold the cameras' aim point (their
-        masks took another piece for the object, `aimed_at`) or they give no pose."""
+        (`_aimed`) as `aimed_look` says: by default where the whole photos' floor box does not
+        hold the cameras' aim point (their masks took another piece for the object, `aimed_at`)
+        or they give no pose."""
+        if self._aimed_look == "always":
+            aimed = self._aimed(images)
+            if aimed is not None:
+                return aimed
         try:
             looked = self._whole_photo_pose(images)
         except ObjectPoseError:
@@ -451,6 +465,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      segmenter: Path = SEGMENTER_DIR, part: int | None = None,
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                      room_loss: RoomLoss = "background", mask_crop: bool = True,
+                     aimed_look: AimedLook = "off-aim",
                      paintings: tuple[Painting, ...] = PAINTINGS) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
@@ -477,7 +492,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
         keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
-        room_loss=room_loss, mask_crop=mask_crop, paintings=paintings))
+        room_loss=room_loss, mask_crop=mask_crop, paintings=paintings, aimed_look=aimed_look))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

@@ -22,6 +22,7 @@ from nfr_drake.objects import (
     object_rng,
     sample_object,
 )
+from nfr_drake.perception.segmentation.crop import AimedLook
 from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.systems.articulation import GRASPS, SimulationConfig
 from nfr_drake.systems.scene_objects import object_pose, random_part
@@ -128,6 +129,11 @@ class Scenario:
     """Perceiving a room, whether the segmenter takes a second, close look at the crop around the
     object's box estimated from its first masks, and at the crop around its carcass's box for the
     amodal carcass masks that give the pose (`perception.segmentation.crop`)."""
+    aimed_look: str = "off-aim"
+    """Perceiving a room with `mask_crop` and an estimated pose, when the segmenter's look at the
+    crop around where the cameras aim gives the pose and masks: "off-aim" (where the whole photos'
+    pose is not of the object aimed at, or none), "always" or "never"
+    (`perception.segmentation.crop.AimedLook`)."""
     part: int = -1
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning
@@ -161,6 +167,9 @@ class Scenario:
         if self.room_loss not in ROOM_LOSSES:
             raise ConfigError(f"room_loss must be one of {', '.join(ROOM_LOSSES)}, got {self.room_loss!r}")
         checked_paintings(self.paintings)
+        if self.aimed_look not in typing.get_args(AimedLook):
+            raise ConfigError(f"aimed_look must be one of {', '.join(typing.get_args(AimedLook))}, "
+                              f"got {self.aimed_look!r}")
         if not (self.coarse_look_m >= 0.0 and self.coarse_look_deg >= 0.0):
             raise ConfigError("coarse_look_m and coarse_look_deg must be >= 0")
         if self.min_confidence > 1.0:

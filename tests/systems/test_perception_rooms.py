@@ -78,7 +78,8 @@ def test_a_room_placed_at_X_PW_is_the_same_room_moved():
                                        atol=1e-12)
 
 
-def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, paintings=("region",)):
+def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, paintings=("region",),
+                      aimed_look="off-aim"):
     obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
     scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
                         object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
@@ -96,7 +97,7 @@ def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, painting
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
                               X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER,
-                              paintings=paintings)
+                              paintings=paintings, aimed_look=aimed_look)
     return builder.Build(), system
 
 
@@ -289,11 +290,14 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
     assert [float(m.mean()) for m in calls[0]["masks"]] == pytest.approx([0.3] * 3)  # the fit's masks
 
 
-@pytest.mark.parametrize("whole", ["holds the aim", "off the aim", "no pose"])
-def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypatch, whole):
+@pytest.mark.parametrize("whole, aimed_look, expect_aimed", [
+    ("holds the aim", "off-aim", False), ("off the aim", "off-aim", True), ("no pose", "off-aim", True),
+    ("holds the aim", "always", True), ("off the aim", "never", False)])
+def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypatch, whole, aimed_look,
+                                                             expect_aimed):
     """With an estimated pose and the crop stage, the whole photos' pose and masks are the fit's
     when their floor box holds the cameras' aim point; when it does not, or they give no pose,
-    the aimed look's, and the result says so."""
+    the aimed look's (`aimed_look` "off-aim"); "always" looks there first, "never" not at all."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
     box = np.array([1.1, 0.3, 0.5, 0.5, 0.6, 0.9])
@@ -324,14 +328,14 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypat
         raise ObjectPoseError("stop here")  # not the pose's: raised by the fit
 
     monkeypatch.setattr(infer_module, "infer", infer)
-    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False)
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False, aimed_look=aimed_look)
     with pytest.raises(ObjectPoseError, match="stop here"):
         Simulator(diagram).Initialize()
     masks = [float(m.mean()) for m in fitted[0]["masks"]]
-    if whole == "holds the aim":
-        assert not looked and masks == pytest.approx([0.3] * 3)
-    else:
+    if expect_aimed:
         assert looked == [(3, "closet")] and masks == pytest.approx([0.4] * 3)
+    else:
+        assert not looked and masks == pytest.approx([0.3] * 3)
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):
@@ -358,6 +362,11 @@ def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_pa
     assert float(rows[0]["pose_error_cm"]) == math.inf and float(rows[0]["handle_error_cm"]) == math.inf
     assert "1 with no object pose" in pipeline_eval.perception_summary(rows)
     assert list(csv.DictReader(open(tmp_path / "rows.csv")))[0]["failure"].startswith("nothing planned")
+
+
+def test_an_unknown_aimed_look_is_refused():
+    with pytest.raises(ConfigError, match="aimed_look must be one of off-aim, always, never"):
+        Scenario(aimed_look="sometimes")
 
 
 def test_an_unknown_perception_scene_is_refused():

@@ -22,6 +22,8 @@ pose's box; the crop around the aim leaves most of a neighbour out.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from nfr_drake.data.camera import PinholeCamera
@@ -39,6 +41,11 @@ REACH = 0.5
 """How far the crop's box reaches in front of the fitted floor box, as a fraction of the box's
 larger horizontal side: an open door sweeps up to its width forward, a drawer up to its depth,
 and the floor box settles on the carcass."""
+
+AimedLook = Literal["off-aim", "always", "never"]
+"""When the aimed look gives the pose and masks (with the crop stage and an estimated pose):
+"off-aim", where the whole photos' pose has a floor box that does not hold the aim point, or
+none; "always", before the whole photos (which then run only where it gives no pose); "never"."""
 
 AIM_MIN_SPREAD_DEG = 10.0
 """Cameras have an aim (`aim_point`) only when their viewing directions spread about this much: the
