@@ -15,7 +15,8 @@ geometry of the plant (floor, walls, other furniture, clutter, the robot) under 
 a segmenter (`perception.segmentation`, `models/segmenter`) finds the object in each photo (with
 `mask_crop`, a second look at the crop around the object's box estimated from the first masks,
 `segmentation.crop.posed_close_look`, and at the crop around its carcass's box for the carcass's
-amodal masks, `posed_carcass_look`), and the fit sees the photos with everything off the
+amodal masks, `posed_carcass_look`; where that pose is not of the piece the cameras aim at, at the
+crop around the aim, `aimed_looks`), and the fit sees the photos with everything off the
 object's mask painted in the training background (`paint_background`; off the region where the
 estimated carcass can lie, only the pixels the segmenter is sure of kept, `paint_thresholds`; or,
 `room_loss` "masked", only the pixels on the mask count in its loss).
@@ -473,7 +474,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     then see the object alone (`render_only`) under `lighting` (default the training renders'
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
     `RoomLighting.moved`), the `segmenter` model folder finds the object (`mask_crop`: with a second,
-    close look) and `room_loss` says how the fit treats the pixels off its mask
+    close look; `aimed_look`: when at the crop around where the cameras aim) and `room_loss` says
+    how the fit treats the pixels off its mask
     (`NfrPerceptionSystem`). X_WO: the object's
     known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
     parts (furniture): `part` and `furniture_config` as in `NfrPerceptionSystem`. Returns the
