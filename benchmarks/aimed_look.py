@@ -5,15 +5,15 @@ look where the whole photos' pose is off the cameras' aim, and always, side by s
 
 For each unseen object of `nfr-drake eval-pipeline --perceive room --object-pose estimated` (seed
 `seed`; `pipeline.perception_photos`, nothing fitted) the pose is estimated twice from the
-shipped segmenter's masks:
-- whole photos: the crop stage as the perception system ran it before the aimed look (the
+shipped segmenter's masks by `segmentation.crop.room_looks`, as the perception system looks:
+- whole photos (`aimed_look` "never"): the crop stage as it ran before the aimed look (the
   carcass's amodal masks looked at again around the box the whole photos give,
   `posed_carcass_look`, the visible masks likewise, `posed_close_look`;
   `estimate_object_pose_carcass_first`; the first look's masks when those give no pose);
-- off-aim (the default, `aimed_look` "off-aim"): the whole photos' pose where its floor box holds
-  the cameras' aim point (`segmentation.crop.aimed_at`), else, or where they give none, the aimed
-  look's (`aimed_looks`: the carcass in the crop around where the cameras aim) if it gives one;
-- always (`aimed_look` "always"): the aimed look's, the whole photos' where it gives no pose.
+- off-aim (the default): the whole photos' pose where its floor box holds the cameras' aim point
+  (`aimed_at`), else, or where they give none, the aimed look's (`aimed_looks`: the carcass in the
+  crop around where the cameras aim) if it gives one;
+- always: the aimed look's, the whole photos' where it gives no pose.
 Prints one line per object (position cm, yaw deg, seconds of each) and, per method, the median
 errors, how many within 2 cm and 2 degrees, how many more than 10 cm off, and the median time.
 This is the estimate before the fitted field refines it (`pose_refine`); the pipeline's CSV
@@ -30,45 +30,21 @@ from pathlib import Path
 import numpy as np
 import tyro
 
-from nfr_drake.perception.object_pose import (
-    HullConfig,
-    ObjectPoseError,
-    ObjectPoseEstimate,
-    estimate_object_pose_carcass_first,
-)
-from nfr_drake.perception.segmentation.crop import aimed_at, aimed_looks, posed_carcass_look, posed_close_look
+from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
+from nfr_drake.perception.segmentation.crop import room_looks
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.systems.pipeline import perception_photos
 from nfr_drake.systems.scenario import Scenario
 
 
-def whole_photos(net: Segmenter, images, X_WCs, cameras, category: str) -> ObjectPoseEstimate | None:
-    """The pose from the crop stage over whole photos, the first look's masks as its fallback."""
-    try:
-        masks = posed_close_look(net, images, X_WCs, cameras, category)
-        carcass = posed_carcass_look(net, images, X_WCs, cameras, category)
-        return estimate_object_pose_carcass_first(masks, carcass, X_WCs, cameras, HullConfig(), category)[0]
-    except ObjectPoseError:
+def looked(aimed_look: str):
+    """The pose `room_looks` gives with that `aimed_look`, None where none."""
+    def pose(net: Segmenter, images, X_WCs, cameras, category: str) -> ObjectPoseEstimate | None:
         try:
-            masks = [net.object_mask(image) for image in images]
-            return estimate_object_pose_carcass_first(masks, None, X_WCs, cameras, HullConfig(), category)[0]
+            return room_looks(net, images, X_WCs, cameras, category, aimed_look=aimed_look).estimate
         except ObjectPoseError:
             return None
-
-
-def off_aim(net: Segmenter, images, X_WCs, cameras, category: str) -> ObjectPoseEstimate | None:
-    """The whole photos' pose where its box holds the cameras' aim, else the aimed look's."""
-    whole = whole_photos(net, images, X_WCs, cameras, category)
-    if whole is not None and aimed_at(whole.box, X_WCs):
-        return whole
-    looked = aimed_looks(net, images, X_WCs, cameras, category)
-    return looked[2] if looked is not None else whole
-
-
-def always(net: Segmenter, images, X_WCs, cameras, category: str) -> ObjectPoseEstimate | None:
-    """The pose from the aimed look, the whole photos' where it gives none."""
-    looked = aimed_looks(net, images, X_WCs, cameras, category)
-    return looked[2] if looked is not None else whole_photos(net, images, X_WCs, cameras, category)
+    return pose
 
 
 def pose_error(estimate: ObjectPoseEstimate | None, X_WO: np.ndarray) -> tuple[float, float]:
@@ -80,7 +56,7 @@ def pose_error(estimate: ObjectPoseEstimate | None, X_WO: np.ndarray) -> tuple[f
             float(abs(np.degrees((yaw + np.pi) % (2 * np.pi) - np.pi))))
 
 
-METHODS = {"whole photos": whole_photos, "off-aim": off_aim, "always": always}
+METHODS = {"whole photos": looked("never"), "off-aim": looked("off-aim"), "always": looked("always")}
 
 
 def main(category: str = "drawer", objects: tuple[int, ...] = tuple(range(20)), seed: int = 200,

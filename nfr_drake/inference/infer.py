@@ -65,7 +65,6 @@ from nfr_drake.perception.handle_triangulation import (
 )
 from nfr_drake.perception.object_pose import (
     HullConfig,
-    ObjectPoseError,
     background_mask,
     box_silhouette,
     estimate_object_pose_carcass_first,
@@ -524,34 +523,20 @@ def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray]
 def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str
                   ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
     """The segmenter's object masks and amodal carcass masks (H, W) per uint8 RGB photo (H, W, 3)
-    of a capture whose poses are in a floor frame, as `eval-pipeline --mask-crop` looks: the crop
-    stage (a second look at the crop around the box the first look gives: `posed_close_look`,
-    `posed_carcass_look`), or, where the pose of those masks has a floor box that does not hold the
-    cameras' aim point (`aimed_at`) or none, the aimed look's (`aimed_looks`) when it gives a pose;
-    run on the photos shrunk to `MASK_SIZE_PX` and scaled back up; the carcass None for a model
-    without that output."""
-    from nfr_drake.perception.segmentation.crop import (
-        aimed_at,
-        aimed_looks,
-        posed_carcass_look,
-        posed_close_look,
-    )
+    of a capture whose poses are in a floor frame, as `eval-pipeline --mask-crop` looks
+    (`segmentation.crop.room_looks`: the crop stage over whole photos, or the aimed look where
+    their pose is not of the piece the cameras aim at), run on the photos shrunk to `MASK_SIZE_PX`
+    and scaled back up; the carcass None for a model without that output. ObjectPoseError when
+    no look gives a pose."""
+    from nfr_drake.perception.segmentation.crop import room_looks
     from nfr_drake.perception.segmentation.model import load_segmenter
 
     net, _ = load_segmenter(segmenter)
     small = [shrunk(image) for image in images]
     X_WCs, cameras = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
-    views = posed_close_look(net, small, X_WCs, cameras, category)
-    carcass = posed_carcass_look(net, small, X_WCs, cameras, category) if net.config.amodal else None
-    try:
-        box = estimate_object_pose_carcass_first(views, carcass, X_WCs, cameras, category=category)[0].box
-    except ObjectPoseError:
-        box = None
-    if box is None or not aimed_at(box, X_WCs):
-        aimed = aimed_looks(net, small, X_WCs, cameras, category)
-        if aimed is not None:
-            views, carcass = aimed[0], aimed[1]
-    return _at_photo_size(views, images), None if carcass is None else _at_photo_size(carcass, images)
+    looks = room_looks(net, small, X_WCs, cameras, category)
+    return (_at_photo_size(looks.masks, images),
+            None if looks.carcass is None else _at_photo_size(looks.carcass, images))
 
 
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,

@@ -73,18 +73,11 @@ from nfr_drake.inference.infer import (
 from nfr_drake.inference.result import FitResult
 from nfr_drake.perception.object_pose import (
     HullConfig,
-    ObjectPoseError,
     ObjectPoseEstimate,
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import (
-    AimedLook,
-    aimed_at,
-    aimed_looks,
-    posed_carcass_look,
-    posed_close_look,
-)
+from nfr_drake.perception.segmentation.crop import AimedLook, posed_close_look, room_looks
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -96,11 +89,6 @@ PerceptionScene = Literal["alone", "room"]
 """What the perception cameras see: the object "alone" before the training background (the
 paper's setting), or the whole "room" (every geometry of the plant), the object found by a
 segmenter."""
-
-
-AIMED_LOOK = ("the whole photos' masks gave a pose whose box does not hold the cameras' aim point (another "
-              "piece taken for the object); the aimed look gave the pose and the masks")
-"""The result's warning when the aimed look replaced the whole photos' pose."""
 
 
 class NfrPerceptionSystem(LeafSystem):
@@ -274,89 +262,37 @@ class NfrPerceptionSystem(LeafSystem):
             return [self._segmenter.object_mask(image) for image in images]
         return [background_mask(image, self._background_rgb) for image in images]
 
-    def _object_pose(self, masks: list[np.ndarray], images: list[np.ndarray]
-                     ) -> tuple[RigidTransform, dict, list[str]]:
-        """X_WO (given, or estimated from the segmenter's amodal carcass when it has that output;
-        from the object's masks without it, or when the amodal masks give no pose:
-        `estimate_object_pose_carcass_first`), what the result's extra says of it, and warnings."""
+    def _looked(self, images: list[np.ndarray]
+                ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
+        """The object's masks (None without a segmenter when the pose is given), X_WO (given or
+        estimated), what the result's extra says of it, and warnings. With a segmenter, the crop
+        stage and an estimated pose: `segmentation.crop.room_looks` (whole photos, or the aimed
+        look as `aimed_look` says); else the masks of `_masks` and the pose from them (the
+        segmenter's amodal carcass first when it has that output,
+        `estimate_object_pose_carcass_first`)."""
+        X_WCs = [X.GetAsMatrix4() for X in self._X_WCs]
+        if self._X_WO is None and self._segmenter is not None and self._mask_crop:
+            looks = room_looks(self._segmenter, images, X_WCs, self._cameras, self._model.category,
+                               self._hull_config, self._aimed_look)
+            return looks.masks, *self._estimated(looks.estimate, looks.amodal, looks.aimed, looks.warnings)
+        masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
         if self._X_WO is not None:
-            return self._X_WO, {"estimated": False}, []
-        carcass = None
-        if self._segmenter is not None and self._segmenter.config.amodal:
-            carcass = (posed_carcass_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
-                                          self._cameras, self._model.category, self._hull_config)
-                       if self._mask_crop else [self._segmenter.carcass_amodal(image) for image in images])
+            return masks, self._X_WO, {"estimated": False}, []
+        carcass = ([self._segmenter.carcass_amodal(image) for image in images]
+                   if self._segmenter is not None and self._segmenter.config.amodal else None)
         estimate, amodal, warnings = estimate_object_pose_carcass_first(
-            masks, carcass, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras, self._hull_config,
-            self._model.category)
-        return self._estimated(estimate, amodal, warnings)
+            masks, carcass, X_WCs, self._cameras, self._hull_config, self._model.category)
+        return masks, *self._estimated(estimate, amodal, False, warnings)
 
-    def _estimated(self, estimate: ObjectPoseEstimate, amodal: bool, warnings: list[str]
+    def _estimated(self, estimate: ObjectPoseEstimate, amodal: bool, aimed: bool, warnings: list[str]
                    ) -> tuple[RigidTransform, dict, list[str]]:
         """X_WO of an estimate, what the result's extra says of it, and warnings (a size outside
         the model's category added)."""
         problem = estimate.size_problem(self._model.category)
         return (RigidTransform(estimate.X_WO),
                 {"estimated": True, "X_WO": estimate.X_WO.tolist(), "size": estimate.size.tolist(),
-                 "box": estimate.box.tolist(), "amodal": amodal}, warnings + ([problem] if problem else []))
-
-    def _aimed(self, images: list[np.ndarray]
-               ) -> tuple[list[np.ndarray], RigidTransform, dict, list[str]] | None:
-        """As `_whole_photo_pose`, from the aimed look (`aimed_looks`; the extra's `aimed` True), or
-        None where it does not apply (a given pose, no segmenter or no crop stage) or gives no pose."""
-        if (self._X_WO is not None or self._segmenter is None or not self._mask_crop
-                or self._aimed_look == "never"):
-            return None
-        looked = aimed_looks(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs], self._cameras,
-                             self._model.category, self._hull_config)
-        if looked is None:
-            return None
-        masks, _, estimate = looked
-        X_WO, pose, warnings = self._estimated(estimate, True, [])
-        return masks, X_WO, pose | {"aimed": True}, warnings
-
-    def _whole_photo_pose(self, images: list[np.ndarray]
-                          ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
-        """The object's masks (None without a segmenter when the pose is given), X_WO, what the
-        result's extra says of it (an estimate's `aimed` False), and warnings, from looks at the
-        whole photos (`_masks`, `_object_pose`; the first look's when the crop stage's masks give
-        no pose)."""
-        masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
-        try:
-            X_WO, pose, warnings = self._object_pose(masks, images)
-        except ObjectPoseError:
-            if self._segmenter is None or not self._mask_crop:
-                raise
-            masks = [self._segmenter.object_mask(image) for image in images]  # the first look
-            X_WO, pose, warnings = self._object_pose(masks, images)
-            warnings.append("the crop stage's masks agree on no object; the segmenter's first look "
-                            "gave the pose and the masks")
-        return masks, X_WO, pose | ({"aimed": False} if pose["estimated"] else {}), warnings
-
-    def _looked(self, images: list[np.ndarray]
-                ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
-        """As `_whole_photo_pose`; with an estimated pose and the crop stage, the aimed look's
-        (`_aimed`) as `aimed_look` says: by default where the whole photos' floor box does not
-        hold the cameras' aim point (their masks took another piece for the object, `aimed_at`)
-        or they give no pose."""
-        if self._aimed_look == "always":
-            aimed = self._aimed(images)
-            if aimed is not None:
-                return aimed
-        try:
-            looked = self._whole_photo_pose(images)
-        except ObjectPoseError:
-            aimed = self._aimed(images)
-            if aimed is None:
-                raise
-            return aimed
-        box = looked[2].get("box")
-        if box is None or aimed_at(np.array(box), [X.GetAsMatrix4() for X in self._X_WCs]):
-            return looked
-        aimed = self._aimed(images)
-        if aimed is None:
-            return looked
-        return aimed[:3] + (aimed[3] + [AIMED_LOOK],)
+                 "box": estimate.box.tolist(), "amodal": amodal, "aimed": aimed},
+                warnings + ([problem] if problem else []))
 
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]

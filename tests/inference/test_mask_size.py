@@ -139,19 +139,17 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
     seen = []
 
     def look(name: str, value: float):
-        def stage(net, images, X_WCs, cameras, category):
+        def stage(net, images, X_WCs, cameras, category, *options):
             seen.append((name, images[0].shape, len(X_WCs), category))
             return [np.full(image.shape[:2], value, np.float32) for image in images]
         return stage
 
     monkeypatch.setattr(crop, "posed_close_look", look("visible", 1.0))
     monkeypatch.setattr(crop, "posed_carcass_look", look("carcass", 0.5))
-    monkeypatch.setattr(crop, "aimed_looks", lambda *args: None)  # no aim, or no pose there
-
-    def no_pose(*args, **kwargs):
-        raise object_pose.ObjectPoseError("object pose: the masks agree on no object")
-
-    monkeypatch.setattr(infer, "estimate_object_pose_carcass_first", no_pose)
+    monkeypatch.setattr(crop, "aimed_at", lambda box, X_WCs: True)  # the pose is of the piece aimed at
+    box = np.array([1.0, 0.0, 0.0, 0.5, 0.6, 0.9])
+    monkeypatch.setattr(crop, "estimate_object_pose_carcass_first", lambda *args: (
+        object_pose.ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6)), amodal, []))
     net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
     views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
@@ -174,7 +172,7 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_pat
 
     seen = []
 
-    def aimed(net, images, X_WCs, cameras, category):
+    def aimed(net, images, X_WCs, cameras, category, hull):
         seen.append((images[0].shape, len(X_WCs), category))
         return ([np.full(i.shape[:2], 0.25, np.float32) for i in images],
                 [np.full(i.shape[:2], 0.75, np.float32) for i in images], None)
@@ -191,8 +189,9 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_pat
                         lambda net, images, *args: [np.ones(i.shape[:2], np.float32) for i in images])
     monkeypatch.setattr(crop, "posed_carcass_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.5, np.float32) for i in images])
-    monkeypatch.setattr(infer, "estimate_object_pose_carcass_first", estimate)
-    net = type("Net", (), {"config": type("Config", (), {"amodal": True})()})()
+    monkeypatch.setattr(crop, "estimate_object_pose_carcass_first", estimate)
+    net = type("Net", (), {"config": type("Config", (), {"amodal": True})(),
+                           "object_mask": lambda self, image: np.zeros(image.shape[:2], np.float32)})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
     views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
                                          tmp_path, "drawer")

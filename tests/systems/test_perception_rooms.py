@@ -22,6 +22,7 @@ from nfr_drake.objects import SEED_DOMAIN_CAPTURE, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.perception import object_pose as object_pose_module
 from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
+from nfr_drake.perception.segmentation import crop as crop_module
 from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig
 from nfr_drake.systems import perception as perception_module
 from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
@@ -198,7 +199,7 @@ def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, mon
         return net, record
 
     monkeypatch.setattr(perception_module, "load_segmenter", visible_only)
-    monkeypatch.setattr(perception_module, "posed_close_look",
+    monkeypatch.setattr(crop_module, "posed_close_look",
                         lambda net, images, *args: [np.zeros(i.shape[:2], np.float32) for i in images])
     real_estimate = object_pose_module.estimate_object_pose
     poses_from = []
@@ -266,11 +267,11 @@ def test_with_the_amodal_output_the_pose_comes_from_the_carcass(model_dir, monke
         return ObjectPoseEstimate.from_box(np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]), 0.0, 1, np.zeros(6))
 
     monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
-    monkeypatch.setattr(perception_module, "posed_close_look",
+    monkeypatch.setattr(crop_module, "posed_close_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
-    monkeypatch.setattr(perception_module, "posed_carcass_look",
+    monkeypatch.setattr(crop_module, "posed_carcass_look",
                         lambda net, images, *args: [net.carcass_amodal(i) for i in images])
-    monkeypatch.setattr(perception_module, "aimed_looks", lambda *args: None)  # it gives no pose
+    monkeypatch.setattr(crop_module, "aimed_looks", lambda *args: None)  # it gives no pose
     calls = []
 
     class Stop(Exception):
@@ -314,12 +315,12 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypat
         return ObjectPoseEstimate.from_box(box + [0.0 if whole == "holds the aim" else 0.8, 0, 0, 0, 0, 0],
                                            0.0, 1, np.zeros(6))
 
-    monkeypatch.setattr(perception_module, "aimed_looks", aimed)
-    monkeypatch.setattr(perception_module, "aimed_at", lambda b, X_WCs: bool(np.allclose(b, box)))
+    monkeypatch.setattr(crop_module, "aimed_looks", aimed)
+    monkeypatch.setattr(crop_module, "aimed_at", lambda b, X_WCs: bool(np.allclose(b, box)))
     monkeypatch.setattr(object_pose_module, "estimate_object_pose", estimate)
-    monkeypatch.setattr(perception_module, "posed_close_look",
+    monkeypatch.setattr(crop_module, "posed_close_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
-    monkeypatch.setattr(perception_module, "posed_carcass_look",
+    monkeypatch.setattr(crop_module, "posed_carcass_look",
                         lambda net, images, *args: [np.full(i.shape[:2], 0.3, np.float32) for i in images])
     fitted = []
 

@@ -22,6 +22,7 @@ pose's box; the crop around the aim leaves most of a neighbour out.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -34,6 +35,7 @@ from nfr_drake.perception.object_pose import (
     box_image_rect,
     category_size_ranges,
     estimate_object_pose,
+    estimate_object_pose_carcass_first,
 )
 from nfr_drake.perception.segmentation.model import CROP_MARGIN, SEGMENT_PX, Box, Segmenter, square_around
 
@@ -172,3 +174,73 @@ def aimed_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray
     crops = view_boxes(estimate.box, X_WCs, cameras, shapes, margin, reach)
     return ([net.close_look(image, crop, size, margin) for image, crop in zip(images, crops, strict=True)],
             carcass, estimate)
+
+
+FIRST_LOOK = ("the crop stage's masks agree on no object; the segmenter's first look gave the pose and "
+              "the masks")
+"""The warning of `room_looks` when the crop stage's masks give no pose and the first look's do."""
+
+AIMED_LOOK = ("the whole photos' masks gave a pose whose box does not hold the cameras' aim point (another "
+              "piece taken for the object); the aimed look gave the pose and the masks")
+"""The warning of `room_looks` when the aimed look replaced the whole photos' pose."""
+
+
+@dataclass
+class RoomLooks:
+    """What `room_looks` found: the object's masks and the carcass's amodal masks ((H, W) float32
+    per photo; carcass None without the amodal output), the pose estimate, whether the amodal
+    masks gave it, whether the aimed look did, and warnings."""
+
+    masks: list[np.ndarray]
+    carcass: list[np.ndarray] | None
+    estimate: ObjectPoseEstimate
+    amodal: bool
+    aimed: bool
+    warnings: list[str] = field(default_factory=list)
+
+
+def room_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
+               cameras: list[PinholeCamera], category: str, hull: HullConfig | None = None,
+               aimed_look: AimedLook = "off-aim") -> RoomLooks:
+    """The object's masks and pose in photos of a room (uint8 RGB (H, W, 3), camera poses X_WCs
+    (4, 4) in a floor frame): from whole photos, the crop stage (`posed_close_look`, and
+    `posed_carcass_look` for the amodal masks that give the pose,
+    `estimate_object_pose_carcass_first`; where its masks give no pose, the first look's, with
+    `FIRST_LOOK`), or the aimed look's (`aimed_looks`) as `aimed_look` says: "off-aim" where the
+    whole photos' floor box does not hold the cameras' aim point (`aimed_at`, with `AIMED_LOOK`)
+    or they give no pose, "always" first, "never" not. ObjectPoseError when none gives a pose."""
+    hull = hull or HullConfig()
+    if aimed_look == "always":
+        aimed = aimed_looks(net, images, X_WCs, cameras, category, hull)
+        if aimed is not None:
+            return RoomLooks(aimed[0], aimed[1], aimed[2], True, True)
+    try:
+        whole = _whole_photo_looks(net, images, X_WCs, cameras, category, hull)
+    except ObjectPoseError:
+        aimed = None if aimed_look == "never" else aimed_looks(net, images, X_WCs, cameras, category, hull)
+        if aimed is None:
+            raise
+        return RoomLooks(aimed[0], aimed[1], aimed[2], True, True)
+    if aimed_look != "off-aim" or aimed_at(whole.estimate.box, X_WCs):
+        return whole
+    aimed = aimed_looks(net, images, X_WCs, cameras, category, hull)
+    if aimed is None:
+        return whole
+    return RoomLooks(aimed[0], aimed[1], aimed[2], True, True, [AIMED_LOOK])
+
+
+def _whole_photo_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
+                       cameras: list[PinholeCamera], category: str, hull: HullConfig) -> RoomLooks:
+    """`room_looks` from whole photos: the crop stage's masks, or the first look's where those give
+    no pose. ObjectPoseError when neither does."""
+    masks = posed_close_look(net, images, X_WCs, cameras, category, hull)
+    carcass = posed_carcass_look(net, images, X_WCs, cameras, category, hull) if net.config.amodal else None
+    try:
+        estimate, amodal, warnings = estimate_object_pose_carcass_first(masks, carcass, X_WCs, cameras, hull,
+                                                                        category)
+    except ObjectPoseError:
+        masks = [net.object_mask(image) for image in images]
+        estimate, amodal, warnings = estimate_object_pose_carcass_first(masks, carcass, X_WCs, cameras, hull,
+                                                                        category)
+        warnings = warnings + [FIRST_LOOK]
+    return RoomLooks(masks, carcass, estimate, amodal, False, warnings)
