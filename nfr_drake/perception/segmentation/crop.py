@@ -210,23 +210,23 @@ def room_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray]
     whole photos' floor box does not hold the cameras' aim point (`aimed_at`, with `AIMED_LOOK`)
     or they give no pose, "always" first, "never" not. ObjectPoseError when none gives a pose."""
     hull = hull or HullConfig()
-    if aimed_look == "always":
-        aimed = aimed_looks(net, images, X_WCs, cameras, category, hull)
-        if aimed is not None:
-            return RoomLooks(aimed[0], aimed[1], aimed[2], True, True)
+
+    def aimed(warnings: list[str]) -> RoomLooks | None:
+        looked = aimed_looks(net, images, X_WCs, cameras, category, hull)
+        return None if looked is None else RoomLooks(*looked, amodal=True, aimed=True, warnings=warnings)
+
+    if aimed_look == "always" and (first := aimed([])) is not None:
+        return first
     try:
         whole = _whole_photo_looks(net, images, X_WCs, cameras, category, hull)
     except ObjectPoseError:
-        aimed = None if aimed_look == "never" else aimed_looks(net, images, X_WCs, cameras, category, hull)
-        if aimed is None:
+        fallback = aimed([]) if aimed_look == "off-aim" else None  # "always" has looked already
+        if fallback is None:
             raise
-        return RoomLooks(aimed[0], aimed[1], aimed[2], True, True)
+        return fallback
     if aimed_look != "off-aim" or aimed_at(whole.estimate.box, X_WCs):
         return whole
-    aimed = aimed_looks(net, images, X_WCs, cameras, category, hull)
-    if aimed is None:
-        return whole
-    return RoomLooks(aimed[0], aimed[1], aimed[2], True, True, [AIMED_LOOK])
+    return aimed([AIMED_LOOK]) or whole
 
 
 def _whole_photo_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
