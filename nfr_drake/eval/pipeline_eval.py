@@ -217,6 +217,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           paintings: tuple[Literal["region", "fronts", "sure"], ...] = PAINTINGS,
                           mask_crop: bool = True,
                           aimed_look: Literal["off-aim", "always", "never"] = "off-aim",
+                          look_again: bool = True,
                           objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           regrasps: int = SimulationConfig.regrasps,
@@ -266,6 +267,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             around where the cameras aim gives the pose and masks: "off-aim" (where the whole
             photos' pose is not of the object aimed at, or none), "always" or "never"
             (`Scenario.aimed_look`).
+        look_again: with `--mask-crop` and `--object-pose estimated`, a fit its confidence refuses
+            is followed by one at the other look (aimed or whole photos), the more confident kept
+            (`Scenario.look_again`).
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
@@ -283,6 +287,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss,
                     paintings=list(paintings), mask_crop=mask_crop, aimed_look=aimed_look,
+                    look_again=look_again,
                     simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps,
                                                 second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):

@@ -26,6 +26,7 @@ from nfr_drake.inference.confidence import (
     code_scale,
     fit_features,
     part_features,
+    refusal,
     render_views,
 )
 from nfr_drake.inference.fit import (
@@ -520,23 +521,44 @@ def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray]
     return _at_photo_size([net.carcass_amodal(shrunk(image)) for image in images], images)
 
 
-def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str
-                  ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str,
+                  other: bool = False) -> tuple[list[np.ndarray], list[np.ndarray] | None, bool] | None:
     """The segmenter's object masks and amodal carcass masks (H, W) per uint8 RGB photo (H, W, 3)
     of a capture whose poses are in a floor frame, as `eval-pipeline --mask-crop` looks
     (`segmentation.crop.room_looks`: the crop stage over whole photos, or the aimed look where
-    their pose is not of the piece the cameras aim at), run on the photos shrunk to `MASK_SIZE_PX`
-    and scaled back up; the carcass None for a model without that output. ObjectPoseError when
-    no look gives a pose."""
-    from nfr_drake.perception.segmentation.crop import room_looks
+    their pose is not of the piece the cameras aim at; with `other`, the look that did not give
+    those, `other_look`), run on the photos shrunk to `MASK_SIZE_PX` and scaled back up, and
+    whether the look was the aimed one; the carcass None for a model without that output.
+    ObjectPoseError when no look gives a pose; None when the other look gives none."""
+    from nfr_drake.perception.segmentation.crop import other_look, room_looks
     from nfr_drake.perception.segmentation.model import load_segmenter
 
     net, _ = load_segmenter(segmenter)
     small = [shrunk(image) for image in images]
     X_WCs, cameras = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
     looks = room_looks(net, small, X_WCs, cameras, category)
+    if other and (looks := other_look(net, small, X_WCs, cameras, category, looks)) is None:
+        return None
     return (_at_photo_size(looks.masks, images),
-            None if looks.carcass is None else _at_photo_size(looks.carcass, images))
+            None if looks.carcass is None else _at_photo_size(looks.carcass, images), looks.aimed)
+
+
+def more_confident_look(first: FitResult, other: FitResult, aimed: tuple[bool, bool]) -> FitResult:
+    """Of a fit its confidence refused at the first look and the fit at the other look
+    (`segmentation.crop.other_look`; `aimed`: whether each look was the aimed one), the one with
+    the higher P(handle within 2 cm); its `extra["object_pose"]["looked_again"]` says which was
+    kept and both P, and a warning names the other look when that is kept."""
+    p = [r.confidence["p_handle_within_2cm"] for r in (first, other)]
+    kept = "other" if p[1] > p[0] else "first"
+    result = other if kept == "other" else first
+    if kept == "other":
+        result.extra["warnings"].append(
+            f"the fit at the first look's pose was not confident (P {p[0]:.2f} below "
+            f"{first.confidence['threshold']:.2f}); the {'aimed' if aimed[1] else 'whole-photo'} look's "
+            f"fit is kept (P {p[1]:.2f})")
+    result.extra["object_pose"]["looked_again"] = {"kept": kept, "p_handle_within_2cm": p,
+                                                   "aimed": list(aimed)}
+    return result
 
 
 def fit_confidence(fitted: FittedModel, outcome: FitOutcome, capture: CaptureSet,
@@ -722,6 +744,7 @@ def infer_command(
     masks: Literal["segmenter", "background"] = "segmenter",
     segmenter: Path = Path("models/segmenter"),
     mask_crop: bool = False,
+    look_again: bool = True,
     room_loss: RoomLoss = "background",
     paintings: tuple[Painting, ...] = ("region",),
     part: int | None = None,
@@ -754,6 +777,9 @@ def infer_command(
         mask_crop: with --masks segmenter, its masks and its carcass's from a second look at the
             crop around the box the first look gives in each photo (as `eval-pipeline`'s crop
             stage; off by default here: docs/ROOMS.md, tutorial 3).
+        look_again: with --mask-crop, a fit its confidence refuses is followed by one at the other
+            look (the aimed look after whole photos, or the reverse), the more confident kept
+            (as `eval-pipeline`).
         room_loss: with --estimate-pose, the pixels off the object's mask are painted in the
             training background ("background": the field's silhouette must match the mask) or
             left out of the image loss ("masked").
@@ -796,14 +822,23 @@ def infer_command(
             raise NfrDrakeError(f"no segmenter in {segmenter}; train one (nfr-drake train-segmenter) or, "
                                 "for an object alone before a uniform background, use --masks background")
         photos = cap.load_images()
-        if masks == "segmenter" and mask_crop:
-            views, carcass = cropped_masks(photos, cap, segmenter, fitted.category)
+        cropped = masks == "segmenter" and mask_crop
+        if cropped:
+            views, carcass, aimed = cropped_masks(photos, cap, segmenter, fitted.category)
         else:
             views = object_masks(photos, segmenter if masks == "segmenter" else None)
             carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
-        result, outcome, cap = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
-                                              room=masks == "segmenter", carcass=carcass,
-                                              paintings=paintings)
+        in_world = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
+                                  room=masks == "segmenter", carcass=carcass, paintings=paintings)
+        if (cropped and look_again and refusal(in_world[0].confidence) is not None
+                and (other := cropped_masks(photos, cap, segmenter, fitted.category, other=True))):
+            print(f"{refusal(in_world[0].confidence)}\nlooking again, at the "
+                  f"{'aimed' if other[2] else 'whole-photo'} look")
+            again = infer_in_world(fitted, cap, fit, q_grid, other[0], room_loss, keypoints, room=True,
+                                   carcass=other[1], paintings=paintings)
+            kept = more_confident_look(in_world[0], again[0], (aimed, other[2]))
+            in_world = again if kept is again[0] else in_world
+        result, outcome, cap = in_world
         pose = np.array(result.extra["object_pose"]["X_WO"])
         print(f"object pose: x {pose[0, 3]:.3f} m, y {pose[1, 3]:.3f} m, yaw "
               f"{np.degrees(np.arctan2(pose[1, 0], pose[0, 0])):.1f} deg; size (depth x width x "

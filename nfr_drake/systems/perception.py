@@ -54,6 +54,7 @@ from pydrake.systems.sensors import ImageRgba8U, RgbdSensor
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame, CaptureSet
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB, Lighting, LightSet, drake_camera_info
+from nfr_drake.inference.confidence import refusal
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.forward import semantic_point_cloud
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
@@ -67,6 +68,7 @@ from nfr_drake.inference.infer import (
     infer,
     infer_painted,
     infer_parts,
+    more_confident_look,
     paint_off_object,
     refined_object_pose,
 )
@@ -77,7 +79,13 @@ from nfr_drake.perception.object_pose import (
     background_mask,
     estimate_object_pose_carcass_first,
 )
-from nfr_drake.perception.segmentation.crop import AimedLook, posed_close_look, room_looks
+from nfr_drake.perception.segmentation.crop import (
+    AimedLook,
+    RoomLooks,
+    other_look,
+    posed_close_look,
+    room_looks,
+)
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -135,7 +143,12 @@ class NfrPerceptionSystem(LeafSystem):
     X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
     (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate
     before the refinement X_WO_estimated, its floor box, the refinement's report; `extra["warnings"]` names a
-    size outside the model's category). The fit runs in an initialisation event and whenever
+    size outside the model's category). With the crop stage and `look_again`, a fit that its
+    confidence refuses (P(handle within 2 cm) below the calibration's threshold) is followed by a fit
+    at the other look's pose and masks (`crop.other_look`: the aimed look after whole photos, whole
+    photos after the aimed look), and the more confident of the two is kept (the extra's
+    `looked_again`: which, both P and both looks' `aimed`; a warning when the second is kept).
+    The fit runs in an initialisation event and whenever
     `refit` is called; outputs read the stored result. `fit_count` counts fits.
     `keypoint_source` picks the keypoint head or the fitted geometry (see
     `nfr_drake.inference.infer.KeypointSource`).
@@ -156,7 +169,7 @@ class NfrPerceptionSystem(LeafSystem):
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                  room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
                  aimed_look: AimedLook = "off-aim",
-                 paintings: tuple[Painting, ...] = PAINTINGS):
+                 paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -171,7 +184,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
-        self._aimed_look = aimed_look
+        self._aimed_look, self._look_again = aimed_look, look_again
         self._paintings = checked_paintings(paintings)
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
@@ -262,19 +275,23 @@ class NfrPerceptionSystem(LeafSystem):
             return [self._segmenter.object_mask(image) for image in images]
         return [background_mask(image, self._background_rgb) for image in images]
 
-    def _looked(self, images: list[np.ndarray]
+    def _room_looks(self, images: list[np.ndarray]) -> RoomLooks | None:
+        """`segmentation.crop.room_looks` (whole photos, or the aimed look as `aimed_look` says)
+        where the pose is estimated with a segmenter and the crop stage, else None."""
+        if self._X_WO is None and self._segmenter is not None and self._mask_crop:
+            return room_looks(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
+                              self._cameras, self._model.category, self._hull_config, self._aimed_look)
+        return None
+
+    def _looked(self, images: list[np.ndarray], looks: RoomLooks | None
                 ) -> tuple[list[np.ndarray] | None, RigidTransform, dict, list[str]]:
         """The object's masks (None without a segmenter when the pose is given), X_WO (given or
-        estimated), what the result's extra says of it, and warnings. With a segmenter, the crop
-        stage and an estimated pose: `segmentation.crop.room_looks` (whole photos, or the aimed
-        look as `aimed_look` says); else the masks of `_masks` and the pose from them (the
-        segmenter's amodal carcass first when it has that output,
-        `estimate_object_pose_carcass_first`)."""
-        X_WCs = [X.GetAsMatrix4() for X in self._X_WCs]
-        if self._X_WO is None and self._segmenter is not None and self._mask_crop:
-            looks = room_looks(self._segmenter, images, X_WCs, self._cameras, self._model.category,
-                               self._hull_config, self._aimed_look)
+        estimated), what the result's extra says of it, and warnings: those of `looks` when given
+        (`_room_looks`); else the masks of `_masks` and the pose from them (the segmenter's amodal
+        carcass first when it has that output, `estimate_object_pose_carcass_first`)."""
+        if looks is not None:
             return looks.masks, *self._estimated(looks.estimate, looks.amodal, looks.aimed, looks.warnings)
+        X_WCs = [X.GetAsMatrix4() for X in self._X_WCs]
         masks = self._masks(images) if self._X_WO is None or self._segmenter is not None else None
         if self._X_WO is not None:
             return masks, self._X_WO, {"estimated": False}, []
@@ -296,7 +313,23 @@ class NfrPerceptionSystem(LeafSystem):
 
     def _run_fit(self, context) -> tuple[FitResult, RigidTransform]:
         images = [port.Eval(context).data[..., :3].copy() for port in self._image_ports]
-        masks, X_WO, pose, warnings = self._looked(images)
+        looks = self._room_looks(images)
+        result, X_WO = self._fit(context, images, *self._looked(images, looks))
+        if (looks is not None and self._look_again and self._model.num_slots == 1
+                and refusal(result.confidence) is not None):
+            other = other_look(self._segmenter, images, [X.GetAsMatrix4() for X in self._X_WCs],
+                               self._cameras, self._model.category, looks, self._hull_config)
+            if other is not None:
+                again, X_WO_again = self._fit(context, images, *self._looked(images, other))
+                result = more_confident_look(result, again, (looks.aimed, other.aimed))
+                X_WO = X_WO_again if result is again else X_WO
+        self.fit_count += 1
+        return result, X_WO
+
+    def _fit(self, context, images: list[np.ndarray], masks: list[np.ndarray] | None, X_WO: RigidTransform,
+             pose: dict, warnings: list[str]) -> tuple[FitResult, RigidTransform]:
+        """The fit at one look (`_looked`'s masks, pose and warnings): the result and X_WO (the
+        estimate refined by the fitted field where the pose is estimated)."""
         X_OW = X_WO.inverse()
         frames = [CaptureFrame(Path(f"camera_{i}"), (X_OW @ X_WC).GetAsMatrix4(), camera)
                   for i, (X_WC, camera) in enumerate(zip(self._X_WCs, self._cameras, strict=True))]
@@ -327,7 +360,6 @@ class NfrPerceptionSystem(LeafSystem):
                 pose.update(refined)
         result.extra["object_pose"] = pose
         result.extra["warnings"] = result.extra.get("warnings", []) + warnings
-        self.fit_count += 1
         return result, X_WO
 
     def _Fit(self, context, state) -> None:
@@ -403,14 +435,16 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                      room_loss: RoomLoss = "background", mask_crop: bool = True,
                      aimed_look: AimedLook = "off-aim",
-                     paintings: tuple[Painting, ...] = PAINTINGS) -> NfrPerceptionSystem:
+                     paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True
+                     ) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
     then see the object alone (`render_only`) under `lighting` (default the training renders'
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
     `RoomLighting.moved`), the `segmenter` model folder finds the object (`mask_crop`: with a second,
-    close look; `aimed_look`: when at the crop around where the cameras aim) and `room_loss` says
+    close look; `aimed_look`: when at the crop around where the cameras aim; `look_again`: at the
+    other look when the first fit is refused) and `room_loss` says
     how the fit treats the pixels off its mask
     (`NfrPerceptionSystem`). X_WO: the object's
     known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
@@ -430,7 +464,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     system = builder.AddNamedSystem("nfr_perception", NfrPerceptionSystem(
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
         keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
-        room_loss=room_loss, mask_crop=mask_crop, paintings=paintings, aimed_look=aimed_look))
+        room_loss=room_loss, mask_crop=mask_crop, paintings=paintings, aimed_look=aimed_look,
+        look_again=look_again))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

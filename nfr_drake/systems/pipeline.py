@@ -170,7 +170,7 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
                                   X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
                                   scenario.perceive, Path(scenario.segmenter), part,
                                   room_loss=scenario.room_loss, mask_crop=scenario.mask_crop,
-                                  aimed_look=scenario.aimed_look,
+                                  aimed_look=scenario.aimed_look, look_again=scenario.look_again,
                                   paintings=tuple(scenario.paintings))
     diagram = builder.Build()
     simulator = Simulator(diagram)

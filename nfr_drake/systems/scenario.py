@@ -134,6 +134,10 @@ class Scenario:
     crop around where the cameras aim gives the pose and masks: "off-aim" (where the whole photos'
     pose is not of the object aimed at, or none), "always" or "never"
     (`perception.segmentation.crop.AimedLook`)."""
+    look_again: bool = True
+    """Perceiving a room with `mask_crop` and an estimated pose: a fit its confidence refuses is
+    followed by one at the other look (the aimed look after whole photos, or the reverse), the more
+    confident kept (`NfrPerceptionSystem`)."""
     part: int = -1
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning

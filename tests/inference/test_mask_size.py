@@ -152,8 +152,9 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
         object_pose.ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6)), amodal, []))
     net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
-    views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
-                                         tmp_path, "drawer")
+    views, carcass, aimed = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3,
+                                                _three_views(768, 1024), tmp_path, "drawer")
+    assert not aimed
     looks = ["visible", "carcass"] if amodal else ["visible"]
     assert seen == [(name, (192, 256, 3), 3, "drawer") for name in looks]
     assert [m.shape for m in views] == [(768, 1024)] * 3 and views[0].min() == 1.0
@@ -163,10 +164,12 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
         assert carcass is None
 
 
+@pytest.mark.parametrize("other", [False, True])
 @pytest.mark.parametrize("holds_aim", [True, False, None])
-def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_path, holds_aim):
+def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_path, holds_aim, other):
     """The crop stage's masks are kept when their pose's box holds the cameras' aim point; when it
-    does not, or they give no pose (None), the aimed look's (on the shrunk photos)."""
+    does not, or they give no pose (None), the aimed look's (on the shrunk photos). The other look
+    (`other`, to look again) is the one not kept: none where the whole photos give no pose."""
     from nfr_drake.perception.object_pose import ObjectPoseError, ObjectPoseEstimate
     from nfr_drake.perception.segmentation import crop
 
@@ -193,11 +196,17 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_pat
     net = type("Net", (), {"config": type("Config", (), {"amodal": True})(),
                            "object_mask": lambda self, image: np.zeros(image.shape[:2], np.float32)})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
-    views, carcass = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
-                                         tmp_path, "drawer")
+    looked = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
+                                 tmp_path, "drawer", other=other)
+    if other and holds_aim is None:
+        assert looked is None and seen == [((192, 256, 3), 3, "drawer")]
+        return
+    views, carcass, aimed = looked
     assert [m.shape for m in views] == [(768, 1024)] * 3 and [m.shape for m in carcass] == [(768, 1024)] * 3
-    if holds_aim:
-        assert not seen and views[0].min() == 1.0 and carcass[0].max() == 0.5
+    assert aimed == ((holds_aim is not True) != other)
+    if not aimed:
+        assert seen == ([((192, 256, 3), 3, "drawer")] if other else []) and views[0].min() == 1.0
+        assert carcass[0].max() == 0.5
     else:
         assert seen == [((192, 256, 3), 3, "drawer")]
         assert views[0].max() == 0.25 and carcass[0].min() == 0.75

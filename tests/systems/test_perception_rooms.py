@@ -80,7 +80,7 @@ def test_a_room_placed_at_X_PW_is_the_same_room_moved():
 
 
 def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, paintings=("region",),
-                      aimed_look="off-aim"):
+                      aimed_look="off-aim", look_again=True):
     obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
     scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
                         object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
@@ -98,7 +98,7 @@ def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, painting
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
                               X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER,
-                              paintings=paintings, aimed_look=aimed_look)
+                              paintings=paintings, aimed_look=aimed_look, look_again=look_again)
     return builder.Build(), system
 
 
@@ -337,6 +337,68 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(model_dir, monkeypat
         assert looked == [(3, "closet")] and masks == pytest.approx([0.4] * 3)
     else:
         assert not looked and masks == pytest.approx([0.3] * 3)
+
+
+@pytest.mark.parametrize("first_p, other_p, look_again, other_gives_a_pose, kept", [
+    (0.3, 0.8, True, True, "other"), (0.3, 0.2, True, True, "first"), (0.9, 0.8, True, True, None),
+    (0.3, 0.8, False, True, None), (0.3, 0.8, True, False, None)])
+def test_a_refused_fit_looks_again(model_dir, monkeypatch, first_p, other_p, look_again,
+                                   other_gives_a_pose, kept):
+    """A fit its confidence refuses (P below the calibration's threshold) is followed, with
+    `look_again`, by a fit at the other look's pose and masks; the more confident is kept, X_WO
+    and the result with it, and the extra says so. A confident fit, `look_again` off or an other
+    look without a pose: one fit."""
+    _needs_segmenter()
+    from nfr_drake.inference.result import FitResult
+    from nfr_drake.perception.segmentation.crop import RoomLooks
+
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    boxes = {"first": np.array([1.0, 0.4, 0.6, 0.5, 0.6, 0.9]),
+             "other": np.array([1.3, 0.2, 0.5, 0.5, 0.6, 0.9])}
+
+    def looks(name: str, aimed: bool) -> RoomLooks:
+        masks = [np.full((32, 32), 0.5, np.float32)] * 3
+        return RoomLooks(masks, None, ObjectPoseEstimate.from_box(boxes[name], 0.0, 1, np.zeros(6)),
+                         True, aimed)
+
+    others = []
+
+    def other_look(net, images, X_WCs, cameras, category, first, hull):
+        others.append(first.aimed)
+        return looks("other", True) if other_gives_a_pose else None
+
+    def infer_painted(fitted, capture, fit_config, q_grid, images, masks, X_WCs, X_WO, *args, **kwargs):
+        name = "first" if np.allclose(X_WO[:2, 3], boxes["first"][:2]) else "other"
+        p = first_p if name == "first" else other_p
+        confidence = {"p_handle_within_2cm": p, "threshold": 0.5, "weakest": None,
+                      "calibration": "confidence_room.json",
+                      "features": {"views": 3, "image_loss": 0.01, "image_loss_worst_view": 0.02,
+                                   "room": True}}
+        result = FitResult("closet", 0.0, {}, np.zeros(1), {}, 0.01, 1.0, confidence=confidence,
+                           extra={"warnings": [], "fitted_at": name})
+        return result, None
+
+    monkeypatch.setattr(perception_module, "room_looks", lambda *args: looks("first", False))
+    monkeypatch.setattr(perception_module, "other_look", other_look)
+    monkeypatch.setattr(perception_module, "infer_painted", infer_painted)
+    monkeypatch.setattr(perception_module, "refined_object_pose", lambda X, result, outcome: (X, {}))
+    diagram, system = _perception_scene(model_dir, "room", X_WO, known=False, look_again=look_again)
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    context = system.GetMyContextFromRoot(simulator.get_context())
+    result = system.get_fit_result_output_port().Eval(context)
+    X_WO_out = system.get_X_WO_output_port().Eval(context).translation()
+    assert others == ([False] if kept or (first_p < 0.5 and look_again) else [])
+    expect = kept or "first"
+    assert result.extra["fitted_at"] == expect
+    np.testing.assert_allclose(X_WO_out[:2], boxes[expect][:2])
+    looked_again = result.extra["object_pose"].get("looked_again")
+    if kept is None:
+        assert looked_again is None
+    else:
+        assert looked_again == {"kept": kept, "p_handle_within_2cm": [first_p, other_p],
+                                "aimed": [False, True]}
+    assert any("look's fit is kept" in w for w in result.extra["warnings"]) == (kept == "other")
 
 
 def test_a_pose_the_masks_do_not_give_is_refused_not_a_crash(monkeypatch, tmp_path):

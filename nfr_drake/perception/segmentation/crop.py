@@ -229,6 +229,21 @@ def room_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray]
     return aimed([AIMED_LOOK]) or whole
 
 
+def other_look(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
+               cameras: list[PinholeCamera], category: str, first: RoomLooks, hull: HullConfig | None = None
+               ) -> RoomLooks | None:
+    """The look `room_looks` did not give: whole photos' after the aimed look (`first.aimed`), the
+    aimed look's after whole photos; None where it gives no pose. Arguments as `room_looks`'s."""
+    hull = hull or HullConfig()
+    if first.aimed:
+        try:
+            return _whole_photo_looks(net, images, X_WCs, cameras, category, hull)
+        except ObjectPoseError:
+            return None
+    looked = aimed_looks(net, images, X_WCs, cameras, category, hull)
+    return None if looked is None else RoomLooks(*looked, amodal=True, aimed=True)
+
+
 def _whole_photo_looks(net: Segmenter, images: list[np.ndarray], X_WCs: list[np.ndarray],
                        cameras: list[PinholeCamera], category: str, hull: HullConfig) -> RoomLooks:
     """`room_looks` from whole photos: the crop stage's masks, or the first look's where those give
