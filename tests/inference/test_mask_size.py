@@ -210,3 +210,55 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_pat
     else:
         assert seen == [((192, 256, 3), 3, "drawer")]
         assert views[0].max() == 0.25 and carcass[0].min() == 0.75
+
+
+@pytest.mark.parametrize("first_p, other_p, kept", [
+    (0.2, 0.7, "other"), (0.2, 0.1, "first"), (0.8, 0.9, None)])
+def test_infer_looks_again_where_the_fit_is_refused(monkeypatch, tmp_path, capsys, first_p, other_p, kept):
+    """`infer --estimate-pose --mask-crop`: a fit its confidence refuses is followed by one at the
+    other look's masks, the more confident written; a confident fit is fitted once."""
+    import json
+    from types import SimpleNamespace
+
+    from nfr_drake.inference.result import FitResult
+
+    looks = []
+
+    def cropped(images, capture, segmenter, category, other=False):
+        looks.append(other)
+        value = 0.75 if other else 0.25
+        return [np.full(i.shape[:2], value, np.float32) for i in images], None, other
+
+    def in_world(fitted, capture, fit, q_grid, masks, *args, **kwargs):
+        other = float(masks[0].mean()) == 0.75
+        p = other_p if other else first_p
+        confidence = {"p_handle_within_2cm": p, "threshold": 0.5, "weakest": None,
+                      "calibration": "confidence_room.json", "features": {
+                          "views": 3, "image_loss": 0.01, "image_loss_worst_view": 0.02, "room": True,
+                          "silhouette_iou": 0.8, "silhouette_iou_worst_view": 0.7}}
+        X_WO = np.eye(4)
+        X_WO[0, 3] = 1.0 if other else 0.0
+        result = FitResult("closet", 0.0, {}, np.zeros(1), {}, 0.01, 1.0, confidence=confidence,
+                           extra={"warnings": [],
+                                  "object_pose": {"X_WO": X_WO.tolist(), "size": [0.4, 0.5, 0.9]}})
+        return result, SimpleNamespace(steps=1, focus=False), capture
+
+    write_capture_set(tmp_path / "capture", [np.zeros((40, 60, 3), np.uint8)] * 3, [np.eye(4)] * 3,
+                      PinholeCamera.from_fov(60, 40, 1.0))
+    (tmp_path / "segmenter").mkdir()
+    (tmp_path / "segmenter" / "config.json").write_text("{}")
+    fitted = SimpleNamespace(category="closet", num_slots=1, check_capture=lambda *args: None)
+    monkeypatch.setattr(infer, "FittedModel", lambda folder: fitted)
+    monkeypatch.setattr(infer, "cropped_masks", cropped)
+    monkeypatch.setattr(infer, "infer_in_world", in_world)
+    out = tmp_path / "result.json"
+    infer.infer_command(tmp_path / "capture", out=out, estimate_pose=True, mask_crop=True,
+                        segmenter=tmp_path / "segmenter", threads=1)
+    written = json.loads(out.read_text())
+    assert looks == ([False] if kept is None else [False, True])
+    assert written["extra"]["object_pose"]["X_WO"][0][3] == (1.0 if kept == "other" else 0.0)
+    if kept is not None:
+        assert written["extra"]["object_pose"]["looked_again"]["kept"] == kept
+        assert "looking again, at the aimed look" in capsys.readouterr().out
+    else:
+        assert "looked_again" not in written["extra"]["object_pose"]
