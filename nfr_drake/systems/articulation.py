@@ -36,11 +36,6 @@ from pydrake.geometry import (
     ProximityProperties,
     RoleAssign,
 )
-from pydrake.multibody.inverse_kinematics import (
-    DifferentialInverseKinematicsParameters,
-    DifferentialInverseKinematicsStatus,
-    DoDifferentialInverseKinematics,
-)
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
     CoulombFriction,
@@ -54,13 +49,7 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.systems.corrections import (
-    LIMIT_MARGIN,
-    door_turn_offset,
-    regrasp_step,
-    tool_pose_and_jacobian,
-    tool_step,
-)
+from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_pose_and_jacobian, tool_step
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -564,36 +553,14 @@ def second_pull_offset(robot_plant: MultibodyPlant, travel: np.ndarray, q_grasp:
 
 _GUARD_RAMP = 0.2
 """Time over which the guarded pull's speed ramps in, s."""
-_PULL_CENTERING = 0.5
-"""Gain of the guarded pull's draw of the joints towards the middle of their ranges in the task's
-nullspace, 1/s (`_pull_ik_parameters`)."""
-
-
-def _pull_ik_parameters(robot_plant: MultibodyPlant, period: float
-                        ) -> DifferentialInverseKinematicsParameters:
-    """Differential IK of the guarded pull's command (`PullToStop`): the arm's joints within their
-    position limits less `corrections.LIMIT_MARGIN` at every step of `period` s, and, in the task's
-    nullspace, drawn towards the middle of their ranges (`_PULL_CENTERING`), so that the redundant
-    joint keeps the others off their limits rather than one of them running into its own."""
-    n = NUM_ARM_JOINTS
-    lower = robot_plant.GetPositionLowerLimits()[:n] + LIMIT_MARGIN
-    upper = robot_plant.GetPositionUpperLimits()[:n] - LIMIT_MARGIN
-    parameters = DifferentialInverseKinematicsParameters(n, n)
-    parameters.set_time_step(period)
-    parameters.set_joint_position_limits((lower, upper))
-    parameters.set_nominal_joint_position(0.5 * (lower + upper))
-    parameters.set_joint_centering_gain(_PULL_CENTERING * np.eye(n))
-    return parameters
 
 
 class PullToStop(LeafSystem):
     """A guarded pull, as a robot with joint position sensing makes one: from `start` on, the arm's
     command moves the tool on along a line at a set speed (ramped in over `_GUARD_RAMP`), the
-    hand's orientation kept (Drake's differential inverse kinematics at the command, every
-    `period`, within the joints' limits, `_pull_ik_parameters`: where the arm cannot go on, the
-    command slows or waits rather than asking a joint past its limit), until the force the arm's
-    lag behind the command implies along the line reaches a set force, or the command has gone a
-    set distance along it; the arm is then commanded where it is (measured) and
+    hand's orientation kept (differential inverse kinematics at the command, every `period`),
+    until the force the arm's lag behind the command implies along the line reaches a set force,
+    or the command has gone a set distance; the arm is then commanded where it is (measured) and
     stays there. The force is the lag of the tool (commanded less measured position by forward
     kinematics, W) through the arm's translational stiffness at the tool, (J K^-1 J^T)^-1 with J
     the tool's translational Jacobian at the measured joints and K the scaled PD gains (the hand
@@ -619,7 +586,6 @@ class PullToStop(LeafSystem):
         self._plant, self._context = robot_plant, robot_plant.CreateDefaultContext()
         self._n, self._period = robot_plant.num_positions(), period
         self._compliance = 1.0 / (stiffness * _KP[:NUM_ARM_JOINTS])  # rad / N m, per joint
-        self._ik = _pull_ik_parameters(robot_plant, period)
         # [u (3), t_start, distance, speed, force, active]
         self.DeclareNumericParameter(BasicVector(np.r_[1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0]))
         self._state = self.DeclareDiscreteState(np.r_[np.zeros(2 * NUM_ARM_JOINTS + 1), -1.0])
@@ -668,13 +634,9 @@ class PullToStop(LeafSystem):
             x[:n], x[n:2 * n], x[-1] = (q_measured - q_desired)[:n], 0.0, t
         else:
             rate = speed * min(1.0, (t - t_start) / _GUARD_RAMP)
-            solved = DoDifferentialInverseKinematics(q_command[:n], x[n:2 * n], np.r_[np.zeros(3), rate * u],
-                                                     J_command, self._ik)
-            found = solved.status == DifferentialInverseKinematicsStatus.kSolutionFound
-            v = solved.joint_velocities if found and solved.joint_velocities is not None else np.zeros(n)
-            x[n:2 * n] = v
-            x[:n] += self._period * v
-            x[-2] += self._period * float(J_command[3:] @ v @ u)  # how far the command went
+            x[n:2 * n] = np.linalg.lstsq(J_command, np.r_[np.zeros(3), rate * u], rcond=None)[0]
+            x[:n] += self._period * x[n:2 * n]
+            x[-2] += self._period * rate
         state.get_mutable_vector(self._state).SetFromVector(x)
 
     def _calc(self, context, output: BasicVector) -> None:

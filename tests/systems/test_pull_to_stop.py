@@ -53,40 +53,6 @@ def test_a_free_pull_goes_its_distance_along_the_line_the_hand_turned_no_more(pa
     np.testing.assert_allclose(command[9:], 0.0)  # stopped: no rate
 
 
-def test_the_pulls_command_keeps_the_joints_within_their_limits(panda, tool_pose):
-    """Shoulder joint 2 near its upper limit, a pull towards the base: the plain least-squares
-    step would drive it 0.23 rad past the limit (the arm, held there, then lags and reads the lag
-    as the drawer's stop); the command's joints stay within their limits less the margin, and the
-    redundant joint lets the others carry the tool the whole way, the hand's orientation kept."""
-    from nfr_drake.systems.corrections import LIMIT_MARGIN, tool_pose_and_jacobian
-
-    q = np.r_[Q_HOME, FINGER_OPEN, FINGER_OPEN]
-    q[1] = 1.70
-    u = np.array([-1.0, 0.0, 0.0])
-    lower = panda.GetPositionLowerLimits()[:NUM_ARM_JOINTS] - 1e-9
-    upper = panda.GetPositionUpperLimits()[:NUM_ARM_JOINTS] + 1e-9
-    plain = q.copy()
-    for _ in range(240):  # 0.12 m in steps of 0.5 mm
-        J = tool_pose_and_jacobian(panda, panda.CreateDefaultContext(), plain)[1]
-        plain[:NUM_ARM_JOINTS] += np.linalg.lstsq(J, np.r_[0.0, 0.0, 0.0, 5e-4 * u], rcond=None)[0]
-    assert plain[1] > upper[1] + 0.2
-    system = PullToStop(panda, 0.1)
-    context = system.CreateDefaultContext()
-    system.get_input_port(0).FixValue(context, np.r_[q, np.zeros(9)])
-    system.start(context, u, 0.1, 0.12, 0.05, 15.0)
-    simulator = Simulator(system, context)
-    for t in np.arange(0.0, 5.0, 0.01):  # the arm where it is commanded
-        command = system.get_output_port().Eval(context)
-        assert np.all(command[:NUM_ARM_JOINTS] >= lower + LIMIT_MARGIN)
-        assert np.all(command[:NUM_ARM_JOINTS] <= upper - LIMIT_MARGIN)
-        system.get_input_port(1).FixValue(context, command)
-        simulator.AdvanceTo(t)
-    assert system.stopped_at(context)[1] == pytest.approx(0.12, abs=0.002)
-    X_a, X_b = tool_pose(q), tool_pose(system.get_output_port().Eval(context)[:9])
-    np.testing.assert_allclose(X_b.translation() - X_a.translation(), 0.12 * u, atol=2e-3)
-    assert X_a.rotation().inverse().multiply(X_b.rotation()).ToAngleAxis().angle() < np.radians(1.0)
-
-
 def test_a_held_tool_stops_the_pull_at_the_set_force(panda):
     """The arm measured where the plan ended (a drawer at its stop): the command stops once the
     arm's PD (10% of its gains) pulls the tool with 15 N along the line, through its stiffness at
