@@ -830,10 +830,9 @@ def infer_command(
             carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
         in_world = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
                                   room=masks == "segmenter", carcass=carcass, paintings=paintings)
-        if (cropped and look_again and refusal(in_world[0].confidence) is not None
-                and (other := cropped_masks(photos, cap, segmenter, fitted.category, other=True))):
-            print(f"{refusal(in_world[0].confidence)}\nlooking again, at the "
-                  f"{'aimed' if other[2] else 'whole-photo'} look")
+        refused = refusal(in_world[0].confidence) if cropped and look_again else None
+        if refused and (other := cropped_masks(photos, cap, segmenter, fitted.category, other=True)):
+            print(f"{refused}\nlooking again, at the {'aimed' if other[2] else 'whole-photo'} look")
             again = infer_in_world(fitted, cap, fit, q_grid, other[0], room_loss, keypoints, room=True,
                                    carcass=other[1], paintings=paintings)
             kept = more_confident_look(in_world[0], again[0], (aimed, other[2]))

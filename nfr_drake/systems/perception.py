@@ -149,7 +149,8 @@ class NfrPerceptionSystem(LeafSystem):
     photos after the aimed look), and the more confident of the two is kept (the extra's
     `looked_again`: which, both P and both looks' `aimed`; a warning when the second is kept).
     The fit runs in an initialisation event and whenever
-    `refit` is called; outputs read the stored result. `fit_count` counts fits.
+    `refit` is called; outputs read the stored result. `fit_count` counts those (one each,
+    however many fits the paintings and looking again run).
     `keypoint_source` picks the keypoint head or the fitted geometry (see
     `nfr_drake.inference.infer.KeypointSource`).
 
