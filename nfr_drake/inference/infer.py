@@ -6,7 +6,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Literal, get_args
+from typing import TYPE_CHECKING, Annotated, Literal, get_args
 
 import cv2
 import numpy as np
@@ -70,6 +70,9 @@ from nfr_drake.perception.object_pose import (
     box_silhouette,
     estimate_object_pose_carcass_first,
 )
+
+if TYPE_CHECKING:
+    from nfr_drake.perception.segmentation.crop import RoomLooks
 
 
 class FittedModel:
@@ -522,25 +525,28 @@ def carcass_masks(images: list[np.ndarray], segmenter: Path) -> list[np.ndarray]
 
 
 def cropped_masks(images: list[np.ndarray], capture: CaptureSet, segmenter: Path, category: str,
-                  other: bool = False) -> tuple[list[np.ndarray], list[np.ndarray] | None, bool] | None:
+                  after: RoomLooks | None = None
+                  ) -> tuple[list[np.ndarray], list[np.ndarray] | None, RoomLooks] | None:
     """The segmenter's object masks and amodal carcass masks (H, W) per uint8 RGB photo (H, W, 3)
     of a capture whose poses are in a floor frame, as `eval-pipeline --mask-crop` looks
     (`segmentation.crop.room_looks`: the crop stage over whole photos, or the aimed look where
-    their pose is not of the piece the cameras aim at; with `other`, the look that did not give
-    those, `other_look`), run on the photos shrunk to `MASK_SIZE_PX` and scaled back up, and
-    whether the look was the aimed one; the carcass None for a model without that output.
-    ObjectPoseError when no look gives a pose; None when the other look gives none."""
+    their pose is not of the piece the cameras aim at), run on the photos shrunk to `MASK_SIZE_PX`
+    and scaled back up, and the look itself (on the shrunk photos); the carcass None for a model
+    without that output. With `after` (the look an earlier call returned), the look that did not
+    give it instead (`other_look`), None where that gives no pose. ObjectPoseError when no look
+    gives a pose."""
     from nfr_drake.perception.segmentation.crop import other_look, room_looks
     from nfr_drake.perception.segmentation.model import load_segmenter
 
     net, _ = load_segmenter(segmenter)
     small = [shrunk(image) for image in images]
     X_WCs, cameras = [f.X_OC for f in capture.frames], [f.camera for f in capture.frames]
-    looks = room_looks(net, small, X_WCs, cameras, category)
-    if other and (looks := other_look(net, small, X_WCs, cameras, category, looks)) is None:
+    looks = (room_looks(net, small, X_WCs, cameras, category) if after is None
+             else other_look(net, small, X_WCs, cameras, category, after))
+    if looks is None:
         return None
     return (_at_photo_size(looks.masks, images),
-            None if looks.carcass is None else _at_photo_size(looks.carcass, images), looks.aimed)
+            None if looks.carcass is None else _at_photo_size(looks.carcass, images), looks)
 
 
 def more_confident_look(first: FitResult, other: FitResult, aimed: tuple[bool, bool]) -> FitResult:
@@ -824,18 +830,18 @@ def infer_command(
         photos = cap.load_images()
         cropped = masks == "segmenter" and mask_crop
         if cropped:
-            views, carcass, aimed = cropped_masks(photos, cap, segmenter, fitted.category)
+            views, carcass, looks = cropped_masks(photos, cap, segmenter, fitted.category)
         else:
             views = object_masks(photos, segmenter if masks == "segmenter" else None)
             carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
         in_world = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
                                   room=masks == "segmenter", carcass=carcass, paintings=paintings)
         refused = refusal(in_world[0].confidence) if cropped and look_again else None
-        if refused and (other := cropped_masks(photos, cap, segmenter, fitted.category, other=True)):
-            print(f"{refused}\nlooking again, at the {'aimed' if other[2] else 'whole-photo'} look")
+        if refused and (other := cropped_masks(photos, cap, segmenter, fitted.category, after=looks)):
+            print(f"{refused}\nlooking again, at the {'aimed' if other[2].aimed else 'whole-photo'} look")
             again = infer_in_world(fitted, cap, fit, q_grid, other[0], room_loss, keypoints, room=True,
                                    carcass=other[1], paintings=paintings)
-            kept = more_confident_look(in_world[0], again[0], (aimed, other[2]))
+            kept = more_confident_look(in_world[0], again[0], (looks.aimed, other[2].aimed))
             in_world = again if kept is again[0] else in_world
         result, outcome, cap = in_world
         pose = np.array(result.extra["object_pose"]["X_WO"])

@@ -152,9 +152,9 @@ def test_the_crop_stage_sees_shrunk_photos_and_gives_masks_of_the_photo_size(mon
         object_pose.ObjectPoseEstimate.from_box(box, 0.0, 1, np.zeros(6)), amodal, []))
     net = type("Net", (), {"config": type("Config", (), {"amodal": amodal})()})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
-    views, carcass, aimed = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3,
+    views, carcass, looks = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3,
                                                 _three_views(768, 1024), tmp_path, "drawer")
-    assert not aimed
+    assert not looks.aimed
     looks = ["visible", "carcass"] if amodal else ["visible"]
     assert seen == [(name, (192, 256, 3), 3, "drawer") for name in looks]
     assert [m.shape for m in views] == [(768, 1024)] * 3 and views[0].min() == 1.0
@@ -196,16 +196,20 @@ def test_the_aimed_look_replaces_a_pose_off_the_cameras_aim(monkeypatch, tmp_pat
     net = type("Net", (), {"config": type("Config", (), {"amodal": True})(),
                            "object_mask": lambda self, image: np.zeros(image.shape[:2], np.float32)})()
     monkeypatch.setattr("nfr_drake.perception.segmentation.model.load_segmenter", lambda folder: (net, {}))
-    looked = infer.cropped_masks([np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024),
-                                 tmp_path, "drawer", other=other)
+    photos, capture = [np.zeros((768, 1024, 3), np.uint8)] * 3, _three_views(768, 1024)
+    looked = infer.cropped_masks(photos, capture, tmp_path, "drawer")
+    if other:  # the look the first call did not give, from that call's look
+        seen.clear()
+        looked = infer.cropped_masks(photos, capture, tmp_path, "drawer", after=looked[2])
     if other and holds_aim is None:
-        assert looked is None and seen == [((192, 256, 3), 3, "drawer")]
+        assert looked is None and seen == []  # the aimed look gave the first: whole photos give none
         return
-    views, carcass, aimed = looked
+    views, carcass, looks = looked
+    aimed = looks.aimed
     assert [m.shape for m in views] == [(768, 1024)] * 3 and [m.shape for m in carcass] == [(768, 1024)] * 3
     assert aimed == ((holds_aim is not True) != other)
     if not aimed:
-        assert seen == ([((192, 256, 3), 3, "drawer")] if other else []) and views[0].min() == 1.0
+        assert seen == [] and views[0].min() == 1.0
         assert carcass[0].max() == 0.5
     else:
         assert seen == [((192, 256, 3), 3, "drawer")]
@@ -224,10 +228,12 @@ def test_infer_looks_again_where_the_fit_is_refused(monkeypatch, tmp_path, capsy
 
     looks = []
 
-    def cropped(images, capture, segmenter, category, other=False):
+    def cropped(images, capture, segmenter, category, after=None):
+        other = after is not None
+        assert not other or after.aimed is False  # the first look's, handed back
         looks.append(other)
         value = 0.75 if other else 0.25
-        return [np.full(i.shape[:2], value, np.float32) for i in images], None, other
+        return [np.full(i.shape[:2], value, np.float32) for i in images], None, SimpleNamespace(aimed=other)
 
     def in_world(fitted, capture, fit, q_grid, masks, *args, **kwargs):
         other = float(masks[0].mean()) == 0.75
