@@ -28,7 +28,7 @@ from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.pipeline import run_scenario
 from nfr_drake.systems.place_task import PlaceTaskOutcome
 from nfr_drake.systems.scenario import Scenario
-from nfr_drake.systems.task import OPEN_TARGET
+from nfr_drake.systems.task import OPEN_TARGET, TaskOutcome
 
 
 @dataclass
@@ -48,7 +48,10 @@ class PipelineRow:
     when nothing was simulated). q_pulled: the articulation once the planned motion had settled,
     before a second pull, a door's turn or a guarded pull (nan when nothing was simulated).
     hinge_gap_cm: where a door's turn was measured, the hinge the hand felt against the
-    keypoints' (`SimulationResult.hinge_gap`; nan otherwise).
+    keypoints' (`SimulationResult.hinge_gap`; nan otherwise). pulled_on: where the arm's reach
+    ended a guarded pull and the robot pulled on from a second base (`systems.task.pull_on`), why
+    ("panda_joint6 at its upper limit"); empty otherwise. success, final_error and max_drift_cm are
+    then the second base's.
     """
 
     category: str
@@ -75,6 +78,7 @@ class PipelineRow:
     grasp_tries: int
     q_pulled: float
     hinge_gap_cm: float
+    pulled_on: str
 
 
 @dataclass
@@ -110,10 +114,14 @@ def _row(scenario: Scenario) -> PipelineRow:
     task = outcome.task
     sim = task.simulation if task is not None else None
     opening = task.opening if isinstance(task, PlaceTaskOutcome) else sim  # its SimulationResult
+    pulled_on = task.pulled_on if isinstance(task, TaskOutcome) else None
+    ended = task.final if isinstance(task, TaskOutcome) else opening  # where the part ended
     if task is None:
         failure = outcome.refused
+    elif task.plan is None:
+        failure = task.planning_error
     else:
-        failure = task.planning_error if task.plan is None else ("" if sim.success else sim.summary())
+        failure = "" if task.success else task.summary() if isinstance(task, TaskOutcome) else sim.summary()
     handle = [kt.point("handle", kt.q_current) if kt else np.full(3, np.inf)
               for kt in (outcome.predicted, outcome.truth)]
     hinge_side = None
@@ -132,16 +140,17 @@ def _row(scenario: Scenario) -> PipelineRow:
         p_handle_within_2cm=_probability(outcome.confidence), refused=task is None,
         planned=task is not None and task.plan is not None,
         grasped=bool(opening and opening.grasped), success=task is not None and task.success,
-        final_error=float(opening.joint_error * scale) if opening else float("nan"),
+        final_error=float(ended.joint_error * scale) if ended else float("nan"),
         unit="deg" if revolute else "cm",
-        max_drift_cm=float(100 * opening.max_drift) if opening else float("nan"),
+        max_drift_cm=float(100 * ended.max_drift) if ended else float("nan"),
         fit_seconds=outcome.perception_seconds,
         planning_seconds=task.planning_seconds if task is not None else 0.0,
         failure=failure.replace("\n", " "),
         pose_error_cm=outcome.pose_error[0] if outcome.pose_error else float("nan"),
         pose_error_deg=outcome.pose_error[1] if outcome.pose_error else float("nan"),
         grasp_tries=opening.tries if opening else 0, q_pulled=opening.q_pulled if opening else float("nan"),
-        hinge_gap_cm=100 * opening.hinge_gap if opening else float("nan"))
+        hinge_gap_cm=100 * opening.hinge_gap if opening else float("nan"),
+        pulled_on=pulled_on.reason if pulled_on is not None else "")
     if scenario.category == "furniture":
         return PartRow(**asdict(row), part=scenario.part, part_type="door" if revolute else "drawer")
     if scenario.task == "open":

@@ -49,7 +49,7 @@ def evaluate_one(category: str, seed: int, index: int, targets: dict[str, float]
     q_target = targets[scene_object.category]
     outcome = run_task(scene_object, q_target, planner_config=grasp_planner(PlannerConfig(), grasp),
                        simulation_config=SimulationConfig(grasp=grasp))
-    sim = outcome.simulation
+    sim = outcome.final
     return dict(category=category, seed=seed, index=index, kind=obj.params.get("kind", category),
                 part=part, part_type=obj.front(part).kind,
                 handle_height=round(float(scene_object.ground_truth.point("handle", 0.0)[2]), 4),

@@ -19,7 +19,16 @@ from pydrake.systems.framework import Context
 from nfr_drake.parsing import make_robot_diagram_builder
 from nfr_drake.world.items import Item
 from nfr_drake.world.plan import ObstacleBox
-from nfr_drake.world.robot import FINGER_OPEN, HAND_BODIES, TOOL_FRAME, add_floor, add_panda, add_pedestal
+from nfr_drake.world.robot import (
+    FINGER_OPEN,
+    HAND_BODIES,
+    NUM_ARM_JOINTS,
+    TOOL_FRAME,
+    add_floor,
+    add_panda,
+    add_pedestal,
+    arm_joint_limits,
+)
 
 
 @dataclass
@@ -77,3 +86,35 @@ def build_planning_scene(X_WB: RigidTransform, obstacles: list[ObstacleBox],
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     return PlanningScene(diagram, plant, robot, context, plant.GetMyMutableContextFromRoot(context), X_WB)
+
+
+REACH_JOINT_MARGIN = 0.02
+"""A joint this close to a limit (rad) is at it, for `reach_limit`."""
+
+REACH_CLEARANCE = 0.005
+"""Two parts of the arm (or the arm and its pedestal or the floor) this close (m) touch, for
+`reach_limit`."""
+
+
+def reach_limit(X_WB: RigidTransform, q_arm: np.ndarray) -> str | None:
+    """Why the arm on a base at X_WB, at joint positions q_arm (7,) rad, can move on no further, as
+    the robot's own model tells: a joint within `REACH_JOINT_MARGIN` of a limit ("panda_joint6 at
+    its upper limit"), or two of its links (or a link and the pedestal or the floor) within
+    `REACH_CLEARANCE` ("panda_link2 and panda_link4 touch"); None when neither."""
+    q_arm = np.asarray(q_arm, dtype=float)[:NUM_ARM_JOINTS]
+    lower, upper = arm_joint_limits()
+    for i, (q, low, high) in enumerate(zip(q_arm, lower, upper, strict=True)):
+        if q <= low + REACH_JOINT_MARGIN:
+            return f"panda_joint{i + 1} at its lower limit"
+        if q >= high - REACH_JOINT_MARGIN:
+            return f"panda_joint{i + 1} at its upper limit"
+    scene = build_planning_scene(X_WB, [])
+    scene.plant.SetPositions(scene.plant_context, scene.robot, scene.full_q(q_arm))
+    query = scene.plant.get_geometry_query_input_port().Eval(scene.plant_context)
+    inspector = query.inspector()
+    robot_bodies = set(scene.plant.GetBodyIndices(scene.robot))
+    for pair in query.ComputeSignedDistancePairwiseClosestPoints(REACH_CLEARANCE):
+        bodies = [scene.plant.GetBodyFromFrameId(inspector.GetFrameId(g)) for g in (pair.id_A, pair.id_B)]
+        if pair.distance <= REACH_CLEARANCE and any(b.index() in robot_bodies for b in bodies):
+            return f"{bodies[0].name()} and {bodies[1].name()} touch"
+    return None

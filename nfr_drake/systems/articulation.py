@@ -152,6 +152,11 @@ class SimulationConfig:
     times the arm's stiffness at the tool along it, reaches this, N; the arm is then commanded
     where it is. Above a moving drawer's resistance (3 N of runner friction, `JOINT_FRICTION`, and
     2 N s/m of damping), under the 80 N a contact grip's friction holds (2 x 40 N squeeze, mu 1)."""
+    pull_on: bool = True
+    """Where the arm's own reach ended the guarded pull (`planning.scene.reach_limit` at its last
+    joint positions: a joint at a limit, links touching), the robot lets go, its base is placed
+    again in front of the handle where the hand left it, and it grasps and pulls on to the stop,
+    once (`systems.task.pull_on`; the base's drive is not simulated)."""
 
     second_turn: bool = True
     """A door's pull (a planned handle path that is no line, `straight_pull`): once it has

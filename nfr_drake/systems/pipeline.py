@@ -85,11 +85,13 @@ class PipelineOutcome:
             lines.append(f"FAILURE: planning failed: {task.planning_error}")
         else:
             lines.append(f"planning time {task.planning_seconds:.2f} s")
-            lines.append(task.simulation.summary())
+            lines.append(task.simulation.summary() if isinstance(task, PlaceTaskOutcome) else task.summary())
         if isinstance(task, PlaceTaskOutcome) and task.opening_replay is not None:
             lines.append(f"replay of the opening: {task.opening_replay}")
         if task is not None and task.replay is not None:
             lines.append(f"replay: {task.replay}")
+        if isinstance(task, TaskOutcome) and task.pulled_on is not None and task.pulled_on.replay is not None:
+            lines.append(f"replay from the second base: {task.pulled_on.replay}")
         return "\n".join(lines)
 
 

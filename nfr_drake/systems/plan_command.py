@@ -121,7 +121,7 @@ def plan_command(
         shorter = f" (a shorter motion, --target-q between {q0:g} and {q1:g}, may be reachable)" \
             if abs(q1 - q0) > 0.3 else ""
         raise PlanningError(outcome.planning_error + shorter)
-    print(f"{outcome.simulation.summary()}; planning {outcome.planning_seconds:.2f} s; "
+    print(f"{outcome.summary()}; planning {outcome.planning_seconds:.2f} s; "
           f"replay {outcome.replay}")
     if live:
         input("press Enter to quit (the live view closes) ")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -14,13 +14,14 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.planning.grasp import carcass_box, door_panel_box
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
+from nfr_drake.planning.scene import build_planning_scene, reach_limit
 from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.plan import ObstacleBox, PlanResult
-from nfr_drake.world.robot import add_floor, add_panda, add_pedestal
+from nfr_drake.world.robot import NUM_ARM_JOINTS, add_floor, add_panda, add_pedestal
 
 OPEN_TARGET = {"closet": 0.6, "drawer": 1.0}
 """Default articulation an `open` task reaches (and a `close` task starts from)."""
@@ -40,8 +41,27 @@ def task_span(category: str, task: Literal["open", "close"], start_q: float | No
 
 
 @dataclass
+class PulledOn:
+    """A pull to the stop that the arm's own reach ended, taken on from a second base (`pull_on`):
+    why the first base's reach ended, the second plan (None if planning failed) and its error,
+    its simulation and replay."""
+
+    reason: str
+    plan: PlanResult | None
+    planning_error: str
+    simulation: SimulationResult | None
+    replay: Path | None
+
+    def summary(self) -> str:
+        """One line: why, and how the pull from the second base ended."""
+        then = self.simulation.summary() if self.simulation is not None else f"no plan: {self.planning_error}"
+        return f"pulled on from a second base ({self.reason}): {then}"
+
+
+@dataclass
 class TaskOutcome:
-    """Result of `run_task`: the plan (None if planning failed), its error, the simulation."""
+    """Result of `run_task`: the plan (None if planning failed), its error, the simulation, and
+    the pull on from a second base where the first base's reach ended it (`pulled_on`)."""
 
     q_target: float
     keypoints: KeypointTrajectory
@@ -50,10 +70,23 @@ class TaskOutcome:
     planning_seconds: float
     simulation: SimulationResult | None
     replay: Path | None
+    pulled_on: PulledOn | None = None
+
+    @property
+    def final(self) -> SimulationResult | None:
+        """The simulation the object ended in: the second base's, if it pulled on, else the first."""
+        if self.pulled_on is not None and self.pulled_on.simulation is not None:
+            return self.pulled_on.simulation
+        return self.simulation
 
     @property
     def success(self) -> bool:
-        return self.simulation is not None and self.simulation.success
+        return self.final is not None and self.final.success
+
+    def summary(self) -> str:
+        """The simulation's line, then the pull on's where there was one."""
+        lines = [self.simulation.summary()] if self.simulation is not None else [self.planning_error]
+        return "; ".join([*lines, self.pulled_on.summary()] if self.pulled_on is not None else lines)
 
 
 def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
@@ -96,10 +129,73 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
         meshcat = Meshcat()
     if meshcat is not None:
         _show_plan(meshcat, kt, plan, q_target, obstacles, reference)
-    simulation = simulate_articulation(obj, plan, q_target, meshcat, simulation_config or SimulationConfig(),
-                                       keypoints=kt)
+    config = simulation_config or SimulationConfig()
+    simulation = simulate_articulation(obj, plan, q_target, meshcat, config, keypoints=kt)
     path = write_replay(meshcat, replay) if replay is not None else None
-    return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path)
+    pulled_on = pull_on(obj, kt, plan, simulation, obstacles, planner_config or PlannerConfig(), config,
+                        meshcat, replay)
+    return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path, pulled_on)
+
+
+def held_handle(plan: PlanResult, q_arm: np.ndarray) -> np.ndarray:
+    """Where the handle held by the hand is with the arm at q_arm (7,) rad, as the robot knows it
+    (W, m, (3,)): the plan's grip point in the tool frame at the grasp, carried by the tool's pose
+    from forward kinematics."""
+    scene = build_planning_scene(plan.X_WB, [])
+    plant, context, tool = scene.plant, scene.plant_context, scene.tool_frame
+    plant.SetPositions(context, scene.robot, plan.trajectory.value(plan.t_grasp).ravel())
+    p_TH = tool.CalcPoseInWorld(context).inverse() @ plan.waypoints[0].p_WH
+    plant.SetPositions(context, scene.robot, scene.full_q(np.asarray(q_arm)[:NUM_ARM_JOINTS]))
+    return tool.CalcPoseInWorld(context) @ p_TH
+
+
+PULL_ON_REST = 0.005
+"""The second base's plan takes the part as open to `PULL_ON_REST` (m of the keypoints' handle
+path) short of its predicted end where the hand let go: its pull is then that, the planner's
+`end_stop_overshoot` past it and the guarded pull."""
+
+
+def handle_left_at(kt: KeypointTrajectory, p_WH: np.ndarray) -> KeypointTrajectory:
+    """The keypoints moved so that their handle lies at p_WH (W, m, (3,)), `PULL_ON_REST` short
+    of its end of travel (q 1), their present articulation there: the part as the robot takes it
+    when it let go of the handle past the keypoints' predicted end."""
+    path = kt.point("handle", kt.q_grid)
+    length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    q_left = float(np.clip(1.0 - PULL_ON_REST / max(length, 1e-9), kt.q_grid[0], 1.0))
+    return kt.shifted(np.asarray(p_WH) - kt.point("handle", q_left)).with_current(q_left)
+
+
+def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: SimulationResult,
+            obstacles: list[ObstacleBox] | None, planner_config: PlannerConfig, config: SimulationConfig,
+            meshcat: Meshcat | None, replay: Path | None) -> PulledOn | None:
+    """The pull to the stop taken on from a second base, where the arm's own reach ended the
+    guarded pull of `first` (`SimulationConfig.pull_on`, `reach_limit` at its last joint positions,
+    the pull stopped short of its distance); None where it did not. The handle is taken where the
+    hand let go of it (`held_handle`, `handle_left_at`), the base placed again for it as for any
+    pull (the obstacles those of the first plan: `obstacles`, else the keypoints' carcass box), and
+    the second simulation starts with the part where the first left it, the arm at home; the
+    drive between the bases is not simulated. With `replay`, its replay goes beside it
+    (`*_pulled_on.html`)."""
+    if not (config.pull_on and config.pulls_to_stop(plan) and first.grasped
+            and first.pulled_past < config.guarded_pull):
+        return None
+    reason = reach_limit(plan.X_WB, first.q_robot)
+    if reason is None:
+        return None
+    kt_on = handle_left_at(kt, held_handle(plan, first.q_robot))
+    try:
+        plan_on = plan_articulation(kt_on, first.q_target, config=planner_config,
+                                    obstacles=obstacles if obstacles is not None else [carcass_box(kt)])
+    except PlanningError as err:
+        return PulledOn(reason, None, str(err), None, None)
+    obj_on = replace(obj, ground_truth=obj.ground_truth.with_current(first.q_final))
+    if meshcat is not None:
+        _show_plan(meshcat, kt_on, plan_on, first.q_target, obstacles, None)
+    simulation = simulate_articulation(obj_on, plan_on, first.q_target, meshcat, config, keypoints=kt_on)
+    path = None
+    if replay is not None and meshcat is not None:
+        path = write_replay(meshcat, replay.with_name(f"{replay.stem}_pulled_on{replay.suffix}"))
+    return PulledOn(reason, plan_on, "", simulation, path)
 
 
 def _show_plan(meshcat: Meshcat, kt: KeypointTrajectory, plan: PlanResult, q_target: float,
