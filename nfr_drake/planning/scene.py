@@ -12,7 +12,7 @@ import numpy as np
 from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet, ProximityProperties
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.multibody.tree import JacobianWrtVariable, ModelInstanceIndex
 from pydrake.planning import RobotDiagram
 from pydrake.systems.framework import Context
 
@@ -95,26 +95,49 @@ REACH_CLEARANCE = 0.005
 """Two parts of the arm (or the arm and its pedestal or the floor) this close (m) touch, for
 `reach_limit`."""
 
+_REACH_STEP = 0.01
+"""How far on along the line `reach_limit` looks, m."""
 
-def reach_limit(X_WB: RigidTransform, q_arm: np.ndarray) -> str | None:
-    """Why the arm on a base at X_WB, at joint positions q_arm (7,) rad, can move on no further, as
-    the robot's own model tells: a joint within `REACH_JOINT_MARGIN` of a limit ("panda_joint6 at
+
+def reach_limit(X_WB: RigidTransform, q_arm: np.ndarray, toward_W: np.ndarray) -> str | None:
+    """Why the arm on a base at X_WB, at joint positions q_arm (7,) rad, cannot move its tool on
+    along unit toward_W (W) with its orientation held, as the robot's own model tells: a joint
+    within `REACH_JOINT_MARGIN` of a limit that the motion drives it further into ("panda_joint6 at
     its upper limit"), or two of its links (or a link and the pedestal or the floor) within
-    `REACH_CLEARANCE` ("panda_link2 and panda_link4 touch"); None when neither."""
+    `REACH_CLEARANCE` that the motion brings closer ("panda_link2 and panda_link4 touch"); None
+    when neither. The motion: the least-squares joint rates for the tool's velocity along
+    toward_W, as the guarded pull commands it (`systems.articulation.PullToStop`)."""
     q_arm = np.asarray(q_arm, dtype=float)[:NUM_ARM_JOINTS]
-    lower, upper = arm_joint_limits()
-    for i, (q, low, high) in enumerate(zip(q_arm, lower, upper, strict=True)):
-        if q <= low + REACH_JOINT_MARGIN:
-            return f"panda_joint{i + 1} at its lower limit"
-        if q >= high - REACH_JOINT_MARGIN:
-            return f"panda_joint{i + 1} at its upper limit"
     scene = build_planning_scene(X_WB, [])
-    scene.plant.SetPositions(scene.plant_context, scene.robot, scene.full_q(q_arm))
+    plant, context, tool = scene.plant, scene.plant_context, scene.tool_frame
+    plant.SetPositions(context, scene.robot, scene.full_q(q_arm))
+    J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, tool, np.zeros(3),
+                                          plant.world_frame(), plant.world_frame())[:, :NUM_ARM_JOINTS]
+    rate = np.linalg.lstsq(J, np.r_[np.zeros(3), toward_W], rcond=None)[0]  # rad per m along the line
+    lower, upper = arm_joint_limits()
+    for i in range(NUM_ARM_JOINTS):
+        if q_arm[i] <= lower[i] + REACH_JOINT_MARGIN and rate[i] < 0.0:
+            return f"panda_joint{i + 1} at its lower limit"
+        if q_arm[i] >= upper[i] - REACH_JOINT_MARGIN and rate[i] > 0.0:
+            return f"panda_joint{i + 1} at its upper limit"
+    distance, names = _arm_clearance(scene)
+    if distance <= REACH_CLEARANCE:
+        plant.SetPositions(context, scene.robot, scene.full_q(q_arm + _REACH_STEP * rate))
+        if _arm_clearance(scene)[0] < distance:
+            return f"{names[0]} and {names[1]} touch"
+    return None
+
+
+def _arm_clearance(scene: PlanningScene) -> tuple[float, tuple[str, str]]:
+    """The smallest distance (m) between a part of the arm and anything else of `scene` (another
+    part, the pedestal, the floor) within `REACH_CLEARANCE`, with the two bodies' names; (inf, ())
+    when none is that close."""
     query = scene.plant.get_geometry_query_input_port().Eval(scene.plant_context)
     inspector = query.inspector()
-    robot_bodies = set(scene.plant.GetBodyIndices(scene.robot))
+    robot = set(scene.plant.GetBodyIndices(scene.robot))
+    best = (np.inf, ())
     for pair in query.ComputeSignedDistancePairwiseClosestPoints(REACH_CLEARANCE):
         bodies = [scene.plant.GetBodyFromFrameId(inspector.GetFrameId(g)) for g in (pair.id_A, pair.id_B)]
-        if pair.distance <= REACH_CLEARANCE and any(b.index() in robot_bodies for b in bodies):
-            return f"{bodies[0].name()} and {bodies[1].name()} touch"
-    return None
+        if pair.distance < best[0] and any(b.index() in robot for b in bodies):
+            best = (float(pair.distance), (bodies[0].name(), bodies[1].name()))
+    return best

@@ -49,7 +49,13 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
-from nfr_drake.systems.corrections import door_turn_offset, regrasp_step, tool_pose_and_jacobian, tool_step
+from nfr_drake.systems.corrections import (
+    door_turn_offset,
+    felt_line,
+    regrasp_step,
+    tool_pose_and_jacobian,
+    tool_step,
+)
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -306,6 +312,9 @@ class SimulationResult:
     felt to the keypoints' hinge line, m (`corrections.hinge_gap`); nan otherwise."""
     q_robot: np.ndarray = field(default_factory=lambda: np.full(9, np.nan), repr=False)
     """The robot's positions at the end (arm joints, then fingers; rad, m), (9,)."""
+    pull_line: np.ndarray = field(default_factory=lambda: np.full(3, np.nan), repr=False)
+    """The unit direction (W, (3,)) the guarded pull to the stop went along (`felt_line`); nan
+    without one."""
 
     def summary(self) -> str:
         verdict = "SUCCESS" if self.success else "FAILURE"
@@ -453,6 +462,13 @@ def straight_pull(plan: PlanResult, tolerance: tuple[float, float] = _STRAIGHT) 
     return travel if np.linalg.norm(off, axis=1).max() <= max(tolerance[0], tolerance[1] * length) else None
 
 
+def guarded_pull_direction(plan: PlanResult) -> np.ndarray:
+    """The unit direction (W, (3,)) along which a guarded pull to the stop goes on: the planned
+    handle travel's (`straight_pull` within `_STOP_LINE`; a plan that `pulls_to_stop`)."""
+    line = straight_pull(plan, _STOP_LINE)
+    return line / np.linalg.norm(line)
+
+
 class SecondPull(LeafSystem):
     """Adds a joint offset to the robot's desired state: none until one is set (`set`), then
     dq (arm joints, rad) ramped in smoothly over [t_in, t_in + ramp] and, when t_out >= 0, out
@@ -562,7 +578,9 @@ _GUARD_RAMP = 0.2
 
 class PullToStop(LeafSystem):
     """A guarded pull, as a robot with joint position sensing makes one: from `start` on, the arm's
-    command moves the tool on along a line at a set speed (ramped in over `_GUARD_RAMP`), the
+    command starts where the arm is (measured: the lag the pull before it left, which a drawer's
+    slide held off the plan's line, does not count) and moves the tool on along a line at a set
+    speed (ramped in over `_GUARD_RAMP`), the
     hand's orientation kept (differential inverse kinematics at the command, every `period`),
     until the force the arm's lag behind the command implies along the line reaches a set force,
     or the command has gone a set distance; the arm is then commanded where it is (measured) and
@@ -580,8 +598,8 @@ class PullToStop(LeafSystem):
     Input ports "desired_state" and "measured_state", output port "command": [q; v], 2 *
     num_positions values (arm joints first; the fingers pass through). The settings live in the
     context (a numeric parameter, `start`), the command's offset from the desired state in its
-    discrete state: [dq (NUM_ARM_JOINTS), its rate, distance gone (m), time it stopped (s, -1
-    while going)]."""
+    discrete state: [dq (NUM_ARM_JOINTS), its rate, 1 once started (else 0), distance gone (m),
+    time it stopped (s, -1 while going)]."""
 
     def __init__(self, robot_plant: MultibodyPlant, stiffness: float, period: float = 0.01):
         """`robot_plant`: the arm alone (as the controller's; the caller keeps it alive), whose
@@ -593,7 +611,7 @@ class PullToStop(LeafSystem):
         self._compliance = 1.0 / (stiffness * _KP[:NUM_ARM_JOINTS])  # rad / N m, per joint
         # [u (3), t_start, distance, speed, force, active]
         self.DeclareNumericParameter(BasicVector(np.r_[1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0]))
-        self._state = self.DeclareDiscreteState(np.r_[np.zeros(2 * NUM_ARM_JOINTS + 1), -1.0])
+        self._state = self.DeclareDiscreteState(np.r_[np.zeros(2 * NUM_ARM_JOINTS + 2), -1.0])
         self.DeclareVectorInputPort("desired_state", 2 * self._n)
         self.DeclareVectorInputPort("measured_state", 2 * self._n)
         self.DeclareVectorOutputPort("command", 2 * self._n, self._calc)
@@ -627,6 +645,8 @@ class PullToStop(LeafSystem):
         n = NUM_ARM_JOINTS
         desired, measured = self.get_input_port(0).Eval(context), self.get_input_port(1).Eval(context)
         q_desired, q_measured = desired[:self._n], measured[:self._n]
+        if not x[-3]:  # the command starts where the arm is
+            x[:n], x[-3] = (q_measured - q_desired)[:n], 1.0
         q_command = q_desired + np.r_[x[:n], np.zeros(self._n - n)]
         p_command, J_command = self._tool_jacobian(q_command)
         p_measured, J_measured = self._tool_jacobian(q_measured)
@@ -834,6 +854,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
     grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
     turned = q_pulled = gap = float("nan")
+    pull_line = np.full(3, np.nan)
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
     while samples:
         t = samples.pop(0)
@@ -859,8 +880,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
         if t == t_held and again and grasped:
             second_pull.hold(context, plant.GetPositions(plant_context, robot), q_end)
         if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop
-            line = straight_pull(plan, _STOP_LINE)
-            pull_to_stop.start(context, line / np.linalg.norm(line), t, config.guarded_pull,
+            felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
+            pull_line = felt_line(felt, guarded_pull_direction(plan))
+            pull_to_stop.start(context, pull_line, t, config.guarded_pull,
                                config.guarded_pull_speed, config.guarded_pull_force)
         X_WT = tool.CalcPoseInWorld(plant_context)
         X_WHb = plant.EvalBodyPoseInWorld(plant_context, handle_body)
@@ -907,7 +929,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             float(max(forces)) if forces else 0.0, times, np.array(q_obj), p_tool, p_handle,
                             config.grasp, shortfall,
                             pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
-                            misses + 1, turned, q_pulled, gap, plant.GetPositions(plant_context, robot))
+                            misses + 1, turned, q_pulled, gap, plant.GetPositions(plant_context, robot),
+                            pull_line)
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

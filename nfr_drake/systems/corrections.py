@@ -71,6 +71,23 @@ def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) 
     return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
 
 
+FELT_LINE_MIN = 0.05
+"""The least travel (m) of the held handle from which the robot takes its direction as the
+drawer's slide (`felt_line`)."""
+
+
+def felt_line(tool_path: np.ndarray, planned: np.ndarray) -> np.ndarray:
+    """The unit direction (3,) to pull a drawer on along: the tool's travel over `tool_path` (N, 3;
+    forward kinematics since the fingers closed on the handle: the slide guided the held hand)
+    where it went at least `FELT_LINE_MIN` and forward along unit `planned` (the plan's line);
+    else `planned`."""
+    travel = tool_path[-1] - tool_path[0]
+    length = float(np.linalg.norm(travel))
+    if length < FELT_LINE_MIN or travel @ planned <= 0.0:
+        return planned
+    return travel / length
+
+
 def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle from the first
     point to the last about it (rad, within +-pi), its centre (3,) and unit axis (3,), the angle

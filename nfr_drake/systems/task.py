@@ -15,7 +15,12 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.planning.grasp import carcass_box, door_panel_box
 from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
 from nfr_drake.planning.scene import build_planning_scene, reach_limit
-from nfr_drake.systems.articulation import SimulationConfig, SimulationResult, simulate_articulation
+from nfr_drake.systems.articulation import (
+    SimulationConfig,
+    SimulationResult,
+    guarded_pull_direction,
+    simulate_articulation,
+)
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
@@ -169,8 +174,9 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
             obstacles: list[ObstacleBox] | None, planner_config: PlannerConfig, config: SimulationConfig,
             meshcat: Meshcat | None, replay: Path | None) -> PulledOn | None:
     """The pull to the stop taken on from a second base, where the arm's own reach ended the
-    guarded pull of `first` (`SimulationConfig.pull_on`, `reach_limit` at its last joint positions,
-    the pull stopped short of its distance); None where it did not. The handle is taken where the
+    guarded pull of `first` (`SimulationConfig.pull_on`: the pull stopped short of its distance,
+    and at its last joint positions the arm cannot move on along the pull's line, `reach_limit`);
+    None where it did not. The handle is taken where the
     hand let go of it (`held_handle`, `handle_left_at`), the base placed again for it as for any
     pull (the obstacles those of the first plan: `obstacles`, else the keypoints' carcass box), and
     the second simulation starts with the part where the first left it, the arm at home; the
@@ -179,7 +185,7 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
     if not (config.pull_on and config.pulls_to_stop(plan) and first.grasped
             and first.pulled_past < config.guarded_pull):
         return None
-    reason = reach_limit(plan.X_WB, first.q_robot)
+    reason = reach_limit(plan.X_WB, first.q_robot, guarded_pull_direction(plan))
     if reason is None:
         return None
     kt_on = handle_left_at(kt, held_handle(plan, first.q_robot))

@@ -22,7 +22,7 @@ def recorded(monkeypatch):
                            planned=True, grasped=True, success=scenario.index % 2 == 0, final_error=0.5,
                            unit="cm", max_drift_cm=0.1, fit_seconds=1.0, planning_seconds=1.0, failure="",
                            pose_error_cm=float("nan"), pose_error_deg=float("nan"), grasp_tries=1,
-                           q_pulled=0.0, hinge_gap_cm=float("nan"))
+                           q_pulled=0.0, hinge_gap_cm=float("nan"), pulled_on="")
 
     monkeypatch.setattr(pipeline_eval, "_row", fake_row)
     return scenarios
