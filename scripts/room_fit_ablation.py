@@ -207,12 +207,11 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
         whole = [background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5 for image in alone]
         visible = [(w & (np.abs(d_room - d_alone) < VISIBLE_DEPTH_M)).astype(np.float32)
                    for w, d_room, d_alone in zip(whole, room_depth, alone_depth, strict=True)]
-        seg = perception._masks(room)
         X_WO = scenario.X_WO
-        try:
-            X_WO_hat, pose, _ = perception._object_pose(seg, room)
+        try:  # the pipeline's first look: its masks and the pose from them
+            seg, X_WO_hat, pose, _ = perception._looked(room, perception._room_looks(room))
         except ObjectPoseError:  # the pipeline plans nothing; its row is left out
-            X_WO_hat, pose = None, {"amodal": None}
+            seg, X_WO_hat, pose = perception._masks(room), None, {"amodal": None}
         truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
         handle_W = truth.point("handle", truth.q_current)
         sure = paint_background(room, seg, threshold=SURE_THRESHOLD)
