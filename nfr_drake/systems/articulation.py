@@ -317,8 +317,12 @@ class SimulationResult:
     without one."""
 
     def summary(self) -> str:
-        verdict = "SUCCESS" if self.success else "FAILURE"
-        return (f"{verdict}: articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
+        """One line: SUCCESS or FAILURE, then `details`."""
+        return f"{'SUCCESS' if self.success else 'FAILURE'}: {self.details()}"
+
+    def details(self) -> str:
+        """The outcome's figures in one line, without the verdict."""
+        return (f"articulation {self.q_final:.3f} (target {self.q_target:.3f}, error "
                 f"{joint_error_text(self.joint_type, self.joint_error)}), grasped {self.grasped} (offset "
                 f"{self.grasp_offset * 100:.1f} cm), hand-to-handle drift "
                 f"{self.max_drift * 100:.1f} cm, largest constraint force {self.max_constraint_force:.1f} N, "

@@ -57,9 +57,9 @@ class PulledOn:
     simulation: SimulationResult | None
     replay: Path | None
 
-    def summary(self) -> str:
-        """One line: why, and how the pull from the second base ended."""
-        then = self.simulation.summary() if self.simulation is not None else f"no plan: {self.planning_error}"
+    def details(self) -> str:
+        """One line without a verdict: why, and how the pull from the second base ended."""
+        then = self.simulation.details() if self.simulation is not None else f"no plan: {self.planning_error}"
         return f"pulled on from a second base ({self.reason}): {then}"
 
 
@@ -89,9 +89,13 @@ class TaskOutcome:
         return self.final is not None and self.final.success
 
     def summary(self) -> str:
-        """The simulation's line, then the pull on's where there was one."""
-        lines = [self.simulation.summary()] if self.simulation is not None else [self.planning_error]
-        return "; ".join([*lines, self.pulled_on.summary()] if self.pulled_on is not None else lines)
+        """One line: the verdict, the first base's outcome and, where it pulled on, the second's."""
+        if self.simulation is None:
+            return f"FAILURE: planning failed: {self.planning_error}"
+        if self.pulled_on is None:
+            return self.simulation.summary()
+        verdict = "SUCCESS" if self.success else "FAILURE"
+        return f"{verdict}: {self.simulation.details()}; {self.pulled_on.details()}"
 
 
 def read_keypoints(obj: SceneObject) -> KeypointTrajectory:
