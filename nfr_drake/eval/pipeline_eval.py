@@ -229,6 +229,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           look_again: bool = True,
                           objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
+                          pull_on: bool = SimulationConfig.pull_on,
                           regrasps: int = SimulationConfig.regrasps,
                           turn_max_hinge_gap: float = SimulationConfig.second_turn_max_hinge_gap,
                           threads: int | None = None) -> None:
@@ -282,6 +283,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
+        pull_on: where the arm's own reach ends that pull (a joint at its limit, links touching),
+            the robot re-places its base and pulls on to the stop (`SimulationConfig.pull_on`);
+            the CSV's pulled_on says why.
         regrasps: how many times the hand tries again, 2 cm further along the approach, after
             its fingers closed on nothing (`SimulationConfig.regrasps`; 0: one close).
         turn_max_hinge_gap: a door is turned by what the hand swept only when the hinge it felt
@@ -297,7 +301,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss,
                     paintings=list(paintings), mask_crop=mask_crop, aimed_look=aimed_look,
                     look_again=look_again,
-                    simulation=SimulationConfig(guarded_pull=guarded_pull, regrasps=regrasps,
+                    simulation=SimulationConfig(guarded_pull=guarded_pull, pull_on=pull_on, regrasps=regrasps,
                                                 second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):
         raise NfrDrakeError(f"--objects: indices must not be negative, got {list(objects)}")
@@ -311,6 +315,10 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         print(place_summary(rows))
     if category == "furniture":
         print(part_summary(rows))
+    pulled_on = [r for r in rows if r["pulled_on"]]
+    if pulled_on:
+        print(f"pulled on from a second base: {len(pulled_on)} "
+              f"({sum(r['success'] == 'True' for r in pulled_on)} of them succeeded)")
     what = "" if task == "open" else f" {task} ({grasp} grasp)"
     print(f"{category}{what}: {wins}/{len(rows)} succeeded with {keypoints} keypoints "
           f"({100 * wins / max(len(rows), 1):.0f}%), {refused} refused for low fit confidence, "
