@@ -160,7 +160,8 @@ class SimulationConfig:
     2 N s/m of damping), under the 80 N a contact grip's friction holds (2 x 40 N squeeze, mu 1)."""
     pull_on: bool = True
     """Where the arm's own reach ended the guarded pull (`planning.scene.reach_limit` at its last
-    joint positions: a joint at a limit, links touching), the robot lets go, its base is placed
+    joint positions along its line: a joint at a limit that going on drives further, links
+    touching that going on brings closer), the robot lets go, its base is placed
     again in front of the handle where the hand left it, and it grasps and pulls on to the stop,
     once (`systems.task.pull_on`; the base's drive is not simulated)."""
 

@@ -8,6 +8,7 @@ from typing import Literal
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer
+from pydrake.math import RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
@@ -18,7 +19,6 @@ from nfr_drake.planning.scene import build_planning_scene, reach_limit
 from nfr_drake.systems.articulation import (
     SimulationConfig,
     SimulationResult,
-    guarded_pull_direction,
     simulate_articulation,
 )
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
@@ -164,14 +164,21 @@ path) short of its predicted end where the hand let go: its pull is then that, t
 `end_stop_overshoot` past it and the guarded pull."""
 
 
-def handle_left_at(kt: KeypointTrajectory, p_WH: np.ndarray) -> KeypointTrajectory:
-    """The keypoints moved so that their handle lies at p_WH (W, m, (3,)), `PULL_ON_REST` short
-    of its end of travel (q 1), their present articulation there: the part as the robot takes it
-    when it let go of the handle past the keypoints' predicted end."""
+def handle_left_at(kt: KeypointTrajectory, p_WH: np.ndarray, along_W: np.ndarray) -> KeypointTrajectory:
+    """The keypoints turned about the vertical (their handle path's horizontal direction onto that
+    of unit `along_W`: the line the hand felt) and moved so that their handle lies at p_WH (W, m,
+    (3,)), `PULL_ON_REST` short of its end of travel (q 1), their present articulation there: the
+    part as the robot takes it when it let go of the handle past the keypoints' predicted end."""
     path = kt.point("handle", kt.q_grid)
     length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     q_left = float(np.clip(1.0 - PULL_ON_REST / max(length, 1e-9), kt.q_grid[0], 1.0))
-    return kt.shifted(np.asarray(p_WH) - kt.point("handle", q_left)).with_current(q_left)
+    predicted = path[-1] - path[0]
+    turn = np.arctan2(along_W[1], along_W[0]) - np.arctan2(predicted[1], predicted[0])
+    if not np.isfinite(turn) or np.hypot(*along_W[:2]) < 1e-6 or np.hypot(*predicted[:2]) < 1e-6:
+        turn = 0.0
+    R = RotationMatrix.MakeZRotation(float(turn)).matrix()
+    turned = KeypointTrajectory(kt.category, kt.q_grid, kt.names, kt.p_WK @ R.T, kt.q_current)
+    return turned.shifted(np.asarray(p_WH) - turned.point("handle", q_left)).with_current(q_left)
 
 
 def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: SimulationResult,
@@ -179,9 +186,11 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
             meshcat: Meshcat | None, replay: Path | None) -> PulledOn | None:
     """The pull to the stop taken on from a second base, where the arm's own reach ended the
     guarded pull of `first` (`SimulationConfig.pull_on`: the pull stopped short of its distance,
-    and at its last joint positions the arm cannot move on along the pull's line, `reach_limit`);
+    and at its last joint positions the arm cannot move on along the line it pulled along,
+    `SimulationResult.pull_line`, `reach_limit`);
     None where it did not. The handle is taken where the
-    hand let go of it (`held_handle`, `handle_left_at`), the base placed again for it as for any
+    hand let go of it, the keypoints' path along the line it pulled along (`held_handle`,
+    `handle_left_at`), the base placed again for it as for any
     pull (the obstacles those of the first plan: `obstacles`, else the keypoints' carcass box), and
     the second simulation starts with the part where the first left it, the arm at home; the
     drive between the bases is not simulated. With `replay`, its replay goes beside it
@@ -189,10 +198,10 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
     if not (config.pull_on and config.pulls_to_stop(plan) and first.grasped
             and first.pulled_past < config.guarded_pull):
         return None
-    reason = reach_limit(plan.X_WB, first.q_robot, guarded_pull_direction(plan))
+    reason = reach_limit(plan.X_WB, first.q_robot, first.pull_line)
     if reason is None:
         return None
-    kt_on = handle_left_at(kt, held_handle(plan, first.q_robot))
+    kt_on = handle_left_at(kt, held_handle(plan, first.q_robot), first.pull_line)
     try:
         plan_on = plan_articulation(kt_on, first.q_target, config=planner_config,
                                     obstacles=obstacles if obstacles is not None else [carcass_box(kt)])

@@ -212,14 +212,24 @@ def _with_joint(q: np.ndarray, i: int, value: float) -> np.ndarray:
 
 
 def test_the_handle_left_past_the_keypoints_end_is_taken_as_open_to_just_short_of_it():
+    """Moved to where the hand let go, 0.5 cm of path short of q 1, the path turned onto the line
+    the hand felt (10 degrees off the keypoints' here), every keypoint moved alike."""
     kt = read_keypoints(_training_drawer())
     p_WH = kt.point("handle", 1.0) + [0.07, 0.01, 0.0]
-    on = handle_left_at(kt, p_WH)
+    path = kt.point("handle", 1.0) - kt.point("handle", 0.0)
+    felt = RotationMatrix.MakeZRotation(np.radians(10.0)).matrix() @ (path / np.linalg.norm(path))
+    on = handle_left_at(kt, p_WH, felt)
     np.testing.assert_allclose(on.point("handle", on.q_current), p_WH, atol=1e-9)
     rest = on.point("handle", np.linspace(on.q_current, 1.0, 50))
     assert np.linalg.norm(np.diff(rest, axis=0), axis=1).sum() == pytest.approx(PULL_ON_REST, rel=0.01)
-    offset = on.p_WK[0, 0] - kt.p_WK[0, 0]  # every keypoint moved alike
-    np.testing.assert_allclose(on.p_WK - kt.p_WK, np.broadcast_to(offset, kt.p_WK.shape))
+    new_path = on.point("handle", 1.0) - on.point("handle", 0.0)
+    np.testing.assert_allclose(new_path / np.linalg.norm(new_path), felt, atol=1e-6)
+    turned = _turned(kt, 10.0)  # about the handle at q 0: the same turn, moved
+    np.testing.assert_allclose(on.p_WK - turned.p_WK, np.broadcast_to(on.p_WK[0, 0] - turned.p_WK[0, 0],
+                                                                      kt.p_WK.shape), atol=1e-9)
+    same = handle_left_at(kt, p_WH, path / np.linalg.norm(path))  # felt along the keypoints' path
+    np.testing.assert_allclose(same.p_WK - kt.p_WK, np.broadcast_to(same.p_WK[0, 0] - kt.p_WK[0, 0],
+                                                                     kt.p_WK.shape), atol=1e-9)
 
 
 def test_a_pull_the_arms_reach_ended_goes_on_from_a_second_base_to_the_stop(monkeypatch):
@@ -233,7 +243,9 @@ def test_a_pull_the_arms_reach_ended_goes_on_from_a_second_base_to_the_stop(monk
     first = run_task(scene_object, 1.0, keypoints=keypoints,
                      simulation_config=SimulationConfig(guarded_pull=0.0))
     assert first.simulation.grasped and first.simulation.joint_error > 0.05 and first.pulled_on is None
-    stopped = replace(first.simulation, pulled_past=0.01)  # as if the guarded pull stopped 1 cm on
+    line = first.plan.waypoints[-1].p_WH - first.plan.waypoints[0].p_WH
+    stopped = replace(first.simulation, pulled_past=0.01,  # as if the guarded pull stopped 1 cm on
+                      pull_line=line / np.linalg.norm(line))
     config = SimulationConfig()
     args = (scene_object, keypoints, first.plan, stopped, None, PlannerConfig(), config, None, None)
     monkeypatch.setattr(task, "reach_limit", lambda X_WB, q, u: None)
