@@ -159,10 +159,10 @@ def _turned(kt: KeypointTrajectory, degrees: float) -> KeypointTrajectory:
 
 def test_a_drawer_planned_16_degrees_off_its_slide_is_pulled_on_along_the_slide_to_its_stop():
     """The training drawer planned on keypoints turned 16 degrees and 10 cm short: the planned
-    pull, the compliant hand dragged along the slide, leaves it at 0.83, the plan's end 5 cm off
-    the slide. Pulled on along the plan's line from the plan's end, the lag stopped the pull at
-    once there (0.830, failed); along the hand's travel since it closed (`felt_line`), from where
-    the arm is, the stop ends it at q 1 (within 5 mm)."""
+    pull, the compliant hand dragged along the slide, leaves it short, the plan's end off the
+    slide. Pulled on along the plan's line from the plan's end (the code before 09f2926), the lag
+    stopped the pull where the plan left it; along the hand's travel since it closed
+    (`felt_line`), from where the arm is, the stop ends it at q 1 (within 5 mm)."""
     scene_object = _training_drawer()
     truth = read_keypoints(scene_object)
     keypoints = _turned(_short(truth, 0.10), 16.0)
