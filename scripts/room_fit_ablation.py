@@ -44,7 +44,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
 
 Per setting: keypoint RMSE at the observed state and handle error (cm, in W; and the handle's
 error along the true object's axes, `handle_d{x,y,z}_cm`: x out of the front, z up), q error, the
-handle detector's triangulated handle error (cm; nan when fewer than 3 views agree), the fit's
+handle detector's triangulated handle error (cm; nan when fewer than 3 views agree; kept inside
+the masks as `infer` does, `inside_masks`), the fit's
 seconds. Per object: the detector's handle pixels (p > 0.5) on the raw room photos and the share
 of them off the true (whole) silhouette, and the object's extent in the photos (its silhouette's
 bounding box's longer side over the image side, median over the views). The segmenter's masks and
@@ -84,7 +85,7 @@ from nfr_drake.inference.infer import (
 )
 from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.nfr.render import render_images
-from nfr_drake.perception.handle_triangulation import locate_handle
+from nfr_drake.perception.handle_triangulation import inside_masks, locate_handle
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
@@ -219,7 +220,7 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
         if X_WO_hat is not None:
             region = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=False)
             region_reach = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=True)
-            fronts = paint_off_object(room, seg, [X.GetAsMatrix4() for X in perception.camera_poses],
+            fronts, _ = paint_off_object(room, seg, [X.GetAsMatrix4() for X in perception.camera_poses],
                                       perception.cameras, X_WO_hat.GetAsMatrix4(), np.asarray(pose["size"]),
                                       painting="fronts")
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
@@ -274,7 +275,9 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             predicted = np.stack([R @ result.keypoints[n] + t for n in names])
             true_now = np.stack([truth.point(n, truth.q_current) for n in names])
             X_OW = X.inverse()
-            sighted = locate_handle(detector.detect(images), cap.frames) if use_detector else None
+            maps = detector.detect(images) if use_detector else None
+            sighted = None if maps is None else locate_handle(
+                maps if masks is None else inside_masks(maps, masks), cap.frames)  # as `infer` does
             fit_cm, fit_deg = pose_error(X_WO, X_fit)
             row = {**common, "pose_cm": fit_cm, "pose_deg": fit_deg, "setting": name,
                    "q_true": scenario.q_start, "q": result.q,

@@ -60,6 +60,7 @@ from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, HandleDetec
 from nfr_drake.perception.handle_triangulation import (
     MIN_VIEWS,
     TriangulatedHandle,
+    inside_masks,
     locate_handle,
     locate_handles,
     project,
@@ -246,22 +247,30 @@ def checked_paintings(paintings) -> tuple[Painting, ...]:
     return tuple(dict.fromkeys(paintings))
 
 
+def painting_thresholds(painting: Painting, X_WCs: list[np.ndarray], cameras: list[PinholeCamera],
+                        shapes: list[tuple[int, int]], X_WO: np.ndarray, size: np.ndarray | None
+                        ) -> list[float | np.ndarray]:
+    """`paint_background`'s threshold per view (one float, or an (H, W) map of `paint_thresholds`)
+    for `painting` (X_WO (4, 4), size (3,) m: the estimated carcass; for a pose given without a
+    size (None), "region" and "fronts" paint at `PAINT_THRESHOLD` everywhere)."""
+    if painting == "sure":
+        return [SURE_THRESHOLD] * len(shapes)
+    if size is None:
+        return [PAINT_THRESHOLD] * len(shapes)
+    reach = float(max(size[0], size[1])) if painting == "fronts" else None
+    return paint_thresholds(X_WO, size, X_WCs, cameras, shapes, front_reach_m=reach)
+
+
 def paint_off_object(images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
                      cameras: list[PinholeCamera], X_WO: np.ndarray, size: np.ndarray | None,
                      background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
-                     painting: Painting = "region") -> list[np.ndarray]:
-    """`paint_background` as `painting` says (X_WO (4, 4), size (3,) m: the estimated carcass);
-    for a pose given without a size (None), "region" and "fronts" paint at `PAINT_THRESHOLD`
-    everywhere."""
-    if painting == "sure":
-        threshold = SURE_THRESHOLD
-    elif size is None:
-        threshold = PAINT_THRESHOLD
-    else:
-        reach = float(max(size[0], size[1])) if painting == "fronts" else None
-        threshold = paint_thresholds(X_WO, size, X_WCs, cameras, [image.shape[:2] for image in images],
-                                     front_reach_m=reach)
-    return paint_background(images, masks, background_rgb, threshold)
+                     painting: Painting = "region") -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """`paint_background` as `painting` says (`painting_thresholds`): the painted uint8 RGB images
+    and the pixels each keeps from its photo ((H, W) bool per image)."""
+    shapes = [image.shape[:2] for image in images]
+    thresholds = painting_thresholds(painting, X_WCs, cameras, shapes, X_WO, size)
+    kept = [m > t for m, t in zip(masks, thresholds, strict=True)]
+    return paint_background(images, masks, background_rgb, thresholds), kept
 
 
 def refined_object_pose(X_WO_estimated: np.ndarray, result: FitResult,
@@ -286,14 +295,16 @@ rendered geometry where it shows them (`forward.geometric_keypoints`)."""
 def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_grid: np.ndarray,
           images: list[np.ndarray] | None = None, keypoint_source: KeypointSource = "head",
           masks: list[np.ndarray] | None = None, masked_loss: bool = True, room: bool = True,
-          refine_pose: bool = False) -> tuple[FitResult, FitOutcome]:
+          refine_pose: bool = False, kept: list[np.ndarray] | None = None) -> tuple[FitResult, FitOutcome]:
     """Fit z to the capture and forward-simulate keypoints over q_grid (N,).
 
     `images` (uint8 RGB per frame) replaces reading the capture's image files (Drake cameras).
     `masks` ((H, W) object probability per frame): with `masked_loss`, only pixels on the object
     count in the image loss (`observed_rays`); with `room` (photos of a room, the segmenter's
     masks) they are the fit confidence's observed silhouette (`confidence.fit_features`), else
-    that is the pixels off the image border's colour (an object alone).
+    that is the pixels off the image border's colour (an object alone), and the handle detector
+    counts only well inside them (`inside_masks`), or inside `kept` when given ((H, W) bool per
+    frame: the pixels a painted photo keeps, `paint_off_object`).
     `refine_pose` (the capture's O an estimate, `FitConfig.refine_pose`): the fit is followed by
     the pose refinement (`pose_refine`); kept, the result's positions, the fitted code and the
     confidence are in its frame P, `outcome.X_OP` is P in O; `extra["pose_refinement"]` says what
@@ -311,7 +322,9 @@ def infer(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig, q_gri
     rays = observed_rays(capture, images, masks=masks if masked_loss else None)
     handle = None
     if fitted.handle_detector is not None and fit_config.uses_sightings:
-        handle = locate_handle(fitted.handle_detector.detect(images), capture.frames)
+        maps = fitted.handle_detector.detect(images)
+        region = kept if kept is not None else masks if room else None
+        handle = locate_handle(maps if region is None else inside_masks(maps, region), capture.frames)
     sighting = None if handle is None else PartSighting(
         fitted.keypoint_names.index("handle"), torch.as_tensor(handle.p_O, dtype=rays.rgb.dtype))
     outcome = fit_latent(fitted.model, rays, fit_config, fitted.z_obj_mean, fitted.focus, sighting,
@@ -364,11 +377,12 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
     painting the result's `extra["paintings"]` says which was kept and each one's P (docs/ROOMS.md,
     "Several paintings")."""
     cameras = [frame.camera for frame in capture.frames]
-    fits = {name: infer(fitted, capture, fit_config, q_grid,
-                        paint_off_object(images, masks, X_WCs, cameras, X_WO, size, background_rgb, name),
-                        keypoint_source, masks=masks, masked_loss=False, room=room, refine_pose=refine_pose)
-            for name in checked_paintings("region" if size is None and p == "fronts" else p
-                                          for p in checked_paintings(paintings))}
+    fits = {}
+    for name in checked_paintings("region" if size is None and p == "fronts" else p
+                                  for p in checked_paintings(paintings)):
+        painted, kept = paint_off_object(images, masks, X_WCs, cameras, X_WO, size, background_rgb, name)
+        fits[name] = infer(fitted, capture, fit_config, q_grid, painted, keypoint_source, masks=masks,
+                           masked_loss=False, room=room, refine_pose=refine_pose, kept=kept)
 
     def p_of(result: FitResult) -> float:
         p = (result.confidence or {}).get("p_handle_within_2cm")

@@ -34,6 +34,9 @@ from nfr_drake.data.capture import CaptureFrame
 _REFERENCE_HEIGHT_PX = 128.0
 MIN_VIEWS = 3
 """Views that must agree on a handle for a point."""
+INSIDE_MASK_PX = 3.0
+"""How far inside the object's mask a handle pixel must lie, px (scaled to a 128 px high image),
+in `inside_masks`."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,22 @@ class HandleMap:
     def centroid_only(cls, probability: np.ndarray) -> HandleMap:
         """A map without offsets: sightings are the blobs' centroids."""
         return cls(probability, np.zeros((*probability.shape, 2), np.float32))
+
+    def inside(self, mask: np.ndarray, margin_px: float = INSIDE_MASK_PX) -> HandleMap:
+        """This map with the probability 0 off the object's mask (H, W) (probability > 0.5) and
+        within `margin_px` (scaled to a 128 px high image) of its edge."""
+        margin = margin_px * mask.shape[0] / _REFERENCE_HEIGHT_PX
+        depth = cv2.distanceTransform((np.asarray(mask) > 0.5).astype(np.uint8), cv2.DIST_L2, 3)
+        return HandleMap(np.where(depth > margin, self.probability, 0.0).astype(np.float32), self.offset_px)
+
+
+def inside_masks(maps: list[HandleMap], masks: list[np.ndarray]) -> list[HandleMap]:
+    """Each view's map kept only well inside the object's mask (`HandleMap.inside`): on a room
+    photo painted off the segmenter's mask, the cut along the object's bottom edge (a dark strip of
+    floor or shadow left between the object and the paint) reads as a handle bar, and several
+    views agree on it since it is a real edge (docs/ROOMS.md, "Handles sighted on the object's
+    edge")."""
+    return [m.inside(mask) for m, mask in zip(maps, masks, strict=True)]
 
 
 @dataclass(frozen=True)

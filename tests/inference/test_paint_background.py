@@ -1,12 +1,21 @@
 """`paint_background`: a room photo's pixels off the object's mask become the training background,
 those on it keep their colour; an unsure mask does not blend the room into the background.
-`paint_thresholds`: the decision threshold where the object can lie, only the sure pixels kept off it."""
+`paint_thresholds`: the decision threshold where the object can lie, only the sure pixels kept off it.
+`paint_off_object`: the painted photos and the pixels kept."""
 
 import numpy as np
+import pytest
 
 from nfr_drake.data.camera import PinholeCamera, project_points
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
-from nfr_drake.inference.infer import PAINT_THRESHOLD, SURE_THRESHOLD, paint_background, paint_thresholds
+from nfr_drake.inference.infer import (
+    PAINT_THRESHOLD,
+    PAINTINGS,
+    SURE_THRESHOLD,
+    paint_background,
+    paint_off_object,
+    paint_thresholds,
+)
 
 
 def test_pixels_are_kept_or_painted_never_blended():
@@ -109,3 +118,21 @@ def test_beyond_where_open_fronts_reach_even_sure_pixels_are_painted():
     background = np.round(255 * np.asarray(DEFAULT_BACKGROUND_RGB)).astype(np.uint8)
     np.testing.assert_array_equal(painted[ahead], photo[ahead])
     np.testing.assert_array_equal(painted[neighbour], background)
+
+
+@pytest.mark.parametrize("painting", PAINTINGS)
+def test_paint_off_object_says_which_pixels_it_kept(painting):
+    """Every painting's kept pixels are exactly those left as in the photo; "sure" keeps fewer of
+    an unsure mask (p 0.7) than "region"; "fronts" none of a sure neighbour no front reaches."""
+    X_WC, camera = _camera_before_object()
+    rng = np.random.default_rng(3)
+    mask = rng.choice([0.3, 0.7, 0.99], size=(64, 64)).astype(np.float32)
+    photo = np.full((64, 64, 3), 40, np.uint8)
+    painted, kept = paint_off_object([photo], [mask], [X_WC], [camera], np.eye(4), np.array([0.4, 0.5, 0.3]),
+                                     painting=painting)
+    assert kept[0].dtype == bool and kept[0].shape == (64, 64)
+    np.testing.assert_array_equal(np.all(painted[0] == photo, axis=-1), kept[0])
+    edge = _pixel([0.2, 0.24, 0.15], X_WC, camera)
+    neighbour = _pixel([-0.1, 0.7, 0.0], X_WC, camera)
+    assert kept[0][edge] == (mask[edge] > (SURE_THRESHOLD if painting == "sure" else PAINT_THRESHOLD))
+    assert kept[0][neighbour] == (painting != "fronts" and mask[neighbour] > SURE_THRESHOLD)

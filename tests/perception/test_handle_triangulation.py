@@ -10,6 +10,7 @@ from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.perception.handle_triangulation import (
     HandleMap,
+    inside_masks,
     sighting,
     sightings,
     triangulate_handle,
@@ -107,6 +108,29 @@ def test_sighting_takes_the_strongest_blob():
     assert s is not None and s.frame == 3
     np.testing.assert_allclose(s.uv, [11.0, 21.5])
     assert sighting(HandleMap.centroid_only(np.full((8, 8), 0.4, np.float32)), 0) is None
+
+
+def test_a_blob_on_the_masks_edge_is_left_out_inside_the_mask():
+    """A room photo painted off the object's mask: a strong blob along the mask's bottom edge (the
+    cut) outweighs the weaker handle blob in the middle, until the map is kept inside the mask."""
+    mask = np.zeros((128, 128), np.float32)
+    mask[20:80, 24:104] = 1.0
+    prob = np.zeros((128, 128), np.float32)
+    prob[77:82, 28:100] = 0.95  # along the bottom edge, 3 px in and 2 px out
+    prob[48:50, 52:76] = 0.8  # the handle
+    handle_map = HandleMap.centroid_only(prob)
+    assert sighting(handle_map, 0).uv[1] > 77
+    kept = inside_masks([handle_map], [mask])[0]
+    np.testing.assert_allclose(sighting(kept, 0).uv, [64.0, 49.0])
+    # the margin scales with the image: 2 px in is on the edge at 128 px, inside at 64 px
+    edge = np.zeros((128, 128), np.float32)
+    edge[78, 40:80] = 0.9
+    assert sighting(HandleMap.centroid_only(edge).inside(mask), 0) is None
+    small = HandleMap.centroid_only(edge[::2, ::2]).inside(mask[::2, ::2])
+    assert sighting(small, 0) is None
+    edge_small = np.zeros((64, 64), np.float32)
+    edge_small[38, 20:40] = 0.9
+    assert sighting(HandleMap.centroid_only(edge_small).inside(mask[::2, ::2]), 0) is not None
 
 
 def test_sighting_is_where_the_blob_votes():
