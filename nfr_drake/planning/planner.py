@@ -118,6 +118,11 @@ class PlannerConfig:
     held 1.5 cm deep by contact, leaves the hand's 0.2 m wide palm under 1 cm from the floor
     (docs/PLANNING.md, "A tighter clearance when nothing plans"). At or above `min_distance`: no
     second try."""
+    wide_grasp_cone_deg: float = 45.0
+    """The approach cone tried when nothing plans at `grasp_cone_deg` at either clearance, degrees:
+    a bar about 10 cm above the floor, fitted a centimetre or two low, is reached only by a hand
+    that comes in further from above (docs/PLANNING.md, "A wider approach cone when nothing
+    plans"). At or below `grasp_cone_deg`: no further try."""
     collision_samples: int = 24
     num_control_points: int = 22
     velocity_scale: float = 0.5
@@ -517,17 +522,28 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
     config = config or PlannerConfig()
     if not 0.0 <= q_target <= 1.0:
         raise NfrDrakeError(f"target articulation {q_target} is outside [0, 1]")
-    try:
-        return _plan(kt, q_target, q_start, config, obstacles, must_reach)
-    except PlanningError as err:
-        if config.tight_min_distance >= config.min_distance:
-            raise
+    failures = []
+    for label, tried in _fallbacks(config):
         try:
-            return _plan(kt, q_target, q_start, replace(config, min_distance=config.tight_min_distance),
-                         obstacles, must_reach)
-        except PlanningError as tight:
-            raise PlanningError(f"{err}; with {100 * config.tight_min_distance:.1f} cm of clearance: "
-                                f"{str(tight).split(': ', 1)[1]}") from None
+            return _plan(kt, q_target, q_start, tried, obstacles, must_reach)
+        except PlanningError as err:
+            failures.append(str(err) if not failures else f"{label}: {str(err).split(': ', 1)[1]}")
+    raise PlanningError("; ".join(failures))
+
+
+def _fallbacks(config: PlannerConfig) -> list[tuple[str, PlannerConfig]]:
+    """The configurations `plan_articulation` tries in turn, each with the words that name its
+    failure: `config`, then at `tight_min_distance`, then with `wide_grasp_cone_deg` at either
+    clearance (each only where it differs from `config`)."""
+    clearances = [config.min_distance]
+    if config.tight_min_distance < config.min_distance:
+        clearances.append(config.tight_min_distance)
+    tries = [(f"with {100 * c:.1f} cm of clearance", replace(config, min_distance=c)) for c in clearances]
+    if config.wide_grasp_cone_deg > config.grasp_cone_deg:
+        cone = config.wide_grasp_cone_deg
+        tries += [(f"with a {cone:g} deg approach cone and {100 * c:.1f} cm of clearance",
+                   replace(config, min_distance=c, grasp_cone_deg=cone)) for c in clearances]
+    return tries
 
 
 def _plan(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray, config: PlannerConfig,

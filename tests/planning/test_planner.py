@@ -96,13 +96,33 @@ def test_a_low_bar_held_deep_plans_at_the_tighter_clearance():
     config = grasp_planner(PlannerConfig(), "contact")
     assert scene_object.obstacles is None  # a sampled drawer: the keypoints' carcass box
     with pytest.raises(PlanningError, match="IK of grasp"):
-        plan_articulation(kt, 1.0, config=replace(config, tight_min_distance=config.min_distance))
+        plan_articulation(kt, 1.0, config=replace(config, tight_min_distance=config.min_distance,
+                                                  wide_grasp_cone_deg=config.grasp_cone_deg))
     plan = plan_articulation(kt, 1.0, config=config)
     scene = build_planning_scene(plan.X_WB, [carcass_box(kt)])
     scene.plant.SetPositions(scene.plant_context, plan.trajectory.value(plan.t_grasp).ravel())
     query = scene.plant.get_geometry_query_input_port().Eval(scene.plant_context)
     nearest = min(p.distance for p in query.ComputeSignedDistancePairwiseClosestPoints(0.05))
     assert config.tight_min_distance - 1e-3 <= nearest < config.min_distance
+
+
+def test_a_bar_fitted_low_plans_with_the_wider_approach_cone():
+    """A drawer bar fitted 2 cm low (6.3 cm above the floor): at the 30 degree approach cone no
+    grasp clears the floor at either clearance; the last tries, at the 45 degree cone, plan it,
+    with the hand coming in from above by more than 30 degrees, and the failure names every try."""
+    obj, _, _ = sampled_part("drawer", 7, 8, RigidTransform())
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0).shifted(np.array([0.0, 0, -0.02]))
+    config = grasp_planner(PlannerConfig(), "constraint")
+    with pytest.raises(PlanningError, match="IK of grasp; .*with 0.5 cm of clearance: IK of"):
+        plan_articulation(kt, 1.0, config=replace(config, wide_grasp_cone_deg=config.grasp_cone_deg))
+    plan = plan_articulation(kt, 1.0, config=config)
+    scene = build_planning_scene(plan.X_WB, [carcass_box(kt)])
+    scene.plant.SetPositions(scene.plant_context, plan.trajectory.value(plan.t_grasp).ravel())
+    z_G = scene.tool_frame.CalcPoseInWorld(scene.plant_context).rotation().col(2)
+    down = np.degrees(np.arcsin(-z_G[2]))  # the tool's z is its approach
+    assert config.grasp_cone_deg < down <= config.wide_grasp_cone_deg + 1.0, down
+    with pytest.raises(PlanningError, match="with a 45 deg approach cone and 0.5 cm of clearance: IK of"):
+        plan_articulation(kt.shifted(np.array([0.0, 0, -0.03])), 1.0, config=config)
 
 
 @pytest.mark.slow
