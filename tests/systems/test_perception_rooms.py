@@ -151,16 +151,18 @@ def test_room_perception_sees_the_room_and_fits_on_the_segmenters_masks(model_di
 
 def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch):
     """Two paintings ("region", then "sure"): two fits on differently painted photos (the sure one
-    paints more), the one whose P(handle within 2 cm) is higher kept, and the result says which."""
+    paints more), each told which pixels its photos keep (where the handle detector counts), the
+    one whose P(handle within 2 cm) is higher kept, and the result says which."""
     _needs_segmenter()
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
-    calls, given_p = [], iter([0.3, 0.8])
+    calls, kept, given_p = [], [], iter([0.3, 0.8])
     real_infer = infer_module.infer
 
     def spy(*args, **kwargs):
         result, outcome = real_infer(*args, **kwargs)
         result.confidence = {**(result.confidence or {}), "p_handle_within_2cm": next(given_p)}
         calls.append((args[4], result))
+        kept.append(kwargs["kept"])
         return result, outcome
 
     monkeypatch.setattr(infer_module, "infer", spy)
@@ -172,6 +174,10 @@ def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch
     painted = [sum(int((np.abs(i.astype(float) - background).max(-1) <= 3).sum()) for i in images)
                for images, _ in calls]
     assert painted[1] >= painted[0]
+    for (images, _), kept_pixels in zip(calls, kept, strict=True):
+        assert [k.sum() for k in kept_pixels] != [0] * len(images)
+        for image, k in zip(images, kept_pixels, strict=True):  # every pixel not kept is painted
+            assert (image[~k] == background).all()
     result = system.get_fit_result_output_port().Eval(system.GetMyContextFromRoot(context))
     assert result.confidence["p_handle_within_2cm"] == 0.8 and result.q == calls[1][1].q
     assert result.extra["paintings"] == {"chosen": "sure",
