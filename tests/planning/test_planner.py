@@ -111,7 +111,8 @@ def test_a_bar_fitted_low_plans_with_the_wider_approach_cone():
     grasp clears the floor at either clearance; the last tries, at the 45 degree cone, plan it,
     with the hand coming in from above by more than 30 degrees, and the failure names every try."""
     obj, _, _ = sampled_part("drawer", 7, 8, RigidTransform())
-    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0).shifted(np.array([0.0, 0, -0.02]))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    kt = kt.shifted(np.array([0.0, 0.0, -0.02]))
     config = grasp_planner(PlannerConfig(), "constraint")
     with pytest.raises(PlanningError, match="IK of grasp; .*with 0.5 cm of clearance: IK of"):
         plan_articulation(kt, 1.0, config=replace(config, wide_grasp_cone_deg=config.grasp_cone_deg))
