@@ -112,8 +112,8 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
     monkeypatch.setattr(object_pose, "estimate_object_pose", lambda *args, **kwargs: estimate)
 
     def fake_infer(fitted, capture, config, grid, images, source, masks, masked_loss, room,
-                   refine_pose=False):
-        seen.update(images=images, masked_loss=masked_loss)
+                   refine_pose=False, kept=None):
+        seen.update(images=images, masked_loss=masked_loss, kept=kept)
         raise Stop
 
     monkeypatch.setattr(infer, "infer", fake_infer)
@@ -130,6 +130,10 @@ def test_room_photos_off_the_mask_are_painted_or_left_out(monkeypatch, tmp_path,
     assert (image[10:30, 20:40] == 50).all()
     assert (image[0, 0] == (235 if room_loss == "background" else 50)).all()
     assert seen["masked_loss"] is (room_loss == "masked")
+    if room_loss == "background":  # the painted photos' kept pixels: the mask's
+        np.testing.assert_array_equal(seen["kept"][0], mask > 0.5)
+    else:
+        assert seen["kept"] is None
 
 
 @pytest.mark.parametrize("amodal", [True, False])
