@@ -11,7 +11,8 @@ time its joints need at the velocity limits, the approach at least
 trajectory is used, with obstacle boxes: the floor and the keypoint-derived carcass box, or a true
 model's own collision geometry (`nfr_drake.world.obstacles`), and until the grasp an open door's
 panel. The base stands on the floor or, for a high handle path, on a lift column the planner raises
-(`PlannerConfig.max_lift`).
+(`PlannerConfig.max_lift`). Where nothing plans, a tighter clearance and then a wider approach
+cone are tried (`plan_articulation`).
 """
 
 import time
@@ -516,8 +517,9 @@ def plan_articulation(kt: KeypointTrajectory, q_target: float, q_start: np.ndarr
     must_reach: points in W (m, (M, 3)) the base must stay within `config.place_reach` of
     (horizontally), for a motion after this one, the first in sight past the obstacles and the
     door open at q_target (a place: the pre-place point, then the goal). A door's plan ends with
-    the arm clear of the door at q_target (the hand may touch it). Raises PlanningError naming
-    the constraints that failed.
+    the arm clear of the door at q_target (the hand may touch it). Where nothing plans, the
+    fallbacks of `_fallbacks` are tried in turn. Raises PlanningError naming the constraints that
+    failed at each try.
     """
     config = config or PlannerConfig()
     if not 0.0 <= q_target <= 1.0:
@@ -548,7 +550,7 @@ def _fallbacks(config: PlannerConfig) -> list[tuple[str, PlannerConfig]]:
 
 def _plan(kt: KeypointTrajectory, q_target: float, q_start: np.ndarray, config: PlannerConfig,
           obstacles: list[ObstacleBox] | None, must_reach: np.ndarray | None) -> PlanResult:
-    """`plan_articulation` at `config`'s clearance."""
+    """`plan_articulation` at `config`'s clearance and approach cone, without fallbacks."""
     t0, cpu0 = time.perf_counter(), time.process_time()
     q_values = np.linspace(kt.q_current, q_target, config.num_waypoints)
     waypoints = handle_waypoints(kt, q_values)
