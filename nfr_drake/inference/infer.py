@@ -447,13 +447,15 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 
 def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitConfig,
                 q_grid: np.ndarray, images: list[np.ndarray] | None = None, part: int | None = None,
-                masks: list[np.ndarray] | None = None) -> tuple[FitResult, FurnitureFit]:
+                masks: list[np.ndarray] | None = None, kept: list[np.ndarray] | None = None
+                ) -> tuple[FitResult, FurnitureFit]:
     """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`, with
     the handles the model's detector sights, `sighted_handles`, reported in `extra["handles"]`);
     the result lists the parts the field finds (`parts`, each swept over q_grid (N,) with the
     others held, each with its `confidence`, `parts_confidence`) and its single-part fields and
     `confidence` are those of `part` (default: the first part found, slot 0 when none is; a part
-    the field does not find adds a warning). `images` and `masks` as in `infer`. NfrDrakeError
+    the field does not find adds a warning). `images`, `masks` and `kept` as in `infer` (the
+    handle detector counts only well inside `kept`, else inside `masks` when given). NfrDrakeError
     for a part outside the model's slots."""
     started = time.perf_counter()
     if part is not None and not 0 <= part < fitted.num_slots:
@@ -464,7 +466,7 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
         warnings.append(f"{capture.root}: only {len(capture.frames)} view(s); q and the keypoints "
                         f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
-    handles = sighted_handles(fitted, capture, images, config)
+    handles = sighted_handles(fitted, capture, images, config, kept if kept is not None else masks)
     fit = fit_furniture(fitted.model, observed_rays(capture, images, masks=masks), fitted.codes, config,
                         None if handles is None else np.array([h.p_O for h in handles]).reshape(-1, 3))
     found = [int(k) for k in np.flatnonzero(fit.exists)]
@@ -489,13 +491,16 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
 
 
 def sighted_handles(fitted: FittedModel, capture: CaptureSet, images: list[np.ndarray],
-                    config: FurnitureFitConfig) -> list[TriangulatedHandle] | None:
+                    config: FurnitureFitConfig, region: list[np.ndarray] | None = None
+                    ) -> list[TriangulatedHandle] | None:
     """The handles of a piece of furniture triangulated from the model's handle detector in the
-    capture's views (`locate_handles`); None when the model ships no detector or the fit is told
-    not to use it (`FurnitureFitConfig.handle_detector`)."""
+    capture's views (`locate_handles`), counted only well inside `region` ((H, W) per view, the
+    object's pixels of a room photo, `inside_masks`) when given; None when the model ships no
+    detector or the fit is told not to use it (`FurnitureFitConfig.handle_detector`)."""
     if fitted.handle_detector is None or not config.handle_detector:
         return None
-    return locate_handles(fitted.handle_detector.detect(images), capture.frames)
+    maps = fitted.handle_detector.detect(images)
+    return locate_handles(maps if region is None else inside_masks(maps, region), capture.frames)
 
 
 def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,

@@ -339,11 +339,12 @@ class NfrPerceptionSystem(LeafSystem):
         painting = self._segmenter is not None and not masked  # a given pose comes without a size
         X_WCs = [X.GetAsMatrix4() for X in self._X_WCs]
         if self._model.num_slots > 1:
+            kept = None
             if painting:
-                images, _ = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
-                                             pose.get("size"), self._background_rgb, self._paintings[0])
+                images, kept = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
+                                                pose.get("size"), self._background_rgb, self._paintings[0])
             result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
-                                    self._part(context), masks if masked else None)
+                                    self._part(context), masks if masked else None, kept)
         else:
             if painting:
                 result, outcome = infer_painted(self._model, capture, self._fit_config, self._q_grid, images,

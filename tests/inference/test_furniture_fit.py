@@ -141,3 +141,27 @@ def test_a_furniture_model_folder_loads_and_uses_its_handle_detector(furniture_m
     assert off.extra["handles"] == {"used": False, "why": "turned off"}
     none, _ = infer_parts(FittedModel(furniture_model_folder), capture, config, grid)
     assert none.extra["handles"]["why"] == "the model ships no handle detector"
+
+
+def test_furniture_handles_are_sighted_only_inside_the_kept_pixels(capture, monkeypatch):
+    """A room photo's furniture fit (`sighted_handles` with a region): the detector's maps reach
+    the triangulation zero off the region and at its edge, untouched inside it; without a region
+    untouched everywhere."""
+    import nfr_drake.inference.infer as infer_module
+    from nfr_drake.perception.handle_triangulation import HandleMap
+
+    h, w = 128, 160
+    images = [np.zeros((h, w, 3), np.uint8)] * len(capture.frames)  # triangulation is replaced
+    detector = type("Detector", (), {"detect": lambda self, ims: [
+        HandleMap.centroid_only(np.full(im.shape[:2], 0.9, np.float32)) for im in ims]})()
+    fitted = type("Fitted", (), {"handle_detector": detector})()
+    seen = []
+    monkeypatch.setattr(infer_module, "locate_handles", lambda maps, frames: seen.append(maps) or [])
+    region = np.zeros((h, w), bool)
+    region[h // 4:3 * h // 4, w // 4:3 * w // 4] = True
+    infer_module.sighted_handles(fitted, capture, images, FurnitureFitConfig(), [region] * len(images))
+    infer_module.sighted_handles(fitted, capture, images, FurnitureFitConfig())
+    inside, everywhere = (maps[0].probability for maps in seen)
+    assert (inside[~region] == 0).all() and inside[h // 2, w // 2] == np.float32(0.9)
+    assert inside[h // 4, w // 2] == 0  # the region's edge
+    assert (everywhere == np.float32(0.9)).all()
