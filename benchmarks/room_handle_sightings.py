@@ -1,4 +1,4 @@
-"""The handle detector's triangulated handle on the pipeline's room photos, whole or inside the masks.
+"""The handle detector's triangulated handle on the pipeline's room photos: whole, or inside the object.
 
     python benchmarks/room_handle_sightings.py --category drawer --seed 901 --objects $(seq 0 39)
     python benchmarks/room_handle_sightings.py --category closet --seed 901 --objects $(seq 0 29) \
@@ -9,8 +9,9 @@ room --object-pose estimated` photograph it in its held-out room (`pipeline.perc
 the pipeline's look (`segmentation.crop.room_looks`: the segmenter's masks and the pose estimate)
 paints the photos each way the room fit does (`infer.paint_off_object`, every painting of
 `PAINTINGS`), and the model's handle detector runs on each painted set. The handle is triangulated
-(`locate_handle`) from its maps over the whole photo (before) and from its maps kept well inside
-the masks (`inside_masks`, what `infer` does on room photos), side by side. Per painting and way:
+(`locate_handle`) from its maps over the whole photo (before), kept well inside the segmenter's
+masks, and kept well inside the pixels the painted photo keeps (`inside_masks`, what `infer` does
+on painted room photos), side by side. Per painting and way:
 objects with a sighting, the distance from the sighting to the true handle (median, p90), and how
 many are within 2 cm and more than 5 cm off. Nothing is fitted.
 """

@@ -44,8 +44,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
 
 Per setting: keypoint RMSE at the observed state and handle error (cm, in W; and the handle's
 error along the true object's axes, `handle_d{x,y,z}_cm`: x out of the front, z up), q error, the
-handle detector's triangulated handle error (cm; nan when fewer than 3 views agree; kept inside
-the masks as `infer` does, `inside_masks`), the fit's
+handle detector's triangulated handle error (cm; nan when fewer than 3 views agree; counted, as
+`infer` does, inside a painted setting's kept pixels, else inside its masks: `inside_masks`), the fit's
 seconds. Per object: the detector's handle pixels (p > 0.5) on the raw room photos and the share
 of them off the true (whole) silhouette, and the object's extent in the photos (its silhouette's
 bounding box's longer side over the image side, median over the views). The segmenter's masks and
@@ -258,11 +258,14 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             if X is None:
                 continue
             cap = capture_in(X, perception.camera_poses, perception.cameras)
+            # a painted setting's kept pixels (those equal to the room photo), as `infer_painted` passes them
+            painted = masks is not None and not masked and "blend" not in name
+            kept = [np.all(i == r, axis=-1) for i, r in zip(images, room, strict=True)] if painted else None
             t0 = time.perf_counter()
             config = replace(scenario.fit, handle_detector=use_detector)
             result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
                                     masked_loss=masked, room=masks is not None,
-                                    refine_pose=name.endswith("_refined"))
+                                    refine_pose=name.endswith("_refined"), kept=kept)
             seconds = time.perf_counter() - t0
             if figure is not None and index == objects[0]:
                 if panels is None:
@@ -276,8 +279,9 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             true_now = np.stack([truth.point(n, truth.q_current) for n in names])
             X_OW = X.inverse()
             maps = detector.detect(images) if use_detector else None
+            region = kept if kept is not None else masks  # as `infer` does
             sighted = None if maps is None else locate_handle(
-                maps if masks is None else inside_masks(maps, masks), cap.frames)  # as `infer` does
+                maps if region is None else inside_masks(maps, region), cap.frames)
             fit_cm, fit_deg = pose_error(X_WO, X_fit)
             row = {**common, "pose_cm": fit_cm, "pose_deg": fit_deg, "setting": name,
                    "q_true": scenario.q_start, "q": result.q,
