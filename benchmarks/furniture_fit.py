@@ -6,7 +6,9 @@ A quick check with the fitted q per part; `nfr-drake eval --category furniture` 
 Per capture: whether the part count is right (the slots the head says exist against the true
 fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
 keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
-handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time.
+handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time; the
+keypoint, handle and trajectory figures also as the head gives them before its slots are moved
+onto the sighted handles (`*_head`: `FurnitureFitConfig.snap_to_handles`), from the same fit.
 Handles (`--handles`): "detector", those triangulated from the 2D handle detector in `--detector`
 (default MODEL/handle_detector) join the fit (part count, starts, handle term:
 `nfr_drake.inference.furniture_fit`); "encoder", the handles of the slots the encoder baseline in
@@ -18,7 +20,7 @@ part also gets the keypoint RMSE of the head at the object's training code and t
 (`own_code_keypoint_rmse_cm`): what a fit that found the training code again would give.
 
     python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json] [--starts S]
-        [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR]
+        [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR] [--pairing order|nearest]
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.latent import slots_q_to_z_art
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handles
+
+HANDLE = SLOT_KEYPOINTS.index("handle")
 
 
 def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handles: str = "none",
@@ -74,15 +78,20 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
         pred = fit.keypoints[k, pick]
         true = np.array([part["keypoints"][names[n]] for n in names])
         traj_q = np.asarray(part["trajectory"]["q"])
-        path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
+        head_path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
+        true_path = np.asarray(part["trajectory"]["keypoints"]["handle"])
+        true_handle = np.asarray(part["keypoints"]["handle"])[None]
         parts.append({
             "index": k, "type": part["type"], "q_true": part["q"], "q": float(fit.q[k]),
             "found": bool(fit.exists[k]), "type_right": int(fit.types[k]) == (part["type"] == "drawer"),
             "articulation_error": articulation_error(fit.q[k], part["q"], part["joint_type"],
                                                      part["joint_upper"]),
             "keypoint_rmse_cm": keypoint_rmse_cm(pred, true),
-            "trajectory_rmse_cm": trajectory_rmse_cm(
-                path, np.asarray(part["trajectory"]["keypoints"]["handle"])),
+            "keypoint_rmse_cm_head": keypoint_rmse_cm(pred - fit.shift[k], true),
+            "handle_error_cm": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]], true_handle),
+            "handle_error_cm_head": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]] - fit.shift[k], true_handle),
+            "trajectory_rmse_cm": trajectory_rmse_cm(head_path + fit.shift[k], true_path),
+            "trajectory_rmse_cm_head": trajectory_rmse_cm(head_path, true_path),
             **({} if own is None else {"own_code_keypoint_rmse_cm": keypoint_rmse_cm(own[k, pick], true)})})
     return {"capture": capture_dir.name, "fronts": len(gt["parts"]),
             "found": int(fit.exists.sum()), "count_right": int(fit.exists.sum()) == len(gt["parts"]),
@@ -116,8 +125,11 @@ def summary(rows: list[dict]) -> dict:
         "door_error_deg_median": med([p["articulation_error"] for p in parts if p["type"] == "door"]),
         "drawer_error_cm_median": med([p["articulation_error"] for p in parts
                                        if p["type"] == "drawer"]),
-        "keypoint_rmse_cm_median": med([p["keypoint_rmse_cm"] for p in parts]),
-        "trajectory_rmse_cm_median": med([p["trajectory_rmse_cm"] for p in parts]),
+        **{f"{m}_median": med([p[m] for p in parts]) for m in (
+            "keypoint_rmse_cm", "keypoint_rmse_cm_head", "handle_error_cm", "handle_error_cm_head",
+            "trajectory_rmse_cm", "trajectory_rmse_cm_head")},
+        "handles_within_2cm": float(np.mean([p["handle_error_cm"] <= 2.0 for p in parts])),
+        "handles_within_2cm_head": float(np.mean([p["handle_error_cm_head"] <= 2.0 for p in parts])),
         "own_code_keypoint_rmse_cm_median": med([p["own_code_keypoint_rmse_cm"] for p in parts
                                                  if "own_code_keypoint_rmse_cm" in p]),
         "fit_seconds_median": med([r["seconds"] for r in rows]),
@@ -138,6 +150,8 @@ def main() -> None:
     parser.add_argument("--handles", choices=("detector", "encoder", "none", "true"), default="detector")
     parser.add_argument("--detector", type=Path, help="default: MODEL/handle_detector")
     parser.add_argument("--baseline", type=Path, help="default: MODEL/baseline")
+    parser.add_argument("--pairing", choices=("order", "nearest"), default=FurnitureFitConfig.handle_pairing,
+                        help="how sighted handles pair with slots (FurnitureFitConfig.handle_pairing)")
     args = parser.parse_args()
     detector = baseline = None
     if args.handles == "detector":
@@ -149,7 +163,7 @@ def main() -> None:
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
         p.requires_grad_(False)
-    config = FurnitureFitConfig(steps=args.steps, starts=args.starts)
+    config = FurnitureFitConfig(steps=args.steps, starts=args.starts, handle_pairing=args.pairing)
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:

@@ -74,7 +74,8 @@ def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
         fitted.check_capture(capture)
         result, fit = infer_parts(fitted, capture, config, grid)
-        paths = np.stack([part_trajectory(fitted.model, fit.z, k, grid) for k in range(fitted.num_slots)])
+        paths = np.stack([part_trajectory(fitted.model, fit.z, k, grid, fit.shift[k])
+                          for k in range(fitted.num_slots)])
         confidence = None
         if fitted.confidence is not None:
             confidence = parts_confidence(fitted, fit, capture, capture.load_images())[0]

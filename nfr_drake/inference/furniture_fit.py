@@ -1,11 +1,14 @@
 """Fitting a furniture field (several articulation slots) to posed images, and what it gives.
 
 The networks stay frozen; z = [z_art (2 per slot), z_obj] moves by Adam on the image loss plus
-SRN's latent prior (`FurnitureFitConfig`). Starts: `starts` training codes (evenly spaced over the
-code table) with every slot shut and with every slot half open are scored by one forward pass on
-`lookup_rays` rays; the best `keep` are fitted together, and the lowest image loss wins. Each slot
-of the result has its q (its own z_art), the keypoint head's existence and type logits and its four
-keypoints; forward simulation sweeps one slot's q with the others held (`part_trajectory`).
+SRN's latent prior (`FurnitureFitConfig`), each slot's z_art reflected onto the upper half of its
+circle after every step (as `nfr_drake.inference.fit` does: the networks were trained there only,
+and a slot left below is rendered at another articulation than the q reported and swept).
+Starts: `starts` training codes (evenly spaced over the code table) with every slot shut and with
+every slot half open are scored by one forward pass on `lookup_rays` rays; the best `keep` are
+fitted together, and the lowest image loss wins. Each slot of the result has its q (its own
+z_art), the keypoint head's existence and type logits and its four keypoints; forward simulation
+sweeps one slot's q with the others held (`part_trajectory`).
 docs/NEURAL_FIELD.md, "Furniture: several parts".
 
 Handles seen by the 2D handle detector (`handles`, M points in O triangulated across the views,
@@ -13,9 +16,14 @@ Handles seen by the 2D handle detector (`handles`, M points in O triangulated ac
 has M fronts, so slots 0..M-1 exist (slot k is front k; `count_from_handles`); the starts are the
 training codes whose keypoint head lays its handles out as the sightings (`HandleTerm` on every
 training code shut and half open, then the image loss on the best `starts`); and the same term
-joins the loss of every step and the choice of the winner. The term matches the M sightings one
-to one with slots 0..M-1 (the assignment of least summed squared distance, redone at each step)
-and adds w log(1 + d^2 / s^2) per pair, averaged: robust as the closets' sighting term.
+joins the loss of every step and the choice of the winner. The term pairs the M sightings one
+to one with slots 0..M-1 (`handle_pairing`: "order", sighting k with slot k once the sightings
+are put in the fronts' canonical order, `sighting_order`; "nearest", the assignment of least
+summed squared distance to the head's handles, redone at each step) and adds
+w log(1 + d^2 / s^2) per pair, averaged: robust as the closets' sighting term. After
+the fit, each matched slot is translated onto its sighting (`snap_to_handles`): its keypoints and
+its swept path move rigidly by the sighting minus the head's handle, so the head gives the part's
+layout (hinge and goal about the handle, the way it moves) and the sighting where it is.
 """
 
 from __future__ import annotations
@@ -66,6 +74,12 @@ class FurnitureFitConfig:
     """With M >= 1 sighted handles, slots 0..M-1 exist and no others (else the head's logits)."""
     handle_detector: bool = True
     """Sight the handles with the model's 2D handle detector when it ships one (`infer_parts`)."""
+    handle_pairing: str = "order"
+    """How sightings pair with slots (module docstring): "order" or "nearest"."""
+    column_gap_m: float = 0.2
+    """`sighting_order`: handles closer than this in y share a column, m."""
+    snap_to_handles: bool = True
+    """Translate each slot matched with a sighted handle onto it (module docstring; `FurnitureFit.shift`)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -76,12 +90,16 @@ class FurnitureFitConfig:
                               "latent_weight >= 0")
         if self.handle_weight < 0 or self.handle_scale_m <= 0:
             raise ConfigError("FurnitureFitConfig: handle_weight >= 0, handle_scale_m > 0")
+        if self.handle_pairing not in ("order", "nearest") or self.column_gap_m < 0:
+            raise ConfigError("FurnitureFitConfig: handle_pairing is \"order\" or \"nearest\", "
+                              "column_gap_m >= 0")
 
 
 @dataclass
 class FurnitureFit:
     """The fitted code z (2 S + k,); per slot q (S,), exists bool (S,) (existence logit > 0),
-    types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`); image_loss
+    types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`), the head's
+    plus shift (S, 3) in O, m (a slot's translation onto its sighted handle; zero if none); image_loss
     (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
     in O the fit used (M = 0: none); the starts fitted together (`keep` of them): their final
     codes start_z (keep, 2 S + k) and image losses on the last step's rays start_losses (keep,);
@@ -92,6 +110,7 @@ class FurnitureFit:
     exists: np.ndarray
     types: np.ndarray
     keypoints: np.ndarray
+    shift: np.ndarray
     image_loss: float
     steps: int
     seconds: float
@@ -102,10 +121,11 @@ class FurnitureFit:
 
 class HandleTerm:
     """The handle term (module docstring) of codes against sighted handles p_O (M, 3) in O:
-    slots 0..M-1 of the keypoint head matched one to one with the sightings."""
+    slots 0..M-1 of the keypoint head paired one to one with the sightings, sighting k with slot
+    k (`in_order`) or by least summed squared distance."""
 
-    def __init__(self, model: NFRModel, handles_O, weight: float, scale_m: float):
-        self.model, self.weight, self.scale = model, weight, scale_m
+    def __init__(self, model: NFRModel, handles_O, weight: float, scale_m: float, in_order: bool = False):
+        self.model, self.weight, self.scale, self.in_order = model, weight, scale_m, in_order
         self.handles = torch.as_tensor(np.asarray(handles_O, np.float32).reshape(-1, 3))
         self.handle_index = SLOT_KEYPOINTS.index("handle")
 
@@ -117,6 +137,8 @@ class HandleTerm:
         S = self.model.config.num_slots
         slots = self.model.keypoints(z).view(len(z), S, len(SLOT_KEYPOINTS), 3)[:, :M, self.handle_index]
         d2 = ((slots[:, :, None] - self.handles.to(z)[None, None]) ** 2).sum(-1)  # (B, slot, sighting)
+        if self.in_order:
+            return self.weight * torch.log1p(d2.diagonal(dim1=1, dim2=2) / self.scale ** 2).mean(-1)
         cost = d2.detach().cpu().numpy()
         pairs = torch.tensor(np.array([linear_sum_assignment(c) for c in cost]), dtype=torch.long)
         matched = d2[torch.arange(len(z))[:, None], pairs[:, 0], pairs[:, 1]]
@@ -146,8 +168,12 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         raise ConfigError("fit_furniture needs a model with several articulation slots")
     t0 = time.perf_counter()
     generator = torch.Generator().manual_seed(config.seed)
-    handles = np.zeros((0, 3)) if handles_O is None else np.asarray(handles_O, float).reshape(-1, 3)[:S]
-    term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m)
+    handles = np.zeros((0, 3)) if handles_O is None else np.asarray(handles_O, float).reshape(-1, 3)
+    in_order = config.handle_pairing == "order"
+    if in_order:
+        handles = handles[sighting_order(handles, config.column_gap_m)]
+    handles = handles[:S]
+    term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
         with torch.no_grad():
             every = start_codes(codes.to(rays.rgb), S)
@@ -168,6 +194,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         optimiser.zero_grad(set_to_none=True)
         total.backward()
         optimiser.step()
+        with torch.no_grad():  # every slot's z_art on the upper half circle, where q lies
+            z[:, 1:2 * S:2].abs_()
     with torch.no_grad():
         best = int((per_code + term(z)).argmin())
         z_best = z[best].detach()
@@ -177,16 +205,64 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     exists = (logits[:, 0] > 0).cpu().numpy()
     if len(handles) and config.count_from_handles:
         exists = np.arange(S) < len(handles)
+    keypoints = keypoints.double().cpu().numpy()
+    shift = np.zeros((S, 3))
+    if config.snap_to_handles:
+        shift = handle_shift(keypoints[:, SLOT_KEYPOINTS.index("handle")], handles, in_order)
     return FurnitureFit(z_best, q.double().cpu().numpy(), exists,
-                        logits[:, 1:].argmax(-1).cpu().numpy(), keypoints.double().cpu().numpy(),
+                        logits[:, 1:].argmax(-1).cpu().numpy(), keypoints + shift[:, None], shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
+def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool = False) -> np.ndarray:
+    """Per slot, the translation (S, 3), m, that puts its handle (slot_handles (S, 3) in O) on the
+    sighted handle (handles (M, 3) in O, M <= S) paired with it as `HandleTerm` pairs them
+    (sighting k with slot k when `in_order`, else least summed squared distance); zero for the
+    other slots."""
+    shift = np.zeros_like(slot_handles)
+    M = len(handles)
+    if M:
+        d2 = ((slot_handles[:M, None] - handles[None]) ** 2).sum(-1)
+        slots, sights = (np.arange(M), np.arange(M)) if in_order else linear_sum_assignment(d2)
+        shift[slots] = handles[sights] - slot_handles[slots]
+    return shift
+
+
+def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03) -> np.ndarray:
+    """Indices (M,) that put handles (M, 3) in O, m, in the order of their fronts as far as the
+    handles tell it (the fronts' canonical order, `nfr_drake.objects.furniture.canonical_order`:
+    by panel left edge, then top edge): columns left to right (increasing y; handles less than
+    `column_gap_m` apart in y share one), in a column top to bottom, handles within `level_m` in
+    height left to right (a pair's doors, side by side drawers). A door's handle lies near its
+    free edge, not its left one, so some layouts come out in another order than the fronts'."""
+    if len(handles_O) == 0:
+        return np.zeros(0, int)
+    by_y = np.argsort(handles_O[:, 1], kind="stable")
+    columns = [[by_y[0]]]
+    for i in by_y[1:]:
+        if handles_O[i, 1] - handles_O[columns[-1][-1], 1] < column_gap_m:
+            columns[-1].append(i)
+        else:
+            columns.append([i])
+    order = []
+    for column in columns:
+        column = sorted(column, key=lambda j: -handles_O[j, 2])
+        for a in range(1, len(column)):  # insertion: a level neighbour further left goes first
+            b = a
+            while (b > 0 and abs(handles_O[column[b], 2] - handles_O[column[b - 1], 2]) < level_m
+                   and handles_O[column[b], 1] < handles_O[column[b - 1], 1]):
+                column[b - 1], column[b] = column[b], column[b - 1]
+                b -= 1
+        order += column
+    return np.array(order, int)
+
+
 @torch.no_grad()
-def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndarray) -> np.ndarray:
+def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndarray,
+                    shift: np.ndarray | None = None) -> np.ndarray:
     """Forward simulation of one part: slot `slot`'s keypoints (N, 4, 3) in O as its q sweeps
-    q_grid (N,), the other slots held at their q in z."""
+    q_grid (N,), the other slots held at their q in z; plus shift (3,), m (`FurnitureFit.shift`)."""
     S = model.config.num_slots
     z_art, z_obj = split_z(z, S)
     art = z_art.view(S, 2).expand(len(q_grid), S, 2).clone()
@@ -194,14 +270,14 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
     art[:, slot] = slots_q_to_z_art(qs[:, None], 1)
     codes = torch.cat([art.flatten(1), z_obj.expand(len(q_grid), -1)], -1)
     kp = model.keypoints(codes).view(len(q_grid), S, len(SLOT_KEYPOINTS), 3)
-    return kp[:, slot].double().cpu().numpy()
+    return kp[:, slot].double().cpu().numpy() + (0.0 if shift is None else np.asarray(shift))
 
 
 def part_json(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> dict:
     """Slot `slot` of a fit as a part (`slot_part`) at the fitted q, swept over q_grid (N,) with
     the others held."""
     return slot_part(slot, fit.types[slot], fit.q[slot], fit.keypoints[slot], q_grid,
-                     part_trajectory(model, fit.z, slot, q_grid))
+                     part_trajectory(model, fit.z, slot, q_grid, fit.shift[slot]))
 
 
 def parts_json(model: NFRModel, fit: FurnitureFit, q_grid: np.ndarray) -> list[dict]:

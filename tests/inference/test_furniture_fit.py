@@ -16,8 +16,10 @@ from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
     HandleTerm,
     fit_furniture,
+    handle_shift,
     part_trajectory,
     parts_json,
+    sighting_order,
 )
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRModel
@@ -52,6 +54,20 @@ def test_fit_gives_every_slot_and_moves_z(capture):
     assert set(parts[0]) == {"index", "type", "q", "keypoints", "trajectory"}
     assert parts[0]["type"] in PART_TYPES and list(parts[0]["keypoints"]) == list(SLOT_KEYPOINTS)
     assert np.asarray(parts[1]["trajectory"]["keypoints"]["handle"]).shape == (5, 3)
+
+
+def test_fitted_keypoints_lie_on_each_slots_swept_path(capture):
+    """Every slot's z_art ends on the upper half circle, so its keypoints at the fitted code are
+    its path's at the q reported (a slot left on the lower half was drawn 4 cm off its path)."""
+    torch.manual_seed(3)
+    model = NFRModel(TINY).eval().requires_grad_(False)
+    codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
+    config = FurnitureFitConfig(starts=3, keep=2, steps=20, rays_per_step=64, lookup_rays=64, lr=0.2)
+    fit = fit_furniture(model, observed_rays(capture), codes, config)
+    assert (fit.z[1:2 * S:2] >= 0).all()
+    for k in range(S):
+        np.testing.assert_allclose(part_trajectory(model, fit.z, k, fit.q[k:k + 1])[0], fit.keypoints[k],
+                                   atol=1e-5)
 
 
 def test_part_trajectory_sweeps_one_slot_and_holds_the_others():
@@ -101,12 +117,57 @@ def test_sighted_handles_give_the_part_count(capture):
     handles = np.array([[0.6, -0.3, 0.9], [0.6, 0.3, 0.9], [0.6, 0.0, 0.4]])
     fit = fit_furniture(model, observed_rays(capture), codes, config, handles)
     assert fit.exists.tolist() == [True] * 3 + [False] * (S - 3)
-    np.testing.assert_allclose(fit.handles, handles)
+    np.testing.assert_allclose(fit.handles, handles[[0, 2, 1]])  # in the fronts' order: by y
     plain = fit_furniture(model, observed_rays(capture), codes, config)
     off = fit_furniture(model, observed_rays(capture), codes, replace(config, count_from_handles=False),
                         handles)
     logits = model.slot_logits(off.z[None])[0, :, 0] > 0
     assert off.exists.tolist() == logits.tolist() and len(plain.handles) == 0
+
+
+def test_handle_shift_moves_each_matched_slot_onto_its_sighting():
+    """Slots 0..M-1 are matched one to one with the sightings by least squared distance (here
+    slot 0 <-> sighting 1, slot 1 <-> sighting 0); the other slots stay."""
+    slots = np.array([[0.5, -0.3, 0.9], [0.5, 0.3, 0.9], [0.5, 0.0, 0.3]])
+    sighted = np.array([[0.6, 0.25, 1.0], [0.55, -0.2, 0.85]])
+    shift = handle_shift(slots, sighted)
+    np.testing.assert_allclose((slots + shift)[:2], sighted[[1, 0]])
+    np.testing.assert_array_equal(shift[2], 0.0)
+    np.testing.assert_array_equal(handle_shift(slots, np.zeros((0, 3))), 0.0)
+
+
+def test_sighting_order_follows_the_fronts_canonical_order():
+    """Columns left to right (y), top to bottom within one, level handles left to right: a
+    drawer over a door pair (handles near the pair's middle), then a stack of two drawers."""
+    handles = np.array([[0.3, 0.45, 0.3],    # 4: right column, lower drawer
+                        [0.3, 0.05, 0.5],    # 2: right door of the pair
+                        [0.3, 0.0, 0.8],     # 0: drawer over the pair
+                        [0.3, 0.45, 0.6],    # 3: right column, upper drawer
+                        [0.3, -0.05, 0.51]])  # 1: left door (level with the right one)
+    assert sighting_order(handles, 0.2).tolist() == [2, 4, 1, 3, 0]
+    assert sighting_order(handles, 0.0).tolist()[:3] == [4, 2, 1]  # no columns: by y
+    assert sighting_order(np.zeros((0, 3)), 0.2).tolist() == []
+
+
+def test_fitted_parts_are_translated_onto_the_sighted_handles(capture):
+    """With sightings, each matched slot's handle lies on its sighting at the fitted q, and its
+    swept path is the head's moved by the same translation; `snap_to_handles` off: the head's."""
+    torch.manual_seed(0)
+    model = NFRModel(TINY).eval().requires_grad_(False)
+    codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
+    config = FurnitureFitConfig(starts=3, keep=2, steps=3, rays_per_step=64, lookup_rays=64)
+    handles = np.array([[0.6, -0.3, 0.9], [0.6, 0.3, 0.9]])
+    fit = fit_furniture(model, observed_rays(capture), codes, config, handles)
+    head = fit_furniture(model, observed_rays(capture), codes, replace(config, snap_to_handles=False),
+                         handles)
+    h = SLOT_KEYPOINTS.index("handle")
+    assert sorted(map(tuple, fit.keypoints[:2, h].round(9))) == sorted(map(tuple, handles))
+    np.testing.assert_allclose(fit.keypoints - fit.shift[:, None], head.keypoints, atol=1e-9)
+    assert (head.shift == 0).all() and (fit.shift[2:] == 0).all() and (fit.shift[:2] != 0).any()
+    grid = np.linspace(0, 1, 3)
+    part = parts_json(model, fit, grid)[1]
+    np.testing.assert_allclose(np.asarray(part["trajectory"]["keypoints"]["handle"]),
+                               part_trajectory(model, fit.z, 1, grid)[:, h] + fit.shift[1], atol=1e-9)
 
 
 def test_a_furniture_model_folder_loads_and_uses_its_handle_detector(furniture_model_folder, capture,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from nfr_drake.perception.handle_detector.model import HandleDetectorConfig
 from nfr_drake.perception.handle_detector.training import DetectorTrainConfig, train_detector
 
 
@@ -13,6 +14,7 @@ def train_detector_command(data: list[Path], out: Path,
                            batch: int = DetectorTrainConfig.images_per_batch,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
+                           channels: int = HandleDetectorConfig.channels,
                            threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
@@ -24,6 +26,7 @@ def train_detector_command(data: list[Path], out: Path,
         batch: crops per dataset per step.
         crop: crop size, px.
         lr: learning rate (cosine decay to 0).
+        channels: channels of every convolution (the network's width).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a killed run from OUT/checkpoint/.
         allow_incomplete: train on the objects on disk when a dataset misses some.
@@ -31,7 +34,8 @@ def train_detector_command(data: list[Path], out: Path,
     config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
                                  threads=threads)
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
-    record = train_detector(list(data), out, config, resume=resume, command=command,
+    record = train_detector(list(data), out, config, HandleDetectorConfig(channels=channels),
+                            resume=resume, command=command,
                             allow_incomplete=allow_incomplete)
     print(f"handle detector written to {out}: held-out handle IoU, offset error "
           + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
