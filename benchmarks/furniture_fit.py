@@ -7,8 +7,9 @@ Per capture: whether the part count is right (the slots the head says exist agai
 fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
 keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
 handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time; the
-keypoint, handle and trajectory figures also as the head gives them before its slots are moved
-onto the sighted handles (`*_head`: `FurnitureFitConfig.snap_to_handles`), from the same fit.
+keypoint, handle and trajectory figures also as the head gives them (`*_head`: before its slots
+are moved onto the sighted handles, `FurnitureFitConfig.snap_to_handles`, and the head's sweep
+rather than `slot_path`, which slides drawers straight), from the same fit.
 Handles (`--handles`): "detector", those triangulated from the 2D handle detector in `--detector`
 (default MODEL/handle_detector) join the fit (part count, starts, handle term:
 `nfr_drake.inference.furniture_fit`); "encoder", the handles of the slots the encoder baseline in
@@ -40,7 +41,7 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.inference.fit import observed_rays
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture, part_trajectory
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, fit_furniture, part_trajectory, slot_path
 from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, trajectory_rmse_cm
 from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
@@ -90,7 +91,7 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
             "keypoint_rmse_cm_head": keypoint_rmse_cm(pred - fit.shift[k], true),
             "handle_error_cm": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]], true_handle),
             "handle_error_cm_head": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]] - fit.shift[k], true_handle),
-            "trajectory_rmse_cm": trajectory_rmse_cm(head_path + fit.shift[k], true_path),
+            "trajectory_rmse_cm": trajectory_rmse_cm(slot_path(model, fit, k, traj_q)[:, HANDLE], true_path),
             "trajectory_rmse_cm_head": trajectory_rmse_cm(head_path, true_path),
             **({} if own is None else {"own_code_keypoint_rmse_cm": keypoint_rmse_cm(own[k, pick], true)})})
     return {"capture": capture_dir.name, "fronts": len(gt["parts"]),

@@ -68,14 +68,13 @@ def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     `FittedModel`): a `PartsPrediction` with every slot swept over the q grid, the others held,
     and every slot's confidence (refused below the calibration's threshold)."""
     from nfr_drake.inference.confidence import refusal
-    from nfr_drake.inference.furniture_fit import part_trajectory
+    from nfr_drake.inference.furniture_fit import slot_path
     from nfr_drake.inference.infer import infer_parts, parts_confidence
 
     def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
         fitted.check_capture(capture)
         result, fit = infer_parts(fitted, capture, config, grid)
-        paths = np.stack([part_trajectory(fitted.model, fit.z, k, grid, fit.shift[k])
-                          for k in range(fitted.num_slots)])
+        paths = np.stack([slot_path(fitted.model, fit, k, grid) for k in range(fitted.num_slots)])
         confidence = None
         if fitted.confidence is not None:
             confidence = parts_confidence(fitted, fit, capture, capture.load_images())[0]

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS, slot_part
+from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_part
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
@@ -273,11 +273,29 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
     return kp[:, slot].double().cpu().numpy() + (0.0 if shift is None else np.asarray(shift))
 
 
+def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> np.ndarray:
+    """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them: the head's
+    sweep with the others held (`part_trajectory`) moved by the slot's shift; a slot the head
+    types a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md), its
+    handle and goal from where the fit put them at its q by the head's travel along x over
+    [0, 1] (at least 0): the head's sweep of a drawer bends sideways and stops short near the end
+    of its travel, which jams a drawer pulled along it."""
+    path = part_trajectory(model, fit.z, slot, q_grid, fit.shift[slot])
+    if PART_TYPES[int(fit.types[slot])] == "drawer":
+        handle, goal = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
+        ends = part_trajectory(model, fit.z, slot, np.array([0.0, 1.0]))[:, handle, 0]
+        travel = max(float(ends[1] - ends[0]), 0.0)
+        moving = [handle, goal]
+        path[:, moving] = fit.keypoints[slot, moving][None].copy()
+        path[:, moving, 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
+    return path
+
+
 def part_json(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> dict:
-    """Slot `slot` of a fit as a part (`slot_part`) at the fitted q, swept over q_grid (N,) with
-    the others held."""
+    """Slot `slot` of a fit as a part (`slot_part`) at the fitted q, its path `slot_path` over
+    q_grid (N,)."""
     return slot_part(slot, fit.types[slot], fit.q[slot], fit.keypoints[slot], q_grid,
-                     part_trajectory(model, fit.z, slot, q_grid, fit.shift[slot]))
+                     slot_path(model, fit, slot, q_grid))
 
 
 def parts_json(model: NFRModel, fit: FurnitureFit, q_grid: np.ndarray) -> list[dict]:

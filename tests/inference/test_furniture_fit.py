@@ -20,6 +20,7 @@ from nfr_drake.inference.furniture_fit import (
     part_trajectory,
     parts_json,
     sighting_order,
+    slot_path,
 )
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRModel
@@ -68,6 +69,27 @@ def test_fitted_keypoints_lie_on_each_slots_swept_path(capture):
     for k in range(S):
         np.testing.assert_allclose(part_trajectory(model, fit.z, k, fit.q[k:k + 1])[0], fit.keypoints[k],
                                    atol=1e-5)
+
+
+def test_a_drawer_slot_slides_straight_along_x_by_the_heads_travel(capture):
+    """A slot typed drawer: handle and goal move along +x of O only, through where the fit put
+    them at its q, by the head's x travel over [0, 1]; a door slot keeps the head's sweep."""
+    torch.manual_seed(0)
+    model = NFRModel(TINY).eval().requires_grad_(False)
+    codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
+    config = FurnitureFitConfig(starts=3, keep=2, steps=3, rays_per_step=64, lookup_rays=64)
+    fit = fit_furniture(model, observed_rays(capture), codes, config, np.array([[0.6, -0.3, 0.9]]))
+    grid = np.linspace(0, 1, 5)
+    h, g = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
+    fit.types[:2] = [PART_TYPES.index("drawer"), PART_TYPES.index("door")]
+    ends = part_trajectory(model, fit.z, 0, np.array([0.0, 1.0]))[:, h, 0]
+    path = slot_path(model, fit, 0, grid)
+    for i in (h, g):
+        np.testing.assert_allclose(path[:, i, 1:], np.repeat(fit.keypoints[0, i, 1:][None], 5, 0))
+        np.testing.assert_allclose(path[:, i, 0], fit.keypoints[0, i, 0]
+                                   + (grid - fit.q[0]) * max(ends[1] - ends[0], 0.0))
+    np.testing.assert_allclose(slot_path(model, fit, 1, grid),
+                               part_trajectory(model, fit.z, 1, grid, fit.shift[1]))
 
 
 def test_part_trajectory_sweeps_one_slot_and_holds_the_others():
