@@ -9,7 +9,8 @@ averaged over views, and a head predicts, per part slot (one for closets and dra
 prismatic categories the joint travel at q = 1 (m), which the straight-pull assumption needs to
 extrapolate keypoints to other q (`extrapolate_keypoints`); for furniture whether the slot holds
 a front and whether it is a door or a drawer, the keypoints those of the field's slots
-(`SLOT_KEYPOINTS`: a drawer's axis points give its pull line and travel, `slot_trajectory`).
+(`SLOT_KEYPOINTS`: a drawer's axis points give its pull line and travel,
+`nfr_drake.data.slot_dataset.slot_trajectory`).
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from torch import nn
 
 from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
 from nfr_drake.errors import ConfigError
-from nfr_drake.objects.articulated import axis_angle_rotation
-from nfr_drake.objects.fronts import DOOR_OPENING
 
 JOINT_TYPES = ("revolute", "prismatic", "per_slot")
 """A baseline's joint types: closets, drawers, and furniture (each slot's predicted type)."""
@@ -161,34 +160,4 @@ def extrapolate_keypoints(keypoint_names: tuple[str, ...], joint_type: str, keyp
     for i, angle in enumerate(sign * dq * np.pi / 2):
         c, s = np.cos(angle), np.sin(angle)
         out[i, h, :2] = hinge[:2] + [c * d[0] - s * d[1], s * d[0] + c * d[1]]
-    return out
-
-
-def slot_trajectory(part_type: str, keypoints: np.ndarray, q: float, q_grid: np.ndarray) -> np.ndarray:
-    """A furniture slot's keypoints at other articulations from one observed state, by explicit
-    geometric assumption, the one-part baseline's (`extrapolate_keypoints`) per slot.
-
-    A door turns about the line through its axis points by `DOOR_OPENING` over q in [0, 1], its
-    free edge (the side of the goal, which lies behind the door) swinging out of the carcass (+x
-    of O); only the handle moves. A drawer's handle and goal move along its axis points' line
-    (shut handle -> fully open handle) by their difference over [0, 1].
-
-    Args:
-        part_type: "door" or "drawer" (`PART_TYPES`).
-        keypoints: (4, 3) at articulation q in O, m, `SLOT_KEYPOINTS` order.
-        q_grid: (N,) articulations to predict.
-    Returns: (N, 4, 3).
-    """
-    handle, goal, axis_0, axis_1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
-    kp = np.asarray(keypoints, float)
-    out = np.repeat(kp[None], len(q_grid), axis=0)
-    dq = np.asarray(q_grid, float) - q
-    if part_type == "drawer":
-        out[:, [handle, goal]] += (dq[:, None] * (kp[axis_1] - kp[axis_0]))[:, None]
-        return out
-    axis = kp[axis_1] - kp[axis_0]
-    axis /= max(np.linalg.norm(axis), 1e-9)
-    sign = 1.0 if np.cross(axis, kp[goal] - kp[axis_0])[0] >= 0 else -1.0
-    for i, angle in enumerate(sign * dq * DOOR_OPENING):
-        out[i, handle] = kp[axis_0] + axis_angle_rotation(axis, angle) @ (kp[handle] - kp[axis_0])
     return out

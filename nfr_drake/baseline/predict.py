@@ -8,9 +8,9 @@ import cv2
 import numpy as np
 import torch
 
-from nfr_drake.baseline.model import ImageEncoderBaseline, extrapolate_keypoints, slot_trajectory
+from nfr_drake.baseline.model import ImageEncoderBaseline, extrapolate_keypoints
 from nfr_drake.data.capture import CaptureSet
-from nfr_drake.data.slot_dataset import PART_TYPES, slot_part
+from nfr_drake.data.slot_dataset import PART_TYPES, slot_part, slot_trajectory
 
 
 @dataclass

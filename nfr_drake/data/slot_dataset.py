@@ -19,7 +19,8 @@ import torch
 from nfr_drake.data.dataset import DEPTH_SCALE, RenderedDataset
 from nfr_drake.data.shards import PART_CATEGORIES, read_spec
 from nfr_drake.errors import DatasetError
-from nfr_drake.objects.articulated import MAX_FRONTS
+from nfr_drake.objects.articulated import MAX_FRONTS, axis_angle_rotation
+from nfr_drake.objects.fronts import DOOR_OPENING
 
 SLOT_KEYPOINTS = ("handle", "goal", "axis_0", "axis_1")
 """Keypoints of one slot, in this order."""
@@ -43,6 +44,37 @@ def slot_part(slot: int, part_type: int, q: float, keypoints: np.ndarray, q_grid
             "trajectory": {"q": np.asarray(q_grid, float).tolist(),
                            "keypoints": {n: np.asarray(path[:, i], float).tolist()
                                          for i, n in enumerate(SLOT_KEYPOINTS)}}}
+
+
+def slot_trajectory(part_type: str, keypoints: np.ndarray, q: float, q_grid: np.ndarray) -> np.ndarray:
+    """A furniture slot's keypoints at other articulations from one observed state, by explicit
+    geometric assumption, the one-part baseline's (`nfr_drake.baseline.model.extrapolate_keypoints`) per
+    slot; the furniture fit turns its doors so too (`nfr_drake.inference.furniture_fit.slot_path`).
+
+    A door turns about the line through its axis points by `DOOR_OPENING` over q in [0, 1], its
+    free edge (the side of the goal, which lies behind the door) swinging out of the carcass (+x
+    of O); only the handle moves. A drawer's handle and goal move along its axis points' line
+    (shut handle -> fully open handle) by their difference over [0, 1].
+
+    Args:
+        part_type: "door" or "drawer" (`PART_TYPES`).
+        keypoints: (4, 3) at articulation q in O, m, `SLOT_KEYPOINTS` order.
+        q_grid: (N,) articulations to predict.
+    Returns: (N, 4, 3).
+    """
+    handle, goal, axis_0, axis_1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
+    kp = np.asarray(keypoints, float)
+    out = np.repeat(kp[None], len(q_grid), axis=0)
+    dq = np.asarray(q_grid, float) - q
+    if part_type == "drawer":
+        out[:, [handle, goal]] += (dq[:, None] * (kp[axis_1] - kp[axis_0]))[:, None]
+        return out
+    axis = kp[axis_1] - kp[axis_0]
+    axis /= max(np.linalg.norm(axis), 1e-9)
+    sign = 1.0 if np.cross(axis, kp[goal] - kp[axis_0])[0] >= 0 else -1.0
+    for i, angle in enumerate(sign * dq * DOOR_OPENING):
+        out[i, handle] = kp[axis_0] + axis_angle_rotation(axis, angle) @ (kp[handle] - kp[axis_0])
+    return out
 
 
 class SlotTargets(NamedTuple):

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from scipy.optimize import linear_sum_assignment
 
-from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_part
+from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_part, slot_trajectory
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
@@ -274,20 +274,22 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
 
 
 def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> np.ndarray:
-    """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them: the head's
-    sweep with the others held (`part_trajectory`) moved by the slot's shift; a slot the head
-    types a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md), its
-    handle and goal from where the fit put them at its q by the head's travel along x over
-    [0, 1] (at least 0): the head's sweep of a drawer bends sideways and stops short near the end
-    of its travel, which jams a drawer pulled along it."""
-    path = part_trajectory(model, fit.z, slot, q_grid, fit.shift[slot])
+    """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them, from where
+    the fit put them at its q (`FurnitureFit.keypoints`), moved as a rigid front on the joint its
+    type names: a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md),
+    its handle and goal by the head's travel along x between q = 0 and 1 (at least 0); a door's
+    handle turns about the line through its hinge points, 90 degrees over q in [0, 1], outward
+    (`slot_trajectory`). The head's own sweep (`part_trajectory`) bends a drawer sideways and
+    stops it short near the end of its travel, which jams a drawer pulled along it, and turns a
+    door by other angles than its q says (docs/FURNITURE.md)."""
     if PART_TYPES[int(fit.types[slot])] == "drawer":
+        path = np.repeat(fit.keypoints[slot][None], len(q_grid), axis=0)
         handle, goal = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
         ends = part_trajectory(model, fit.z, slot, np.array([0.0, 1.0]))[:, handle, 0]
         travel = max(float(ends[1] - ends[0]), 0.0)
-        moving = [handle, goal]
-        path[:, moving] = fit.keypoints[slot, moving][None].copy()
-        path[:, moving, 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
+        path[:, [handle, goal], 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
+    else:
+        path = slot_trajectory("door", fit.keypoints[slot], fit.q[slot], q_grid)
     return path
 
 

@@ -11,7 +11,6 @@ from nfr_drake.baseline.model import (
     BaselineConfig,
     ImageEncoderBaseline,
     extrapolate_keypoints,
-    slot_trajectory,
 )
 from nfr_drake.baseline.predict import predict_capture
 from nfr_drake.baseline.train import (
@@ -25,7 +24,7 @@ from nfr_drake.data.captures import captures_command
 from nfr_drake.data.generate import generate_dataset
 from nfr_drake.data.object_records import front_record
 from nfr_drake.data.shards import DatasetSpec
-from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS, _part_keypoints
+from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS, _part_keypoints, slot_trajectory
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.eval.command import eval_command
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object

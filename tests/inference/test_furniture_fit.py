@@ -9,7 +9,7 @@ import torch
 
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.captures import captures_command
-from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
+from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_trajectory
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import observed_rays
 from nfr_drake.inference.furniture_fit import (
@@ -73,7 +73,8 @@ def test_fitted_keypoints_lie_on_each_slots_swept_path(capture):
 
 def test_a_drawer_slot_slides_straight_along_x_by_the_heads_travel(capture):
     """A slot typed drawer: handle and goal move along +x of O only, through where the fit put
-    them at its q, by the head's x travel over [0, 1]; a door slot keeps the head's sweep."""
+    them at its q, by the head's x travel over [0, 1]; a door slot turns about its hinge points
+    (`slot_trajectory`) from there."""
     torch.manual_seed(0)
     model = NFRModel(TINY).eval().requires_grad_(False)
     codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
@@ -89,7 +90,7 @@ def test_a_drawer_slot_slides_straight_along_x_by_the_heads_travel(capture):
         np.testing.assert_allclose(path[:, i, 0], fit.keypoints[0, i, 0]
                                    + (grid - fit.q[0]) * max(ends[1] - ends[0], 0.0))
     np.testing.assert_allclose(slot_path(model, fit, 1, grid),
-                               part_trajectory(model, fit.z, 1, grid, fit.shift[1]))
+                               slot_trajectory("door", fit.keypoints[1], fit.q[1], grid))
 
 
 def test_part_trajectory_sweeps_one_slot_and_holds_the_others():
@@ -172,8 +173,8 @@ def test_sighting_order_follows_the_fronts_canonical_order():
 
 
 def test_fitted_parts_are_translated_onto_the_sighted_handles(capture):
-    """With sightings, each matched slot's handle lies on its sighting at the fitted q, and its
-    swept path is the head's moved by the same translation; `snap_to_handles` off: the head's."""
+    """With sightings, each matched slot's handle lies on its sighting at the fitted q, and so
+    does its path there; `snap_to_handles` off: the head's keypoints."""
     torch.manual_seed(0)
     model = NFRModel(TINY).eval().requires_grad_(False)
     codes = torch.randn(5, TINY.latent_obj_dim) * 0.1
@@ -189,7 +190,10 @@ def test_fitted_parts_are_translated_onto_the_sighted_handles(capture):
     grid = np.linspace(0, 1, 3)
     part = parts_json(model, fit, grid)[1]
     np.testing.assert_allclose(np.asarray(part["trajectory"]["keypoints"]["handle"]),
-                               part_trajectory(model, fit.z, 1, grid)[:, h] + fit.shift[1], atol=1e-9)
+                               slot_path(model, fit, 1, grid)[:, h], atol=1e-9)
+    for k in (0, 1):  # each path passes through its sighting at the fitted q
+        np.testing.assert_allclose(slot_path(model, fit, k, fit.q[k:k + 1])[0, h], fit.keypoints[k, h],
+                                   atol=1e-9)
 
 
 def test_a_furniture_model_folder_loads_and_uses_its_handle_detector(furniture_model_folder, capture,
