@@ -277,7 +277,8 @@ def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray)
     """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them, from where
     the fit put them at its q (`FurnitureFit.keypoints`), moved as a rigid front on the joint its
     type names: a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md),
-    its handle and goal by the head's travel along x between q = 0 and 1 (at least 0); a door's
+    its handle and goal by the head's travel along x between q = 0 and 1 (where that is not
+    forward, the length of the head's displacement: a drawer's path is never degenerate); a door's
     handle turns about the line through its hinge points, 90 degrees over q in [0, 1], outward
     (`slot_trajectory`). The head's own sweep (`part_trajectory`) bends a drawer sideways and
     stops it short near the end of its travel, which jams a drawer pulled along it, and turns a
@@ -285,8 +286,10 @@ def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray)
     if PART_TYPES[int(fit.types[slot])] == "drawer":
         path = np.repeat(fit.keypoints[slot][None], len(q_grid), axis=0)
         handle, goal = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
-        ends = part_trajectory(model, fit.z, slot, np.array([0.0, 1.0]))[:, handle, 0]
-        travel = max(float(ends[1] - ends[0]), 0.0)
+        ends = part_trajectory(model, fit.z, slot, np.array([0.0, 1.0]))[:, handle]
+        travel = float(ends[1, 0] - ends[0, 0])
+        if travel <= 0.0:  # a head that does not pull this drawer out: its displacement's length
+            travel = float(np.linalg.norm(ends[1] - ends[0]))
         path[:, [handle, goal], 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
     else:
         path = slot_trajectory("door", fit.keypoints[slot], fit.q[slot], q_grid)
