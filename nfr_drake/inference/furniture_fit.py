@@ -80,6 +80,9 @@ class FurnitureFitConfig:
     """`sighting_order`: handles closer than this in y share a column, m."""
     snap_to_handles: bool = True
     """Translate each slot matched with a sighted handle onto it (module docstring; `FurnitureFit.shift`)."""
+    pair_gap_m: float = 0.25
+    """`pair_hinges`: a door's sighted handle with another level one closer than this in y is one
+    of a pair, hinged on the side away from it, m (0: the head's hinge side always)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -209,8 +212,9 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     shift = np.zeros((S, 3))
     if config.snap_to_handles:
         shift = handle_shift(keypoints[:, SLOT_KEYPOINTS.index("handle")], handles, in_order)
-    return FurnitureFit(z_best, q.double().cpu().numpy(), exists,
-                        logits[:, 1:].argmax(-1).cpu().numpy(), keypoints + shift[:, None], shift,
+    types = logits[:, 1:].argmax(-1).cpu().numpy()
+    placed = pair_hinges(keypoints + shift[:, None], types, len(handles), config.pair_gap_m)
+    return FurnitureFit(z_best, q.double().cpu().numpy(), exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
@@ -227,6 +231,33 @@ def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool =
         slots, sights = (np.arange(M), np.arange(M)) if in_order else linear_sum_assignment(d2)
         shift[slots] = handles[sights] - slot_handles[slots]
     return shift
+
+
+def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap_m: float,
+                level_m: float = 0.05) -> np.ndarray:
+    """Slot keypoints (S, 4, 3) in O with the hinge of each door of a pair on its outer side: a
+    slot k < `sighted` (its handle a sighting) typed door whose handle has another sighted handle
+    within `level_m` in height and `pair_gap_m` in y is one of a pair, whose doors hinge on the
+    edges away from each other (their handles near where they meet); where the head puts its
+    hinge on the neighbour's side, its hinge points and goal are mirrored in y about its handle
+    (`benchmarks/handle_layout.py` measures the rule on generated pieces); the other doors keep
+    the head's side."""
+    out = keypoints.copy()
+    h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
+    handles = keypoints[:sighted, h]
+    for k in range(min(sighted, len(keypoints))):
+        if PART_TYPES[int(types[k])] != "door":
+            continue
+        dy, dz = handles[:, 1] - handles[k, 1], handles[:, 2] - handles[k, 2]
+        near = np.flatnonzero((np.abs(dz) < level_m) & (np.abs(dy) < pair_gap_m) & (np.arange(sighted) != k))
+        if near.size == 0:
+            continue
+        toward = np.sign(dy[near[np.argmin(np.abs(dy[near]))]])
+        hinge_y = keypoints[k, [a0, a1], 1].mean()
+        if np.sign(hinge_y - handles[k, 1]) == toward:
+            for i in (g, a0, a1):
+                out[k, i, 1] = 2.0 * handles[k, 1] - keypoints[k, i, 1]
+    return out
 
 
 def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03) -> np.ndarray:

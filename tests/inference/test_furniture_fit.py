@@ -17,6 +17,7 @@ from nfr_drake.inference.furniture_fit import (
     HandleTerm,
     fit_furniture,
     handle_shift,
+    pair_hinges,
     part_trajectory,
     parts_json,
     sighting_order,
@@ -171,6 +172,25 @@ def test_sighting_order_follows_the_fronts_canonical_order():
     assert sighting_order(handles, 0.2).tolist() == [2, 4, 1, 3, 0]
     assert sighting_order(handles, 0.0).tolist()[:3] == [4, 2, 1]  # no columns: by y
     assert sighting_order(np.zeros((0, 3)), 0.2).tolist() == []
+
+
+def test_the_doors_of_a_pair_hinge_on_their_outer_sides():
+    """Two level door handles 10 cm apart: each door's hinge (and goal) is put on the side away
+    from the other handle, mirrored about its own handle; a lone door, a drawer and a slot
+    without a sighting keep the head's."""
+    def door(handle_y, hinge_y, z=0.9):
+        return [[0.3, handle_y, z], [0.0, (handle_y + hinge_y) / 2, 0.1], [0.3, hinge_y, 1.6],
+                [0.3, hinge_y, 0.1]]
+    keypoints = np.array([door(-0.05, 0.3),     # left door of a pair, hinged toward its neighbour
+                          door(0.05, 0.4),      # right door, right already
+                          door(0.8, 0.4),       # a lone door further right
+                          door(-0.04, 0.3, 0.5),  # a drawer below (type), not level anyway
+                          door(0.15, 0.5)])     # level and near, but not sighted
+    types = np.array([PART_TYPES.index(t) for t in ("door", "door", "door", "drawer", "door")])
+    out = pair_hinges(keypoints, types, 4, 0.25)
+    np.testing.assert_allclose(out[0, 1:, 1], [-0.225, -0.4, -0.4])
+    np.testing.assert_allclose(out[1:], keypoints[1:])
+    np.testing.assert_allclose(pair_hinges(keypoints, types, 4, 0.0), keypoints)
 
 
 def test_fitted_parts_are_translated_onto_the_sighted_handles(capture):

@@ -1,0 +1,76 @@
+"""What the furniture fit reads from the handles alone: the fronts' order and the doors of a pair.
+
+The furniture field's slot k is front k in canonical order (by panel left edge, then top edge;
+docs/FURNITURE.md), and the fit pairs sighted handles with slots by putting them in the order
+their fronts most likely have (`nfr_drake.inference.furniture_fit.sighting_order`). This runs it
+on the true shut handles of generated pieces, shuffled, and counts the fronts that get their own
+index and the pieces whose fronts all do, for several column gaps (0: every handle its own
+column). Then the doors of a pair (`pair_hinges`: a door's handle with another level one within
+the pair gap): how many doors are such, and for how many the hinge lies on the side away from
+that handle, as the fit then puts it. No rendering: a few seconds.
+
+    python benchmarks/handle_layout.py [--pieces 400] [--seed 123] [--gaps 0 0.1 0.2 0.3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+from datetime import date
+
+import numpy as np
+
+from nfr_drake.data.slot_dataset import PART_TYPES
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_hinges, sighting_order
+from nfr_drake.objects import sample_object
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pieces", type=int, default=400)
+    parser.add_argument("--seed", type=int, default=123)
+    parser.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.3])
+    parser.add_argument("--pair-gap", type=float, default=FurnitureFitConfig.pair_gap_m)
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    pieces = [sample_object("furniture", rng).front_keypoints(0.0) for _ in range(args.pieces)]
+    handles = [np.array([k["handle"] for k in kps]) for kps in pieces]
+    print(f"{date.today()}, {platform.machine()}, {args.pieces} pieces of seed {args.seed}, "
+          f"{sum(map(len, handles))} fronts")
+    print("| column gap (m) | fronts given their index | pieces with every front right |")
+    print("|---|---|---|")
+    for gap in args.gaps:
+        right = []
+        for h in handles:
+            shuffled = rng.permutation(len(h))
+            right.append(shuffled[sighting_order(h[shuffled], gap)] == np.arange(len(h)))
+        fronts, whole = np.mean(np.concatenate(right)), np.mean([r.all() for r in right])
+        print(f"| {gap:.2f} | {fronts:.1%} | {whole:.1%} |")
+    # pair_hinges on every piece's true slot keypoints, and with every door's hinge mirrored
+    moved = fixed = doors = 0
+    for kps in pieces:
+        keypoints, types = slot_keypoints(kps)
+        is_door = types == PART_TYPES.index("door")
+        doors += int(is_door.sum())
+        moved += int((pair_hinges(keypoints, types, len(kps), args.pair_gap) != keypoints).any((1, 2)).sum())
+        wrong = keypoints.copy()
+        wrong[is_door, 1:, 1] = 2.0 * keypoints[is_door, :1, 1] - keypoints[is_door, 1:, 1]
+        put_right = np.isclose(pair_hinges(wrong, types, len(kps), args.pair_gap), keypoints).all((1, 2))
+        fixed += int(put_right[is_door].sum())
+    print(f"doors {doors}: with every hinge on the wrong side, {fixed} ({fixed / doors:.1%}) put right "
+          f"by pair_hinges (pair gap {args.pair_gap} m); with every hinge right, {moved} moved")
+
+
+def slot_keypoints(kps: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """One piece's fronts as slot keypoints (F, 4, 3) in `SLOT_KEYPOINTS` order (a drawer's axis
+    points at its handle: not used here) and types (F,) indexing `PART_TYPES`."""
+    rows, types = [], []
+    for kp in kps:
+        door = "hinge_top" in kp
+        rows.append([kp["handle"], kp["goal"], kp["hinge_top"] if door else kp["handle"],
+                     kp["hinge_bottom"] if door else kp["handle"]])
+        types.append(PART_TYPES.index("door" if door else "drawer"))
+    return np.array(rows, float), np.array(types)
+
+if __name__ == "__main__":
+    main()
