@@ -23,7 +23,9 @@ summed squared distance to the head's handles, redone at each step) and adds
 w log(1 + d^2 / s^2) per pair, averaged: robust as the closets' sighting term. After
 the fit, each matched slot is translated onto its sighting (`snap_to_handles`): its keypoints and
 its swept path move rigidly by the sighting minus the head's handle, so the head gives the part's
-layout (hinge and goal about the handle, the way it moves) and the sighting where it is.
+layout (hinge and goal about the handle, the way it moves) and the sighting where it is; the doors
+of a pair are hinged on their outer sides (`pair_hinges`), and each part moves as a rigid front
+on its joint (`slot_path`).
 """
 
 from __future__ import annotations
@@ -93,16 +95,17 @@ class FurnitureFitConfig:
                               "latent_weight >= 0")
         if self.handle_weight < 0 or self.handle_scale_m <= 0:
             raise ConfigError("FurnitureFitConfig: handle_weight >= 0, handle_scale_m > 0")
-        if self.handle_pairing not in ("order", "nearest") or self.column_gap_m < 0:
+        if self.handle_pairing not in ("order", "nearest") or min(self.column_gap_m, self.pair_gap_m) < 0:
             raise ConfigError("FurnitureFitConfig: handle_pairing is \"order\" or \"nearest\", "
-                              "column_gap_m >= 0")
+                              "column_gap_m and pair_gap_m >= 0")
 
 
 @dataclass
 class FurnitureFit:
     """The fitted code z (2 S + k,); per slot q (S,), exists bool (S,) (existence logit > 0),
-    types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`), the head's
-    plus shift (S, 3) in O, m (a slot's translation onto its sighted handle; zero if none); image_loss
+    types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`): the head's
+    moved by shift (S, 3) in O, m (a slot's translation onto its sighted handle; zero if none),
+    a pair's doors hinged outward (`pair_hinges`); image_loss
     (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
     in O the fit used (M = 0: none); the starts fitted together (`keep` of them): their final
     codes start_z (keep, 2 S + k) and image losses on the last step's rays start_losses (keep,);
@@ -290,10 +293,10 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
 
 
 @torch.no_grad()
-def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndarray,
-                    shift: np.ndarray | None = None) -> np.ndarray:
-    """Forward simulation of one part: slot `slot`'s keypoints (N, 4, 3) in O as its q sweeps
-    q_grid (N,), the other slots held at their q in z; plus shift (3,), m (`FurnitureFit.shift`)."""
+def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndarray) -> np.ndarray:
+    """Forward simulation of one part by the keypoint head: slot `slot`'s keypoints (N, 4, 3) in O
+    as its q sweeps q_grid (N,), the other slots held at their q in z (what the fit gives:
+    `slot_path`)."""
     S = model.config.num_slots
     z_art, z_obj = split_z(z, S)
     art = z_art.view(S, 2).expand(len(q_grid), S, 2).clone()
@@ -301,7 +304,7 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
     art[:, slot] = slots_q_to_z_art(qs[:, None], 1)
     codes = torch.cat([art.flatten(1), z_obj.expand(len(q_grid), -1)], -1)
     kp = model.keypoints(codes).view(len(q_grid), S, len(SLOT_KEYPOINTS), 3)
-    return kp[:, slot].double().cpu().numpy() + (0.0 if shift is None else np.asarray(shift))
+    return kp[:, slot].double().cpu().numpy()
 
 
 def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> np.ndarray:

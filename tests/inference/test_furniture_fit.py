@@ -273,3 +273,9 @@ def test_furniture_handles_are_sighted_only_inside_the_kept_pixels(capture, monk
     assert (inside[~region] == 0).all() and inside[h // 2, w // 2] == np.float32(0.9)
     assert inside[h // 4, w // 2] == 0  # the region's edge
     assert (everywhere == np.float32(0.9)).all()
+
+
+@pytest.mark.parametrize("bad", [{"handle_pairing": "random"}, {"column_gap_m": -0.1}, {"pair_gap_m": -0.1}])
+def test_the_handle_options_are_checked(bad):
+    with pytest.raises(ConfigError, match="handle_pairing"):
+        FurnitureFitConfig(**bad)
