@@ -229,9 +229,10 @@ def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool =
     other slots."""
     shift = np.zeros_like(slot_handles)
     M = len(handles)
-    if M:
-        d2 = ((slot_handles[:M, None] - handles[None]) ** 2).sum(-1)
-        slots, sights = (np.arange(M), np.arange(M)) if in_order else linear_sum_assignment(d2)
+    if in_order:
+        shift[:M] = handles - slot_handles[:M]
+    elif M:
+        slots, sights = linear_sum_assignment(((slot_handles[:M, None] - handles[None]) ** 2).sum(-1))
         shift[slots] = handles[sights] - slot_handles[slots]
     return shift
 

@@ -484,8 +484,9 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
         confidence={"per_view": per_view}, parts=parts,
         extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings,
                "handles": _handles_json(fitted, config, handles)})
-    result = result.with_part({**part_json(fitted.model, fit, chosen, q_grid),
-                               "confidence": confidence[chosen]})
+    chosen_part = next((p for p in parts if p["index"] == chosen), None)
+    result = result.with_part(chosen_part or {**part_json(fitted.model, fit, chosen, q_grid),
+                                              "confidence": confidence[chosen]})
     result.seconds = time.perf_counter() - started
     return result, fit
 

@@ -159,6 +159,10 @@ def test_handle_shift_moves_each_matched_slot_onto_its_sighting():
     np.testing.assert_allclose((slots + shift)[:2], sighted[[1, 0]])
     np.testing.assert_array_equal(shift[2], 0.0)
     np.testing.assert_array_equal(handle_shift(slots, np.zeros((0, 3))), 0.0)
+    in_order = handle_shift(slots, sighted, in_order=True)  # slot k onto sighting k
+    np.testing.assert_allclose((slots + in_order)[:2], sighted)
+    np.testing.assert_array_equal(in_order[2], 0.0)
+    np.testing.assert_array_equal(handle_shift(slots, np.zeros((0, 3)), in_order=True), 0.0)
 
 
 def test_sighting_order_follows_the_fronts_canonical_order():
