@@ -7,9 +7,9 @@ Per capture: whether the part count is right (the slots the head says exist agai
 fronts) and, per true front k (slot k), its articulation error (degrees for doors, cm for drawers),
 keypoint RMSE (handle, goal and the axis points a front has: a door's hinge_top and hinge_bottom),
 handle trajectory RMSE (slot k swept over gt's q grid, the others held), and the fit time; the
-keypoint, handle and trajectory figures also as the head gives them (`*_head`: before its slots
-are moved onto the sighted handles, `FurnitureFitConfig.snap_to_handles`, and the head's sweep
-rather than `slot_path`, which slides drawers straight), from the same fit.
+keypoint, handle and trajectory figures also as the keypoint head gives them at the fitted code
+(`*_head`: before the slots are moved onto the sighted handles, `FurnitureFitConfig.snap_to_handles`,
+and a pair's hinges put outward, and the head's sweep rather than `slot_path`), from the same fit.
 Handles (`--handles`): "detector", those triangulated from the 2D handle detector in `--detector`
 (default MODEL/handle_detector) join the fit (part count, starts, handle term:
 `nfr_drake.inference.furniture_fit`); "encoder", the handles of the slots the encoder baseline in
@@ -72,6 +72,7 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
     sight_seconds = time.perf_counter() - started
     fit = fit_furniture(model, observed_rays(capture), codes, config, handles_O)
     own = own_code_keypoints(model, codes, gt)
+    head = model.keypoints(fit.z[None])[0].view(-1, len(SLOT_KEYPOINTS), 3).double().numpy()
     parts = []
     for part in gt["parts"]:
         k, names = part["index"], PART_KEYPOINTS[part["type"]]
@@ -79,7 +80,7 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
         pred = fit.keypoints[k, pick]
         true = np.array([part["keypoints"][names[n]] for n in names])
         traj_q = np.asarray(part["trajectory"]["q"])
-        head_path = part_trajectory(model, fit.z, k, traj_q)[:, SLOT_KEYPOINTS.index("handle")]
+        head_path = part_trajectory(model, fit.z, k, traj_q)[:, HANDLE]
         true_path = np.asarray(part["trajectory"]["keypoints"]["handle"])
         true_handle = np.asarray(part["keypoints"]["handle"])[None]
         parts.append({
@@ -88,9 +89,9 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
             "articulation_error": articulation_error(fit.q[k], part["q"], part["joint_type"],
                                                      part["joint_upper"]),
             "keypoint_rmse_cm": keypoint_rmse_cm(pred, true),
-            "keypoint_rmse_cm_head": keypoint_rmse_cm(pred - fit.shift[k], true),
+            "keypoint_rmse_cm_head": keypoint_rmse_cm(head[k, pick], true),
             "handle_error_cm": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]], true_handle),
-            "handle_error_cm_head": keypoint_rmse_cm(fit.keypoints[k, [HANDLE]] - fit.shift[k], true_handle),
+            "handle_error_cm_head": keypoint_rmse_cm(head[k, [HANDLE]], true_handle),
             "trajectory_rmse_cm": trajectory_rmse_cm(slot_path(model, fit, k, traj_q)[:, HANDLE], true_path),
             "trajectory_rmse_cm_head": trajectory_rmse_cm(head_path, true_path),
             **({} if own is None else {"own_code_keypoint_rmse_cm": keypoint_rmse_cm(own[k, pick], true)})})
