@@ -14,14 +14,17 @@ Handles (`--handles`): "detector", those triangulated from the 2D handle detecto
 (default MODEL/handle_detector) join the fit (part count, starts, handle term:
 `nfr_drake.inference.furniture_fit`); "encoder", the handles of the slots the encoder baseline in
 `--baseline` (default MODEL/baseline) finds, in their place (its prediction as the fit's start);
-"none", the fit without them; "true", gt.json's handles (the ceiling of what sightings can give,
-for diagnosis only). The handle count and the time to sight them are in each row.
+"none", the fit without them; "true", gt.json's handles and fronts (the ceiling of what sightings
+and front reading can give, for diagnosis only). A detector with front outputs also reads each
+sighted handle's front (type, face corners: `FurnitureFitConfig.read_fronts`; `--no-fronts` turns
+it off). The handle count and the time to sight them are in each row.
 On captures of the model's own training objects (`nfr-drake captures --training-objects`) each
 part also gets the keypoint RMSE of the head at the object's training code and the true q
 (`own_code_keypoint_rmse_cm`): what a fit that found the training code again would give.
 
     python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json] [--starts S]
         [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR] [--pairing order|nearest]
+        [--no-fronts]
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from nfr_drake.inference.metrics import articulation_error, keypoint_rmse_cm, tr
 from nfr_drake.inference.result import PART_KEYPOINTS
 from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.latent import slots_q_to_z_art
+from nfr_drake.perception.front_reading import SightedFront, read_front
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handles
 
@@ -59,18 +63,25 @@ def evaluate(model, codes, capture_dir: Path, config: FurnitureFitConfig, handle
     gt = json.loads((capture_dir / "gt.json").read_text())
     capture = read_capture_set(capture_dir)
     started = time.perf_counter()
+    fronts = None
     if handles == "detector":
-        handles_O = np.array([h.p_O for h in locate_handles(detector.detect(capture.load_images()),
-                                                            capture.frames)]).reshape(-1, 3)
+        images = capture.load_images()
+        found = locate_handles(detector.detect(images), capture.frames)
+        handles_O = np.array([h.p_O for h in found]).reshape(-1, 3)
+        if detector.config.fronts:
+            maps = detector.read_fronts(images)
+            fronts = [read_front(h, maps, capture.frames) for h in found]
     elif handles == "encoder":
         pred = predict_capture(baseline[0], capture, baseline[1], np.zeros(1))
         handles_O = pred.keypoints[pred.exists, SLOT_KEYPOINTS.index("handle")]
     elif handles == "true":
         handles_O = np.array([p["keypoints"]["handle"] for p in gt["parts"]])
+        fronts = [SightedFront(np.asarray(p["keypoints"]["handle"]), float(p["type"] == "door"),
+                               np.asarray(p["face_corners"]), len(capture.frames)) for p in gt["parts"]]
     else:
         handles_O = None
     sight_seconds = time.perf_counter() - started
-    fit = fit_furniture(model, observed_rays(capture), codes, config, handles_O)
+    fit = fit_furniture(model, observed_rays(capture), codes, config, handles_O, fronts)
     own = own_code_keypoints(model, codes, gt)
     head = model.keypoints(fit.z[None])[0].view(-1, len(SLOT_KEYPOINTS), 3).double().numpy()
     parts = []
@@ -154,6 +165,8 @@ def main() -> None:
     parser.add_argument("--baseline", type=Path, help="default: MODEL/baseline")
     parser.add_argument("--pairing", choices=("order", "nearest"), default=FurnitureFitConfig.handle_pairing,
                         help="how sighted handles pair with slots (FurnitureFitConfig.handle_pairing)")
+    parser.add_argument("--no-fronts", action="store_true",
+                        help="not what the detector reads of the fronts (FurnitureFitConfig.read_fronts)")
     args = parser.parse_args()
     detector = baseline = None
     if args.handles == "detector":
@@ -165,7 +178,8 @@ def main() -> None:
     model, codes, _ = load_model(args.model)
     for p in model.parameters():
         p.requires_grad_(False)
-    config = FurnitureFitConfig(steps=args.steps, starts=args.starts, handle_pairing=args.pairing)
+    config = FurnitureFitConfig(steps=args.steps, starts=args.starts, handle_pairing=args.pairing,
+                                read_fronts=not args.no_fronts)
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:

@@ -66,7 +66,7 @@ def part_ground_truth(obj: ArticulatedObject, q: np.ndarray, label_paths: list[s
     """The gt.json document of an object with several fronts observed at articulations q (F,):
     per part (canonical order) its record (`front_record`), q, joint value, keypoints at q and
     along a q grid (the part's own q swept, the others held: a front's keypoints depend on its
-    own q only); positions in O, metres."""
+    own q only), the outer face's corners at q (`Front.face_corners`); positions in O, metres."""
     grid = np.linspace(0.0, 1.0, trajectory_points)
     parts = []
     for k, front in enumerate(obj.fronts):
@@ -76,6 +76,7 @@ def part_ground_truth(obj: ArticulatedObject, q: np.ndarray, label_paths: list[s
             "q": float(q[k]),
             "joint_value": float(front.joint_value(q[k])),
             "keypoints": {n: v.tolist() for n, v in front.keypoints(q[k]).items()},
+            "face_corners": front.face_corners(q[k]).tolist(),
             "trajectory": {"q": grid.tolist(), "keypoints": {
                 n: along[:, i].tolist() for i, n in enumerate(front.keypoint_names)}},
         })

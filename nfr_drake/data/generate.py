@@ -76,14 +76,16 @@ def part_articulations(rng: np.random.Generator, count: int, fronts: int) -> np.
 
 def part_meta(obj: ArticulatedObject, qs: np.ndarray) -> dict:
     """meta.json's per-part entries of an object rendered at articulations qs (A, F): the part
-    order and, per front, its record (`front_record`), q (A,) and named keypoints (A, 3) in O."""
+    order and, per front, its record (`front_record`), q (A,), named keypoints (A, 3) and the
+    outer face's corners (A, 4, 3) (`Front.face_corners`), in O."""
     from nfr_drake.data.object_records import PART_ORDER, front_record
 
     parts = []
     for k, front in enumerate(obj.fronts):
         along = front.keypoint_array(qs[:, k])  # (A, K, 3)
         parts.append({**front_record(obj, k), "q": qs[:, k].tolist(),
-                      "keypoints": {n: along[:, i].tolist() for i, n in enumerate(front.keypoint_names)}})
+                      "keypoints": {n: along[:, i].tolist() for i, n in enumerate(front.keypoint_names)},
+                      "face_corners": front.face_corners(qs[:, k]).tolist()})
     return {"part_order": PART_ORDER, "parts": parts}
 
 

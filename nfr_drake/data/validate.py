@@ -32,7 +32,7 @@ from nfr_drake.errors import CaptureSetError, DatasetError
 from nfr_drake.objects import SemanticClass
 
 PART_KEYS = ("index", "type", "link_name", "joint_name", "joint_type", "joint_upper", "keypoint_names",
-             "q", "joint_value", "keypoints", "trajectory")
+             "q", "joint_value", "keypoints", "face_corners", "trajectory")
 """Fields of every part of a furniture capture's gt.json; doors add hinge_axis, drawers pull_axis
 and travel."""
 NO_PART_PNG = 255  # a part image's value where no front is seen (int8 -1 stored as uint8)

@@ -43,6 +43,12 @@ from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
+from nfr_drake.objects.fronts import DOOR_OPENING
+from nfr_drake.perception.front_reading import SightedFront, hinge_points, opening_angle, shut_edges
+
+FRONT_COLUMN_M = 0.08
+"""`front_order`: read fronts whose shut left edges lie closer than this in y share a column, m
+(a column's fronts share their left edge; columns are a front's width apart)."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +91,10 @@ class FurnitureFitConfig:
     pair_gap_m: float = 0.25
     """`pair_hinges`: a door's sighted handle with another level one closer than this in y is one
     of a pair, hinged on the side away from it, m (0: the head's hinge side always)."""
+    read_fronts: bool = True
+    """Take each sighted front's type, a door's hinge points and the order of the sightings from
+    what the detector read of the fronts, where it read them (`place_fronts`, `front_order`;
+    with the "order" pairing only)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -165,20 +175,28 @@ def start_codes(z_obj: torch.Tensor, S: int) -> torch.Tensor:
 
 def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                   config: FurnitureFitConfig = FurnitureFitConfig(),
-                  handles_O: np.ndarray | None = None) -> FurnitureFit:
+                  handles_O: np.ndarray | None = None,
+                  fronts: list[SightedFront | None] | None = None) -> FurnitureFit:
     """Fit z of a model with several slots to the observed rays of a capture; codes (N, k) are
     the training codes the starts come from; handles_O (M, 3) in O, m: handles sighted by the
-    handle detector (module docstring), or None."""
+    handle detector (module docstring), or None; fronts (M,): what the detector read of each
+    one's front (`nfr_drake.perception.front_reading`; None where it read nothing), or None."""
     S = model.config.num_slots
     if S < 2:
         raise ConfigError("fit_furniture needs a model with several articulation slots")
     t0 = time.perf_counter()
     generator = torch.Generator().manual_seed(config.seed)
     handles = np.zeros((0, 3)) if handles_O is None else np.asarray(handles_O, float).reshape(-1, 3)
+    if fronts is not None and len(fronts) != len(handles):
+        raise ConfigError(f"fit_furniture: {len(fronts)} fronts for {len(handles)} handles")
     in_order = config.handle_pairing == "order"
+    if fronts is None or not config.read_fronts or not in_order:
+        fronts = [None] * len(handles)
     if in_order:
-        handles = handles[sighting_order(handles, config.column_gap_m)]
-    handles = handles[:S]
+        order = (front_order(fronts) if fronts and all(f is not None for f in fronts)
+                 else sighting_order(handles, config.column_gap_m))
+        handles, fronts = handles[order], [fronts[i] for i in order]
+    handles, fronts = handles[:S], fronts[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
         with torch.no_grad():
@@ -217,9 +235,48 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         shift = handle_shift(keypoints[:, SLOT_KEYPOINTS.index("handle")], handles, in_order)
     types = logits[:, 1:].argmax(-1).cpu().numpy()
     placed = pair_hinges(keypoints + shift[:, None], types, len(handles), config.pair_gap_m)
-    return FurnitureFit(z_best, q.double().cpu().numpy(), exists, types, placed, shift,
+    q = q.double().cpu().numpy()
+    if any(f is not None for f in fronts):
+        travel = [drawer_travel(model, z_best, k) for k in range(S)]
+        placed, types, q = place_fronts(placed, types, q, travel, fronts)
+    return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
+
+
+def front_order(fronts: list[SightedFront]) -> np.ndarray:
+    """Indices (M,) that put read fronts in the canonical order (by shut left edge, in columns
+    `FRONT_COLUMN_M` wide, then top edge, `shut_edges`)."""
+    edges = np.array([[0.0, *shut_edges(f)] for f in fronts]).reshape(-1, 3)
+    return sighting_order(edges, FRONT_COLUMN_M)
+
+
+def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
+                 fronts: list[SightedFront | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slot keypoints (S, 4, 3) in O, types (S,) and q (S,) with what the detector read of each
+    paired slot's front (fronts[k] for slot k; None: the field's): its type; its goal (a door's
+    compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
+    its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
+    read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
+    edge away from the handle (`hinge_points`) and its q the turn of its face (`opening_angle`
+    over `DOOR_OPENING`); a drawer the head took for a door gets a pull line through its handle
+    along O's +x, `travel[k]` long (m), shut at q[k]."""
+    out, types, q = keypoints.copy(), types.copy(), q.copy()
+    h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
+    for k, front in enumerate(fronts[:len(out)]):
+        if front is None:
+            continue
+        left, _ = shut_edges(front)
+        width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
+        out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
+        if front.is_door:
+            out[k, [a0, a1]] = hinge_points(front)
+            q[k] = min(opening_angle(front) / DOOR_OPENING, 1.0)
+        elif PART_TYPES[int(types[k])] == "door":
+            out[k, a0] = out[k, h] - [q[k] * travel[k], 0.0, 0.0]
+            out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
+        types[k] = PART_TYPES.index("door" if front.is_door else "drawer")
+    return out, types, q
 
 
 def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool = False) -> np.ndarray:
@@ -308,12 +365,20 @@ def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndar
     return kp[:, slot].double().cpu().numpy()
 
 
+def drawer_travel(model: NFRModel, z: torch.Tensor, slot: int) -> float:
+    """A drawer's travel over q in [0, 1] as the keypoint head gives slot `slot` at code z, m: its
+    handle's displacement along O's +x (where that is not forward, the displacement's length: a
+    drawer's path is never degenerate)."""
+    ends = part_trajectory(model, z, slot, np.array([0.0, 1.0]))[:, SLOT_KEYPOINTS.index("handle")]
+    travel = float(ends[1, 0] - ends[0, 0])
+    return travel if travel > 0.0 else float(np.linalg.norm(ends[1] - ends[0]))
+
+
 def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> np.ndarray:
     """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them, from where
     the fit put them at its q (`FurnitureFit.keypoints`), moved as a rigid front on the joint its
     type names: a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md),
-    its handle and goal by the head's travel along x between q = 0 and 1 (where that is not
-    forward, the length of the head's displacement: a drawer's path is never degenerate); a door's
+    its handle and goal by the head's travel (`drawer_travel`); a door's
     handle turns about the line through its hinge points, 90 degrees over q in [0, 1], outward
     (`slot_trajectory`). The head's own sweep (`part_trajectory`) bends a drawer sideways and
     stops it short near the end of its travel, which jams a drawer pulled along it, and turns a
@@ -321,10 +386,7 @@ def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray)
     if PART_TYPES[int(fit.types[slot])] == "drawer":
         path = np.repeat(fit.keypoints[slot][None], len(q_grid), axis=0)
         handle, goal = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
-        ends = part_trajectory(model, fit.z, slot, np.array([0.0, 1.0]))[:, handle]
-        travel = float(ends[1, 0] - ends[0, 0])
-        if travel <= 0.0:  # a head that does not pull this drawer out: its displacement's length
-            travel = float(np.linalg.norm(ends[1] - ends[0]))
+        travel = drawer_travel(model, fit.z, slot)
         path[:, [handle, goal], 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
     else:
         path = slot_trajectory("door", fit.keypoints[slot], fit.q[slot], q_grid)

@@ -56,6 +56,7 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects import SemanticClass
 from nfr_drake.paths import check_writable_file
+from nfr_drake.perception.front_reading import SightedFront, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, HandleDetector, load_detector
 from nfr_drake.perception.handle_triangulation import (
     MIN_VIEWS,
@@ -467,8 +468,10 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
                         f"are poorly constrained below {MIN_FIT_VIEWS} views")
     images = capture.load_images() if images is None else images
     handles = sighted_handles(fitted, capture, images, config, kept if kept is not None else masks)
+    fronts = sighted_fronts(fitted, capture, images, handles)
     fit = fit_furniture(fitted.model, observed_rays(capture, images, masks=masks), fitted.codes, config,
-                        None if handles is None else np.array([h.p_O for h in handles]).reshape(-1, 3))
+                        None if handles is None else np.array([h.p_O for h in handles]).reshape(-1, 3),
+                        fronts)
     found = [int(k) for k in np.flatnonzero(fit.exists)]
     chosen = part if part is not None else (found[0] if found else 0)
     if chosen not in found:
@@ -483,7 +486,7 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
         trajectory={}, image_loss=fit.image_loss, seconds=0.0, z=fit.z.double().cpu().numpy(),
         confidence={"per_view": per_view}, parts=parts,
         extra={"model": str(fitted.folder), "steps": fit.steps, "warnings": warnings,
-               "handles": _handles_json(fitted, config, handles)})
+               "handles": _handles_json(fitted, config, handles, fronts)})
     chosen_part = next((p for p in parts if p["index"] == chosen), None)
     result = result.with_part(chosen_part or {**part_json(fitted.model, fit, chosen, q_grid),
                                               "confidence": confidence[chosen]})
@@ -504,14 +507,30 @@ def sighted_handles(fitted: FittedModel, capture: CaptureSet, images: list[np.nd
     return locate_handles(maps if region is None else inside_masks(maps, region), capture.frames)
 
 
+def sighted_fronts(fitted: FittedModel, capture: CaptureSet, images: list[np.ndarray],
+                   handles: list[TriangulatedHandle] | None) -> list[SightedFront | None] | None:
+    """What the model's detector reads of the front behind each sighted handle (`read_front`;
+    None where it reads nothing); None without handles or for a detector without front outputs."""
+    if handles is None or not fitted.handle_detector.config.fronts:
+        return None
+    maps = fitted.handle_detector.read_fronts(images)
+    return [read_front(h, maps, capture.frames) for h in handles]
+
+
 def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,
-                  handles: list[TriangulatedHandle] | None) -> dict:
-    """What the handle detector gave a furniture fit, for the result's `extra`."""
+                  handles: list[TriangulatedHandle] | None,
+                  fronts: list[SightedFront | None] | None = None) -> dict:
+    """What the handle detector gave a furniture fit (the handles, and what it read of their
+    fronts: door probability, face corners in O), for the result's `extra`."""
     if handles is None:
         return {"used": False, "why": ("the model ships no handle detector"
                                        if fitted.handle_detector is None else "turned off")}
-    return {"used": bool(handles), "count": len(handles), "p_O": [h.p_O.tolist() for h in handles],
-            "views": [list(h.views) for h in handles]}
+    out = {"used": bool(handles), "count": len(handles), "p_O": [h.p_O.tolist() for h in handles],
+           "views": [list(h.views) for h in handles]}
+    if fronts is not None:
+        out["fronts"] = [None if f is None else {"door_probability": f.door_probability,
+                                                 "face_corners": f.corners.tolist()} for f in fronts]
+    return out
 
 
 def _at_photo_size(masks: list[np.ndarray], images: list[np.ndarray]) -> list[np.ndarray]:

@@ -156,6 +156,10 @@ def axis_angle_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
 
 
+FACE_CORNERS = ("top_left", "top_right", "bottom_left", "bottom_right")
+"""Order of `Front.face_corners`."""
+
+
 @dataclass(frozen=True)
 class Front:
     """One movable front (a door or a drawer): a link on one joint, with its keypoints.
@@ -177,6 +181,8 @@ class Front:
         grip_half_length: half the length of the grip along `grip_axis_M`, m; 0 for a point grip.
         density: kg/m^3 of the link's parts, for its mass and inertia.
         damping: viscous damping of the joint, N m s/rad or N s/m.
+        face_M: the front's outer face, a rectangle of the plane x = x in M: (x, y0, y1, z0, z1),
+            m (furniture fronts; None for the closet and drawer categories).
     """
 
     kind: Literal["door", "drawer"]
@@ -194,10 +200,23 @@ class Front:
     grip_half_length: float = 0.0
     density: float = 500.0
     damping: float = 2.0
+    face_M: tuple[float, float, float, float, float] | None = None
 
     def joint_value(self, q: float | np.ndarray) -> float | np.ndarray:
         """Joint angle (rad) or travel (m) at articulation q in [0, 1]."""
         return q * self.joint_upper
+
+    def face_corners(self, q: float | np.ndarray) -> np.ndarray:
+        """Corners of the outer face in O at articulation q, `FACE_CORNERS` order: shape (4, 3),
+        or (N, 4, 3) for N values of q, m. Left and top as seen from the front (smaller y, larger z
+        in M, which shares O's orientation at q = 0)."""
+        if self.face_M is None:
+            raise ValueError(f"{self.link_name}: no face rectangle (not a furniture front)")
+        x, y0, y1, z0, z1 = self.face_M
+        c_M = np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]])
+        qs = np.atleast_1d(np.asarray(q, dtype=float))
+        out = np.stack([c_M @ X[:3, :3].T + X[:3, 3] for X in map(self.X_OM, qs)])
+        return out if np.ndim(q) else out[0]
 
     def X_OM(self, q: float) -> np.ndarray:
         """Pose of this front's link M in O at articulation q, homogeneous, shape (4, 4)."""

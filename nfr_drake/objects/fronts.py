@@ -119,7 +119,8 @@ def make_door(index: int, rect: Rect, x_front: float, hinge: str, look: FrontLoo
                          "hinge_bottom": (x_hinge, y_hinge, rect.z0),
                          "goal": tuple(float(v) for v in p_O_goal)},
         moving_keypoints={"handle": tuple(float(v) for v in p_MH)}, keypoint_names=DOOR_KEYPOINTS,
-        grip_axis_M=handle.grip_axis, grip_half_length=handle.grip_half_length)
+        grip_axis_M=handle.grip_axis, grip_half_length=handle.grip_half_length,
+        face_M=(x_face, min(0.0, inward * w), max(0.0, inward * w), 0.0, h))
 
 
 def make_drawer(index: int, rect: Rect, x_front: float, look: FrontLook, handle: HandleSpec,
@@ -161,4 +162,4 @@ def make_drawer(index: int, rect: Rect, x_front: float, look: FrontLook, handle:
         moving_keypoints={"handle": tuple(float(v) for v in p_MH),
                           "goal": (-box_d / 2, y_box, z_box + wall)},
         keypoint_names=DRAWER_KEYPOINTS, grip_axis_M=handle.grip_axis,
-        grip_half_length=handle.grip_half_length)
+        grip_half_length=handle.grip_half_length, face_M=(x_face, -w / 2, w / 2, 0.0, h))

@@ -142,7 +142,7 @@ def sightings(handle_map: HandleMap, frame: int, threshold: float = 0.5, min_mas
     return sorted(found, key=lambda s: -s.mass)
 
 
-def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Origin and unit direction in O of the ray through pixel uv of a frame."""
     cam = frame.camera
     if not cam.distortion:
@@ -153,7 +153,7 @@ def _ray(frame: CaptureFrame, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return frame.X_OC[:3, 3].copy(), d / np.linalg.norm(d)
 
 
-def _nearest_point(origins: np.ndarray, directions: np.ndarray,
+def nearest_point(origins: np.ndarray, directions: np.ndarray,
                    weights: np.ndarray | None = None) -> np.ndarray:
     """The point (3,) of least weighted summed squared distance to the rays (n, 3), n >= 2."""
     w = np.ones(len(origins)) if weights is None else weights
@@ -186,7 +186,7 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
     """Robust triangulation (module docstring); None when fewer than `min_views` views agree."""
     if len(sightings) < max(2, min_views):
         return None
-    rays = [_ray(frames[s.frame], s.uv) for s in sightings]
+    rays = [ray(frames[s.frame], s.uv) for s in sightings]
     origins = np.array([o for o, _ in rays])
     directions = np.array([d for _, d in rays])
     tolerance = [max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
@@ -202,7 +202,7 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
     for i, j in combinations(range(len(sightings)), 2):
         if abs(float(directions[i] @ directions[j])) > np.cos(np.radians(2.0)):
             continue  # nearly parallel rays fix no depth
-        inliers, rms = agreeing(_nearest_point(origins[[i, j]], directions[[i, j]]))
+        inliers, rms = agreeing(nearest_point(origins[[i, j]], directions[[i, j]]))
         score = float(mass[inliers].sum()) if len(inliers) >= min_views else 0.0
         if best is None or (score, -rms) > (best[0], -best[1]):
             best = (score, rms, inliers)
@@ -210,11 +210,11 @@ def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSightin
         return None
     inliers = best[2]
     for _ in range(2):  # refit on the agreeing views, then on those that agree with the refit
-        p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+        p = nearest_point(origins[inliers], directions[inliers], mass[inliers])
         inliers, _ = agreeing(p)
         if len(inliers) < min_views:
             return None
-    p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+    p = nearest_point(origins[inliers], directions[inliers], mass[inliers])
     return TriangulatedHandle(p, tuple(sightings[i].frame for i in inliers), agreeing(p)[1],
                               len(sightings))
 
@@ -264,7 +264,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     found = list(found)
     tolerance = np.array([max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
                           for s in found])
-    rays = [_ray(frames[s.frame], s.uv) for s in found]
+    rays = [ray(frames[s.frame], s.uv) for s in found]
     origins = np.array([o for o, _ in rays]).reshape(-1, 3)
     directions = np.array([d for _, d in rays]).reshape(-1, 3)
     mass = np.array([s.mass for s in found])
@@ -294,7 +294,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         rms = np.sqrt(np.where(agree, errors ** 2, 0).sum(1) / np.maximum(count, 1))
         inliers = np.flatnonzero(agree[np.lexsort((rms, -score))[0]])
         for _ in range(3):  # refit on the agreeing sightings, then on those agreeing with the refit
-            p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+            p = nearest_point(origins[inliers], directions[inliers], mass[inliers])
             agree_p, errors_p, inside_p = _agreeing(frames, found, tolerance, p[None])
             new = np.flatnonzero(agree_p[0] & left)
             if len(new) < max(min_views, min_share * inside_p[0]):
@@ -303,7 +303,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         left[inliers] = False
         if len(new) < max(min_views, min_share * inside_p[0]):
             continue
-        p = _nearest_point(origins[inliers], directions[inliers], mass[inliers])
+        p = nearest_point(origins[inliers], directions[inliers], mass[inliers])
         errors_p = _agreeing(frames, found, tolerance, p[None])[1]
         rms_px = float(np.sqrt(np.mean(errors_p[0, inliers] ** 2)))
         frames_in = tuple(int(view[k]) for k in inliers)

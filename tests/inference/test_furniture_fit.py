@@ -16,15 +16,18 @@ from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
     HandleTerm,
     fit_furniture,
+    front_order,
     handle_shift,
     pair_hinges,
     part_trajectory,
     parts_json,
+    place_fronts,
     sighting_order,
     slot_path,
 )
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRModel
+from nfr_drake.perception.front_reading import SightedFront
 
 S = 8
 TINY = NFRModelConfig(latent_obj_dim=4, hyper_hidden=8, field_width=8, field_layers=2,
@@ -176,6 +179,41 @@ def test_sighting_order_follows_the_fronts_canonical_order():
     assert sighting_order(handles, 0.2).tolist() == [2, 4, 1, 3, 0]
     assert sighting_order(handles, 0.0).tolist()[:3] == [4, 2, 1]  # no columns: by y
     assert sighting_order(np.zeros((0, 3)), 0.2).tolist() == []
+
+
+def _face(y0, y1, z0, z1, x=0.3):
+    return np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]], float)
+
+
+def test_read_fronts_give_the_canonical_order_types_and_hinges():
+    """A tall door hinged left (handle near its right edge) beside a column of drawers: the
+    handles alone look like one column (`sighting_order` puts the top drawer first), the fronts'
+    shut left edges give the canonical order (the door's column first). A read door gets its
+    hinge on its face's edge away from the handle and its goal at the face's middle, a read
+    drawer the head took for a door a pull line along +x through its handle."""
+    tall = SightedFront(np.array([0.33, -0.05, 1.0]), 0.9, _face(-0.4, 0.0, 0.1, 1.8), 5)
+    top = SightedFront(np.array([0.33, 0.1, 1.3]), 0.1, _face(-0.05, 0.25, 1.2, 1.4), 5)
+    low = SightedFront(np.array([0.33, 0.1, 1.0]), 0.1, _face(-0.05, 0.25, 0.9, 1.1), 5)
+    handles = np.array([f.p_O for f in (low, top, tall)])
+    assert sighting_order(handles, 0.2).tolist() == [1, 2, 0]
+    assert front_order([low, top, tall]).tolist() == [2, 1, 0]
+    drawer = SightedFront(np.array([0.33, 0.0, 0.9]), 0.1, _face(-0.4, 0.4, 0.8, 1.0), 5)
+    left_door = SightedFront(np.array([0.33, -0.05, 0.6]), 0.9, _face(-0.4, 0.0, 0.2, 0.78), 5)
+    right_door = SightedFront(np.array([0.33, 0.05, 0.6]), 0.9, _face(0.0, 0.4, 0.2, 0.78), 5)
+    side = SightedFront(np.array([0.33, 0.6, 0.5]), 0.2, _face(0.45, 0.75, 0.2, 1.0), 5)
+    head = np.zeros((4, 4, 3))
+    head[:, 0] = [f.p_O for f in (drawer, left_door, right_door, side)]
+    types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
+    q = np.array([0.5, 0.3, 0.3, 0.2])
+    read = [drawer, left_door, right_door, None]
+    placed, read_types, read_q = place_fronts(head, types, q, [0.3] * 4, read)
+    np.testing.assert_allclose(read_q, [0.5, 0.0, 0.0, 0.2])  # the doors' faces are shut
+    assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
+    np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
+    np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
+    np.testing.assert_allclose(placed[2, 2:], _face(0.0, 0.4, 0.2, 0.78)[[1, 3]])  # hinged right
+    np.testing.assert_allclose(placed[:3, 1, 1:], [[0.0, 0.8], [-0.2, 0.2], [0.2, 0.2]])  # goals
+    np.testing.assert_array_equal(placed[3], head[3])
 
 
 def test_the_doors_of_a_pair_hinge_on_their_outer_sides():

@@ -3,6 +3,7 @@ targets for one handle (closets) and for several (furniture)."""
 
 import json
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,8 +12,14 @@ import torch
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
+from nfr_drake.perception.front_reading import FRONT_HEIGHT_PX
 from nfr_drake.perception.handle_detector import training
-from nfr_drake.perception.handle_detector.data import projected_handles, sample_batch
+from nfr_drake.perception.handle_detector.data import (
+    project_points,
+    projected_handles,
+    sample_batch,
+    sample_front_batch,
+)
 from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, load_detector
 from nfr_drake.perception.handle_detector.training import DetectorTrainConfig, train_detector
 
@@ -168,3 +175,67 @@ def test_furniture_pixels_vote_for_their_own_fronts_handle(furniture_dataset):
         assert np.abs(votes[:, None] - targets[None]).max(-1).min(-1).max() < 1e-3
         several += len(np.unique(np.round(votes, 3), axis=0)) >= 2
     assert several >= 3
+
+
+def test_front_targets_vote_for_each_fronts_face_corners(furniture_dataset):
+    """Front outputs' targets: every front pixel of the scaled image votes (pixel + offset) for its
+    own front's projected face corners, door pixels are front pixels of door fronts; mirrored
+    images vote for the mirrored corners with left and right swapped."""
+    data = RenderedDataset(furniture_dataset)
+    scale = data.spec.size / FRONT_HEIGHT_PX
+    targets = []
+    for j, rec in enumerate(data.records):
+        for a in range(data.spec.articulations):
+            for v in range(data.spec.views):
+                faces = np.array([p["face_corners"][a] for p in rec.meta["parts"]])
+                corners = project_points(data, j, a, v, faces)
+                uv = corners / scale
+                mirrored = (uv * [-1, 1] + [FRONT_HEIGHT_PX, 0])[:, [1, 0, 3, 2]]
+                targets += [uv, mirrored]
+    targets = np.concatenate(targets)  # (n, 4, 2)
+    rgb, front, door, offset = sample_front_batch(data, 24, np.random.default_rng(1))
+    assert rgb.shape[2:] == front.shape[1:] == (FRONT_HEIGHT_PX, FRONT_HEIGHT_PX)
+    assert offset.shape == (24, 4, 2, FRONT_HEIGHT_PX, FRONT_HEIGHT_PX)
+    assert torch.all(door <= front) and 0 < door.sum() < front.sum()
+    for f, o in zip(front.numpy() > 0.5, offset.numpy(), strict=True):
+        rows, cols = np.nonzero(f)
+        votes = np.stack([cols + 0.5 + o[:, 0, rows, cols], rows + 0.5 + o[:, 1, rows, cols]], -1)
+        nearest = np.abs(votes.transpose(1, 0, 2)[:, None] - targets[None]).max((-1, -2)).min(-1)
+        assert nearest.max() < 1e-3
+
+
+def test_front_outputs_start_from_a_handle_detector_and_train(furniture_dataset, tiny_dataset, tmp_path):
+    torch.manual_seed(0)
+    config = DetectorTrainConfig(steps=40, images_per_batch=2, crop=16, checkpoint_every=40)
+    handles_only = tmp_path / "handles"
+    train_detector([furniture_dataset], handles_only, config, SMALL)
+    fronts = HandleDetectorConfig(channels=8, dilations=(1, 2, 1), fronts=True)
+    started = HandleDetector(fronts)
+    started.start_from(load_detector(handles_only)[0])
+    image = np.random.default_rng(0).integers(0, 255, (48, 40, 3), dtype=np.uint8)
+    (a,), (b,) = load_detector(handles_only)[0].detect([image]), started.detect([image])
+    np.testing.assert_allclose(a.probability, b.probability, atol=1e-6)
+    (front_map,) = started.read_fronts([image])
+    assert front_map.door_probability.shape == (FRONT_HEIGHT_PX, round(40 * FRONT_HEIGHT_PX / 48))
+    assert front_map.corner_offset_px.shape == (*front_map.door_probability.shape, 4, 2)
+    assert front_map.scale == pytest.approx([40 / front_map.door_probability.shape[1], 48 / FRONT_HEIGHT_PX])
+    with pytest.raises(ConfigError, match="no front outputs"):
+        load_detector(handles_only)[0].read_fronts([image])
+    with pytest.raises(ConfigError, match="another architecture"):
+        HandleDetector(HandleDetectorConfig(channels=4, dilations=(1, 2, 1), fronts=True)).start_from(started)
+    with pytest.raises(ConfigError, match="give --fronts"):
+        train_detector([furniture_dataset], tmp_path / "no_fronts", config, SMALL, init=handles_only)
+
+    out = tmp_path / "fronts"
+    record = train_detector([furniture_dataset], out, config, fronts, init=handles_only)
+    losses = json.loads((out / "checkpoint" / "trainer.json").read_text())["losses"]
+    assert np.mean(losses[-10:]) < np.mean(losses[:10])
+    assert 0.0 <= record["held_out_door_accuracy"][str(furniture_dataset)] <= 1.0
+    trained = load_detector(out)[0]
+    assert record["init"] == str(handles_only) and trained.config.fronts
+    (c,) = trained.detect([image])  # the handle network was kept as it was
+    np.testing.assert_allclose(c.probability, a.probability, atol=1e-6)
+    both = train_detector([furniture_dataset], tmp_path / "both", replace(config, steps=4), fronts)
+    assert set(both["held_out_handle_iou"]) == set(both["held_out_door_accuracy"]) == {str(furniture_dataset)}
+    with pytest.raises(ConfigError, match="front outputs need furniture"):
+        train_detector([tiny_dataset], tmp_path / "closets", config, fronts)

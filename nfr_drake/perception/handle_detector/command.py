@@ -15,6 +15,7 @@ def train_detector_command(data: list[Path], out: Path,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
                            channels: int = HandleDetectorConfig.channels,
+                           fronts: bool = False, init: Path | None = None,
                            threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
@@ -27,6 +28,10 @@ def train_detector_command(data: list[Path], out: Path,
         crop: crop size, px.
         lr: learning rate (cosine decay to 0).
         channels: channels of every convolution (the network's width).
+        fronts: also learn the front outputs (furniture: door or drawer, face corners;
+            `nfr_drake.perception.front_reading`).
+        init: a trained detector folder of the same width to start from (e.g. a handle
+            detector to which --fronts adds the front outputs).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a killed run from OUT/checkpoint/.
         allow_incomplete: train on the objects on disk when a dataset misses some.
@@ -34,9 +39,13 @@ def train_detector_command(data: list[Path], out: Path,
     config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
                                  threads=threads)
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
-    record = train_detector(list(data), out, config, HandleDetectorConfig(channels=channels),
+    record = train_detector(list(data), out, config, HandleDetectorConfig(channels=channels, fronts=fronts),
                             resume=resume, command=command,
-                            allow_incomplete=allow_incomplete)
+                            allow_incomplete=allow_incomplete, init=init)
     print(f"handle detector written to {out}: held-out handle IoU, offset error "
           + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
                       for k, v in record["held_out_handle_iou"].items()))
+    if fronts:
+        print("held-out door accuracy, corner error (px at the front scale) "
+              + ", ".join(f"{k} {v:.3f}, {record['held_out_corner_error_px'][k]:.2f} px"
+                          for k, v in record["held_out_door_accuracy"].items()))

@@ -1,15 +1,19 @@
 """Training data of the detector: crops of rendered images with their handle masks (label class
 3) and, per pixel, the offset to the projected handle keypoint (the grip centre) of the pixel's
 own part: furniture (several fronts) has one handle per front, and a handle pixel votes for its
-front's grip centre (the part image `part.npy`); closets and drawers have one."""
+front's grip centre (the part image `part.npy`); closets and drawers have one. For the front
+outputs (furniture): whole images scaled to `FRONT_HEIGHT_PX` rows with, per pixel of a front,
+whether it is a door and the offsets to its projected face corners (meta.json `face_corners`)."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import torch
 
 from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.objects import SemanticClass
+from nfr_drake.perception.front_reading import FRONT_HEIGHT_PX
 
 
 def handle_points(data: RenderedDataset, j: int, a: int) -> np.ndarray:
@@ -24,9 +28,15 @@ def handle_points(data: RenderedDataset, j: int, a: int) -> np.ndarray:
 def projected_handles(data: RenderedDataset, j: int, a: int, v: int) -> np.ndarray:
     """Pixels (P, 2) (u, v; top-left pixel centre at (0.5, 0.5)) of the handle keypoints
     (`handle_points`) of object j at articulation a in view v."""
+    return project_points(data, j, a, v, handle_points(data, j, a))
+
+
+def project_points(data: RenderedDataset, j: int, a: int, v: int, p_O: np.ndarray) -> np.ndarray:
+    """Pixels (..., 2) (top-left pixel centre at (0.5, 0.5)) of points p_O (..., 3) in view v of
+    object j at articulation a."""
     X_OC = data.records[j].X_OC[a, v].astype(np.float64)
-    p_C = (handle_points(data, j, a) - X_OC[:3, 3]) @ X_OC[:3, :3]
-    return (p_C / p_C[:, 2:]) @ data.camera.K[:2].T
+    p_C = (np.asarray(p_O, np.float64) - X_OC[:3, 3]) @ X_OC[:3, :3]
+    return (p_C / p_C[..., 2:]) @ data.camera.K[:2].T
 
 
 def sample_batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Generator):
@@ -65,3 +75,42 @@ def sample_batch(data: RenderedDataset, n: int, crop: int, rng: np.random.Genera
     offset[flip, 0] *= -1.0
     return (torch.from_numpy(rgb).permute(0, 3, 1, 2).contiguous(),
             torch.from_numpy(mask.astype(np.float32)), torch.from_numpy(offset))
+
+
+def sample_front_batch(data: RenderedDataset, n: int, rng: np.random.Generator):
+    """n random whole images of a furniture dataset scaled to FRONT_HEIGHT_PX rows (h x w): rgb
+    (n, 3, h, w) float32 in [0, 1]; front mask (n, h, w) float32 (the pixel shows a front);
+    door (n, h, w) float32 (its front is a door); corner offsets (n, 4, 2, h, w) float32, map
+    pixels, to its front's projected face corners (`FACE_CORNERS` order). Half the images are
+    mirrored, their left and right corners swapped."""
+    if not data.has_parts:
+        raise ValueError(f"{data.root}: front outputs need a furniture dataset")
+    A, V, S = data.spec.articulations, data.spec.views, data.spec.size
+    h = FRONT_HEIGHT_PX
+    scale = S / h
+    w = round(S / scale)
+    rgb = np.empty((n, h, w, 3), np.float32)
+    front, door = np.zeros((n, h, w), bool), np.zeros((n, h, w), bool)
+    offset = np.zeros((n, 4, 2, h, w), np.float32)
+    centres_u, centres_v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    for b, (j, a, v) in enumerate(zip(rng.integers(0, data.num_objects, n),
+                                      rng.integers(0, A, n), rng.integers(0, V, n), strict=True)):
+        rec = data.records[j]
+        rgb[b] = cv2.resize(np.asarray(rec.rgb[a, v]), (w, h), interpolation=cv2.INTER_AREA) / 255.0
+        part = cv2.resize(np.asarray(rec.part[a, v], np.int32).astype(np.float32), (w, h),
+                          interpolation=cv2.INTER_NEAREST).astype(np.int64)
+        parts = rec.meta["parts"]
+        corners = project_points(data, j, a, v, np.array([p["face_corners"][a] for p in parts])) / scale
+        front[b] = part >= 0
+        k = np.clip(part, 0, len(parts) - 1)
+        door[b] = front[b] & np.array([p["type"] == "door" for p in parts])[k]
+        for c in range(4):
+            offset[b, c, 0] = np.where(front[b], corners[k, c, 0] - centres_u, 0.0)
+            offset[b, c, 1] = np.where(front[b], corners[k, c, 1] - centres_v, 0.0)
+    flip = rng.random(n) < 0.5
+    rgb[flip], front[flip], door[flip] = rgb[flip, :, ::-1], front[flip, :, ::-1], door[flip, :, ::-1]
+    offset[flip] = offset[flip][..., ::-1][:, [1, 0, 3, 2]]
+    offset[flip, :, 0] *= -1.0
+    return (torch.from_numpy(rgb).permute(0, 3, 1, 2).contiguous(),
+            torch.from_numpy(front.astype(np.float32)), torch.from_numpy(door.astype(np.float32)),
+            torch.from_numpy(np.ascontiguousarray(offset)))

@@ -1,5 +1,6 @@
 """Training the detector: the loss, a resumable training loop on rendered datasets of any image
-sizes, and the held-out handle IoU and offset error it reports."""
+sizes, and the held-out handle IoU and offset error it reports (with front outputs also the
+door accuracy and the corner error on the front pixels)."""
 
 from __future__ import annotations
 
@@ -15,8 +16,13 @@ from nfr_drake.data.dataset import RenderedDataset
 from nfr_drake.errors import ConfigError
 from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.nfr.resumable import ResumableRun
-from nfr_drake.perception.handle_detector.data import sample_batch
-from nfr_drake.perception.handle_detector.model import HandleDetector, HandleDetectorConfig, save_detector
+from nfr_drake.perception.handle_detector.data import sample_batch, sample_front_batch
+from nfr_drake.perception.handle_detector.model import (
+    HandleDetector,
+    HandleDetectorConfig,
+    load_detector,
+    save_detector,
+)
 
 CHECKPOINT_DIR = "checkpoint"
 PICKLED_CHECKPOINT = "checkpoint.pt"
@@ -33,6 +39,8 @@ class DetectorTrainConfig:
     crop: int = 64
     pos_weight: float = 10.0
     offset_weight: float = 0.5
+    corner_weight: float = 0.1
+    """Weight of the corner offsets' Huber loss (px) beside the door cross-entropy (front outputs)."""
     checkpoint_every: int = 250
     seed: int = 0
     threads: int | None = None
@@ -43,9 +51,10 @@ class DetectorTrainConfig:
                1 if self.threads is None else self.threads) < 1:
             raise ConfigError("handle detector training: steps, batch, checkpoint_every and "
                               "threads must be >= 1")
-        if self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0 or self.offset_weight < 0:
+        if (self.crop < 8 or self.lr <= 0 or self.pos_weight <= 0
+                or min(self.offset_weight, self.corner_weight) < 0):
             raise ConfigError("handle detector training: crop must be >= 8 px, lr and "
-                              "pos_weight > 0, offset_weight >= 0")
+                              "pos_weight > 0, offset_weight and corner_weight >= 0")
 
 
 def _loss(logits: torch.Tensor, offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor,
@@ -64,6 +73,28 @@ def _loss(logits: torch.Tensor, offsets: torch.Tensor, mask: torch.Tensor, true_
     return bce + dice + offset_weight * huber
 
 
+def _front_loss(door_logits: torch.Tensor, corners: torch.Tensor, front: torch.Tensor, door: torch.Tensor,
+                true_corners: torch.Tensor, corner_weight: float) -> torch.Tensor:
+    """On the front pixels: cross-entropy of the door logits (B, H, W) plus `corner_weight` times
+    the Huber loss (1 px) of the corner offsets (B, 4, 2, H, W)."""
+    on = front > 0.5
+    if not on.any():
+        return door_logits.sum() * 0.0
+    bce = nn.functional.binary_cross_entropy_with_logits(door_logits[on], door[on])
+    huber = nn.functional.huber_loss(corners.permute(0, 3, 4, 1, 2)[on],
+                                     true_corners.permute(0, 3, 4, 1, 2)[on], delta=1.0)
+    return bce + corner_weight * huber
+
+
+def _front_measures(door_logits: torch.Tensor, corners: torch.Tensor, front: torch.Tensor,
+                    door: torch.Tensor, true_corners: torch.Tensor) -> tuple[float, float]:
+    """Door accuracy and median corner error (map px) on the front pixels."""
+    on = front > 0.5
+    accuracy = ((door_logits[on] > 0) == (door[on] > 0.5)).float().mean()
+    error = (corners - true_corners).norm(dim=2).permute(0, 2, 3, 1)[on]
+    return float(accuracy), float(error.median())
+
+
 def _offset_error_px(offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor) -> float:
     """Median distance, px, between predicted and true offsets on the true handle pixels."""
     on = mask > 0.5
@@ -79,12 +110,16 @@ def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
 
 def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig,
                    model: HandleDetectorConfig = HandleDetectorConfig(), resume: bool = False,
-                   command: str = "", allow_incomplete: bool = False) -> dict:
+                   command: str = "", allow_incomplete: bool = False, init: Path | None = None) -> dict:
     """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
 
-    Each step draws `images_per_batch` crops from every dataset. The last 5% of each dataset's
-    objects are held out; the handle IoU and the median offset error (px, on handle pixels) on 64
-    of their full images per dataset are reported.
+    Each step draws `images_per_batch` crops from every dataset (and, with front outputs, as
+    many whole images scaled for them). The last 5% of each dataset's objects are held out; the
+    handle IoU and the median offset error (px, on handle pixels) on 64 of their full images per
+    dataset are reported, with front outputs also the door accuracy and the median corner error
+    (px of the scaled image) on their front pixels. `init` (front outputs only): a trained
+    detector folder whose handle network is taken and kept fixed (`HandleDetector.start_from`);
+    then only the front network trains.
     OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
     A dataset missing objects is refused unless `allow_incomplete`.
     Returns the training record written into OUT/config.json.
@@ -108,6 +143,11 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     categories = {s.spec.category for s in sets}
     if len(categories) != 1:
         raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
+    if model.fronts and not all(s.has_parts for s in sets):
+        raise ConfigError("train-handle-detector: front outputs need furniture datasets")
+    if init is not None and not model.fronts:
+        raise ConfigError("train-handle-detector: --init adds front outputs to a trained detector; "
+                          "give --fronts")
     train_sets, val_sets = [], []
     for s in sets:
         held = max(1, s.num_objects // 20)
@@ -118,31 +158,48 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
         train_sets.append(s)
         val_sets.append(val)
     net = HandleDetector(model)
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    if init is not None:
+        net.start_from(load_detector(Path(init))[0])
+    opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
-    run = ResumableRun(ckpt_path, net, opt, sched, rng, {"model": asdict(model), "train": train_options},
+    run = ResumableRun(ckpt_path, net, opt, sched, rng, {"model": asdict(model), "train": train_options,
+                                                         "init": None if init is None else str(init)},
                        resume)
     out.mkdir(parents=True, exist_ok=True)
 
     def loss() -> torch.Tensor:  # crops from every dataset
-        return sum(_loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
-                   for rgb, mask, offsets in
-                   (sample_batch(s, config.images_per_batch, config.crop, rng) for s in train_sets))
+        total = torch.zeros(())
+        if init is None:
+            for s in train_sets:
+                rgb, mask, offsets = sample_batch(s, config.images_per_batch, config.crop, rng)
+                total = total + _loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
+        if model.fronts:
+            for s in train_sets:
+                rgb, *targets = sample_front_batch(s, config.images_per_batch, rng)
+                total = total + _front_loss(*net.fronts(rgb), *targets, config.corner_weight)
+        return total
 
     run.train(config.steps, config.checkpoint_every, loss, "train handle detector")
     val_rng = np.random.default_rng(12345)
     net.eval()
     with torch.no_grad():
-        ious, offset_errors = {}, {}
+        ious, offset_errors, door_accuracy, corner_errors = {}, {}, {}, {}
         for v in val_sets:
             rgb, mask, true_offsets = sample_batch(v, 64, v.spec.size, val_rng)
             logits, offsets = net(rgb)
             ious[str(v.root)] = _iou(logits, mask)
             offset_errors[str(v.root)] = _offset_error_px(offsets, mask, true_offsets)
+            if model.fronts:
+                rgb, *targets = sample_front_batch(v, 64, val_rng)
+                door_accuracy[str(v.root)], corner_errors[str(v.root)] = _front_measures(
+                    *net.fronts(rgb), *targets)
     record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
+              "init": None if init is None else str(init),
               "data": [str(d) for d in data_dirs], "command": command, "seconds": run.seconds,
               "final_loss": float(np.mean(run.losses[-100:])), "held_out_handle_iou": ious,
               "held_out_offset_error_px": offset_errors}
+    if model.fronts:
+        record.update(held_out_door_accuracy=door_accuracy, held_out_corner_error_px=corner_errors)
     save_detector(out, net, record)
     return record
