@@ -2,16 +2,20 @@
 against the gt.json of furniture capture sets.
 
 Usage: python benchmarks/front_reading.py --detector models/furniture/handle_detector
-       --sets data/eval/furniture_cams128 [--cm 3] [--threads 1]
+       --sets data/eval/furniture_cams128 [--cm 3] [--threads 1] [--figure F.png --figure-capture DIR]
 Handles are triangulated from the detector's maps as the fit does (`locate_handles`); each is
 matched to the true handle nearest it (within `--cm`). Per matched handle: whether the read type
 (door or drawer) is right; the median distance of its four face corners to the true ones (cm);
 for true doors read as doors, the hinge points' error (`hinge_points`, mean of hinge_top and
 hinge_bottom, cm), whether the hinge is on the right side (the read hinge nearer the true hinge
-edge than the true free edge) and the door's angle read from its face (the top and bottom edges'
-turn, `opening_angle`) against the true angle (deg); and the error of the shut left and top
-edges (`shut_edges`, cm). Per piece whose every front was sighted and matched: whether
-`front_order` (the read fronts) and `sighting_order` (the handles alone) give the canonical order.
+edge than the true free edge) and the door's angle read from its face (the top and bottom
+edges' turn, `opening_angle`; the fit keeps the field's q) against the true angle (deg); and the
+error of the shut left and top edges (`shut_edges`, cm). Per piece whose every front was sighted
+and matched: whether `front_order` (the read fronts) and `sighting_order` (the handles alone)
+give the canonical order.
+`--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five views: each
+read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its handle a
+white cross, the true faces thin green.
 """
 
 from __future__ import annotations
@@ -21,14 +25,61 @@ import platform
 from datetime import date
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig, front_order, sighting_order
-from nfr_drake.perception.front_reading import hinge_points, opening_angle, read_front, shut_edges
+from nfr_drake.perception.front_reading import SightedFront, hinge_points, read_front, shut_edges
 from nfr_drake.perception.handle_detector.model import load_detector
-from nfr_drake.perception.handle_triangulation import locate_handles
+from nfr_drake.perception.handle_triangulation import locate_handles, project
+
+ZOOM = 3
+
+
+def _draw_face(image: np.ndarray, frame, corners: np.ndarray, colour, thickness: int,
+               hinge_edge: tuple[int, int] | None = None) -> None:
+    """The face (4, 3) in O as a quadrilateral over the zoomed image, its hinge edge (corner
+    indices) thicker."""
+    uv = [project(frame, c) for c in corners]
+    if any(p is None for p in uv):
+        return
+    pts = [tuple(int(round(v)) for v in np.asarray(p) * ZOOM) for p in uv]
+    for a, b in ((0, 1), (1, 3), (2, 3), (0, 2)):
+        cv2.line(image, pts[a], pts[b], colour, thickness * (3 if (a, b) == hinge_edge else 1), cv2.LINE_AA)
+
+
+def figure_row(detector, capture_dir: Path) -> np.ndarray:
+    """What the detector reads of one capture's fronts, drawn in its first five views side by side."""
+    capture = read_capture_set(capture_dir)
+    images = capture.load_images()
+    found = locate_handles(detector.detect(images), capture.frames)
+    maps = detector.read_fronts(images)
+    fronts = [f for h in found if (f := read_front(h, maps, capture.frames)) is not None]
+    tiles = []
+    for frame, image in list(zip(capture.frames, images, strict=True))[:5]:
+        tile = cv2.resize(image, None, fx=ZOOM, fy=ZOOM, interpolation=cv2.INTER_CUBIC)
+        for part in capture.gt["parts"]:
+            _draw_face(tile, frame, np.asarray(part["face_corners"]), (0, 200, 0), 1)
+        for f in fronts:
+            colour = (230, 40, 40) if f.is_door else (40, 80, 230)
+            left = np.allclose(hinge_points(f), f.corners[[0, 2]])
+            _draw_face(tile, frame, f.corners, colour, 2, ((0, 2) if left else (1, 3)) if f.is_door else None)
+            uv = project(frame, f.p_O)
+            if uv is not None:
+                cv2.drawMarker(tile, tuple(int(round(v)) for v in uv * ZOOM), (255, 255, 255),
+                               cv2.MARKER_CROSS, 12, 2)
+        tiles.append(tile)
+    return np.concatenate(tiles, 1)
+
+
+def opening_angle(front: SightedFront) -> float:
+    """How far the face has turned from shut about a vertical axis, rad in [0, pi/2]: the mean
+    turn of its top and bottom edges in the horizontal plane (shut, they run along y; doors
+    open outward, so the sign needs no hinge)."""
+    edges = front.corners[[1, 3], :2] - front.corners[[0, 2], :2]
+    return float(np.mean(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1]))))
 
 
 def true_shut_edges(part: dict) -> tuple[float, float]:
@@ -48,9 +99,14 @@ def main() -> None:
     parser.add_argument("--sets", type=Path, nargs="+", required=True)
     parser.add_argument("--cm", type=float, default=3.0)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--figure", type=Path)
+    parser.add_argument("--figure-capture", type=Path, nargs="+")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     detector = load_detector(args.detector)[0]
+    if args.figure:
+        rows = [figure_row(detector, d) for d in args.figure_capture or capture_dirs(args.sets[0])[:1]]
+        cv2.imwrite(str(args.figure), cv2.cvtColor(np.concatenate(rows, 0), cv2.COLOR_RGB2BGR))
     print(f"{date.today()}, {platform.processor() or platform.machine()}, {args.detector}")
     print("| set | handles matched | type right | corner error (cm) | hinge error (cm) | hinge side "
           "right | door angle error (deg) | left edge error (cm) | top edge error (cm) | order right: "

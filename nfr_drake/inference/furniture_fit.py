@@ -43,8 +43,7 @@ from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
-from nfr_drake.objects.fronts import DOOR_OPENING
-from nfr_drake.perception.front_reading import SightedFront, hinge_points, opening_angle, shut_edges
+from nfr_drake.perception.front_reading import SightedFront, hinge_points, shut_edges
 
 FRONT_COLUMN_M = 0.08
 """`front_order`: read fronts whose shut left edges lie closer than this in y share a column, m
@@ -235,10 +234,12 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         shift = handle_shift(keypoints[:, SLOT_KEYPOINTS.index("handle")], handles, in_order)
     types = logits[:, 1:].argmax(-1).cpu().numpy()
     placed = pair_hinges(keypoints + shift[:, None], types, len(handles), config.pair_gap_m)
+    sides = np.zeros(S)
+    sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
     q = q.double().cpu().numpy()
     if any(f is not None for f in fronts):
         travel = [drawer_travel(model, z_best, k) for k in range(S)]
-        placed, types, q = place_fronts(placed, types, q, travel, fronts)
+        placed, types = place_fronts(placed, types, q, travel, fronts, sides)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -248,20 +249,23 @@ def front_order(fronts: list[SightedFront]) -> np.ndarray:
     """Indices (M,) that put read fronts in the canonical order (by shut left edge, in columns
     `FRONT_COLUMN_M` wide, then top edge, `shut_edges`)."""
     edges = np.array([[0.0, *shut_edges(f)] for f in fronts]).reshape(-1, 3)
-    return sighting_order(edges, FRONT_COLUMN_M)
+    return sighting_order(edges, FRONT_COLUMN_M, level_m=0.0)  # a column's fronts are never level
 
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
-                 fronts: list[SightedFront | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Slot keypoints (S, 4, 3) in O, types (S,) and q (S,) with what the detector read of each
-    paired slot's front (fronts[k] for slot k; None: the field's): its type; its goal (a door's
+                 fronts: list[SightedFront | None], sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
+    slot's front (fronts[k] for slot k; None: the field's): its type; its goal (a door's
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
     read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
-    edge away from the handle (`hinge_points`) and its q the turn of its face (`opening_angle`
-    over `DOOR_OPENING`); a drawer the head took for a door gets a pull line through its handle
-    along O's +x, `travel[k]` long (m), shut at q[k]."""
-    out, types, q = keypoints.copy(), types.copy(), q.copy()
+    edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair is
+    often read as one wide face) on the edge away from its neighbour (`hinge_points`); a drawer
+    the head took for a door gets a pull line through its handle along O's +x, `travel[k]` long
+    (m), shut at q[k] (the field's q, (S,)).
+    A door's q stays the field's: the face's turn (`benchmarks/front_reading.py`) is 4-6 degrees
+    off (median) and up to 17 on shut doors, where the field's is within 1."""
+    out, types = keypoints.copy(), types.copy()
     h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
     for k, front in enumerate(fronts[:len(out)]):
         if front is None:
@@ -270,13 +274,12 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
         if front.is_door:
-            out[k, [a0, a1]] = hinge_points(front)
-            q[k] = min(opening_angle(front) / DOOR_OPENING, 1.0)
+            out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
         elif PART_TYPES[int(types[k])] == "door":
             out[k, a0] = out[k, h] - [q[k] * travel[k], 0.0, 0.0]
             out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
         types[k] = PART_TYPES.index("door" if front.is_door else "drawer")
-    return out, types, q
+    return out, types
 
 
 def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool = False) -> np.ndarray:
@@ -294,30 +297,36 @@ def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool =
     return shift
 
 
-def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap_m: float,
-                level_m: float = 0.05) -> np.ndarray:
+def pair_sides(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the side (+1: +y, -1: -y) of the nearest other handle
+    within `level_m` in height and `pair_gap_m` in y, 0 where there is none: a door with such a
+    neighbour is one of a pair, whose doors hinge on the edges away from each other (their
+    handles near where they meet; `benchmarks/handle_layout.py` measures the rule)."""
+    sides = np.zeros(len(handles))
+    for k in range(len(handles)):
+        dy, dz = handles[:, 1] - handles[k, 1], handles[:, 2] - handles[k, 2]
+        near = np.flatnonzero((np.abs(dz) < level_m) & (np.abs(dy) < pair_gap_m)
+                              & (np.arange(len(handles)) != k))
+        if near.size:
+            sides[k] = np.sign(dy[near[np.argmin(np.abs(dy[near]))]])
+    return sides
+
+
+def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap_m: float) -> np.ndarray:
     """Slot keypoints (S, 4, 3) in O with the hinge of each door of a pair on its outer side: a
-    slot k < `sighted` (its handle a sighting) typed door whose handle has another sighted handle
-    within `level_m` in height and `pair_gap_m` in y is one of a pair, whose doors hinge on the
-    edges away from each other (their handles near where they meet); where the head puts its
-    hinge on the neighbour's side, its hinge points and goal are mirrored in y about its handle
-    (`benchmarks/handle_layout.py` measures the rule on generated pieces); the other doors keep
-    the head's side."""
+    slot k < `sighted` (its handle a sighting) typed door with a neighbour (`pair_sides`) whose
+    head puts its hinge on the neighbour's side gets its hinge points and goal mirrored in y
+    about its handle; the other doors keep the head's side."""
     out = keypoints.copy()
     h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
-    handles = keypoints[:sighted, h]
-    for k in range(min(sighted, len(keypoints))):
-        if PART_TYPES[int(types[k])] != "door":
+    sighted = min(sighted, len(keypoints))
+    sides = pair_sides(keypoints[:sighted, h], pair_gap_m)
+    for k in range(sighted):
+        if PART_TYPES[int(types[k])] != "door" or sides[k] == 0:
             continue
-        dy, dz = handles[:, 1] - handles[k, 1], handles[:, 2] - handles[k, 2]
-        near = np.flatnonzero((np.abs(dz) < level_m) & (np.abs(dy) < pair_gap_m) & (np.arange(sighted) != k))
-        if near.size == 0:
-            continue
-        toward = np.sign(dy[near[np.argmin(np.abs(dy[near]))]])
-        hinge_y = keypoints[k, [a0, a1], 1].mean()
-        if np.sign(hinge_y - handles[k, 1]) == toward:
+        if np.sign(keypoints[k, [a0, a1], 1].mean() - keypoints[k, h, 1]) == sides[k]:
             for i in (g, a0, a1):
-                out[k, i, 1] = 2.0 * handles[k, 1] - keypoints[k, i, 1]
+                out[k, i, 1] = 2.0 * keypoints[k, h, 1] - keypoints[k, i, 1]
     return out
 
 

@@ -7,11 +7,12 @@ per pixel of a front the probability that the front is a door and the offsets to
 projections of its face's corners (`nfr_drake.objects.articulated.FACE_CORNERS`: top left,
 top right, bottom left, bottom right as seen from the front). For a handle triangulated in 3D
 (`nfr_drake.perception.handle_triangulation`), each view that agreed on it is read around the
-handle's projection (`FrontMap.read`); the door probability is the views' mean and each corner
-is the point nearest the rays through the views' corner votes (`read_front`).
+handle's projection and its front's corners refined from the votes of the pixels that agree
+(`FrontMap.read`); the door probability is the views' mean and each corner is the point
+nearest the rays through the views' corners, the four then squared up into an upright
+rectangle (`read_front`, `upright`).
 
-A door's hinge is the vertical edge of its face away from the handle (`hinge_points`), its
-opening the turn of its face (`opening_angle`), and the
+A door's hinge is the vertical edge of its face away from the handle (`hinge_points`), and the
 front's place in the canonical order (left edge, then top edge, shut) follows from its corners
 (`shut_edges`): the handle alone tells neither (docs/FURNITURE.md, "Fronts read by the detector").
 """
@@ -28,31 +29,49 @@ from nfr_drake.perception.handle_triangulation import TriangulatedHandle, neares
 FRONT_HEIGHT_PX = 64
 """Rows of the image the front outputs are read on (any image is scaled to this height)."""
 READ_RADIUS_PX = 1.5
-"""Pixels (of the FRONT_HEIGHT_PX image) around a handle's projection whose outputs are averaged."""
+"""Pixels (of the FRONT_HEIGHT_PX image) around a handle's projection that give the first guess
+of its front's corners (`FrontMap.read`)."""
+AGREE_PX = (6.0, 3.0)
+"""How far (pixels of the FRONT_HEIGHT_PX image) a pixel's vote for a corner may lie from the
+guess to count, in the two rounds of `FrontMap.read`."""
 
 
 @dataclass(frozen=True)
 class FrontMap:
-    """A detector's front outputs for one image: door_probability (h, w) float32 and
-    corner_offset_px (h, w, 4, 2) float32 from each map pixel's centre to the projected face
-    corners, map pixels (du right, dv down); scale (2,): image pixels per map pixel in u and v."""
+    """A detector's front outputs for one image, per map pixel: front_probability (h, w) that it
+    shows a door or a drawer, door_probability (h, w) that its front is a door, corner_offset_px
+    (h, w, 4, 2) from its centre to its front's projected face corners, map pixels (du right,
+    dv down); scale (2,): image pixels per map pixel in u and v."""
 
+    front_probability: np.ndarray
     door_probability: np.ndarray
     corner_offset_px: np.ndarray
     scale: np.ndarray
 
     def read(self, uv: np.ndarray) -> tuple[float, np.ndarray] | None:
-        """At image pixel uv (2,): the door probability and the four corners' pixels (4, 2) in
-        the image, averaged over the map pixels within `READ_RADIUS_PX` of it; None off the map."""
-        h, w = self.door_probability.shape
-        centre = np.asarray(uv, float) / self.scale
+        """The front at image pixel uv (2,): its door probability and its four corners' pixels
+        (4, 2) in the image; None where no front is seen. The pixels within `READ_RADIUS_PX`
+        of uv give a first guess of the corners (their votes' mean, weighted by the front
+        probability); each corner is then the mean of the votes for it that agree with it
+        (within `AGREE_PX`, twice, the radius shrinking), a pixel's weight its front probability
+        over the square of 1 + its distance to the corner (a vote's error grows with its reach). The door
+        probability is the first guess's pixels' mean, weighted as they are."""
+        h, w = self.front_probability.shape
         rows, cols = np.mgrid[0:h, 0:w]
-        near = np.hypot(cols + 0.5 - centre[0], rows + 0.5 - centre[1]) <= READ_RADIUS_PX
-        if not near.any():
+        centres = np.stack([cols + 0.5, rows + 0.5], -1).astype(np.float64)  # (h, w, 2)
+        weight = self.front_probability.astype(np.float64)
+        near = (np.linalg.norm(centres - np.asarray(uv, float) / self.scale, axis=-1) <= READ_RADIUS_PX)
+        if weight[near].sum() < 0.5:
             return None
-        door = float(self.door_probability[near].mean())
-        corners = (np.stack([cols[near] + 0.5, rows[near] + 0.5], -1)[:, None]
-                   + self.corner_offset_px[near]).mean(0)
+        votes = centres[:, :, None] + self.corner_offset_px  # (h, w, 4, 2)
+        corners = (weight[near][:, None, None] * votes[near]).sum(0) / weight[near].sum()
+        for radius in AGREE_PX:
+            agree = np.linalg.norm(votes - corners, axis=-1) <= radius  # (h, w, 4)
+            for c in range(4):
+                wc = weight * agree[..., c] / (1.0 + np.linalg.norm(centres - corners[c], axis=-1)) ** 2
+                if wc.sum() > 0:
+                    corners[c] = (wc[..., None] * votes[:, :, c]).sum((0, 1)) / wc.sum()
+        door = float((weight[near] * self.door_probability[near]).sum() / weight[near].sum())
         return door, corners * self.scale
 
 
@@ -88,7 +107,20 @@ def read_front(handle: TriangulatedHandle, maps: list[FrontMap], frames: list[Ca
     for c in range(4):
         rays = [ray(frames[f], uv[c]) for f, uv in votes]
         corners[c] = nearest_point(np.array([o for o, _ in rays]), np.array([d for _, d in rays]))
-    return SightedFront(np.asarray(handle.p_O, float), float(np.mean(doors)), corners, len(votes))
+    return SightedFront(np.asarray(handle.p_O, float), float(np.mean(doors)), upright(corners), len(votes))
+
+
+def upright(corners: np.ndarray) -> np.ndarray:
+    """Face corners (4, 3) in O (`FACE_CORNERS` order) made an upright rectangle's, as every
+    front's face is (O's z is up, doors turn about vertical hinges, drawers slide level): each
+    vertical edge's two corners share their mean x and y, each horizontal edge's two their
+    mean z."""
+    out = corners.copy()
+    for edge in ((0, 2), (1, 3)):
+        out[list(edge), :2] = corners[list(edge), :2].mean(0)
+    for edge in ((0, 1), (2, 3)):
+        out[list(edge), 2] = corners[list(edge), 2].mean()
+    return out
 
 
 def _hinged_left(front: SightedFront) -> bool:
@@ -99,18 +131,11 @@ def _hinged_left(front: SightedFront) -> bool:
     return bool(d_left > d_right)
 
 
-def hinge_points(front: SightedFront) -> np.ndarray:
+def hinge_points(front: SightedFront, left: bool | None = None) -> np.ndarray:
     """A door's hinge_top and hinge_bottom (2, 3) in O: the top and bottom corners of its face's
-    edge farther from the handle."""
-    return front.corners[[0, 2]] if _hinged_left(front) else front.corners[[1, 3]]
-
-
-def opening_angle(front: SightedFront) -> float:
-    """How far the face has turned from shut about a vertical axis, rad in [0, pi/2]: the mean
-    turn of its top and bottom edges in the horizontal plane (shut, they run along y; doors
-    open outward, so the sign needs no hinge)."""
-    edges = front.corners[[1, 3], :2] - front.corners[[0, 2], :2]
-    return float(np.mean(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1]))))
+    left edge (`left` True), right edge (False) or, with None, the edge farther from the handle."""
+    left = _hinged_left(front) if left is None else left
+    return front.corners[[0, 2]] if left else front.corners[[1, 3]]
 
 
 def shut_edges(front: SightedFront) -> tuple[float, float]:

@@ -206,14 +206,20 @@ def test_read_fronts_give_the_canonical_order_types_and_hinges():
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
-    placed, read_types, read_q = place_fronts(head, types, q, [0.3] * 4, read)
-    np.testing.assert_allclose(read_q, [0.5, 0.0, 0.0, 0.2])  # the doors' faces are shut
+    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4))
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
     np.testing.assert_allclose(placed[2, 2:], _face(0.0, 0.4, 0.2, 0.78)[[1, 3]])  # hinged right
     np.testing.assert_allclose(placed[:3, 1, 1:], [[0.0, 0.8], [-0.2, 0.2], [0.2, 0.2]])  # goals
     np.testing.assert_array_equal(placed[3], head[3])
+    # a pair read as one wide face: each door hinges on the edge away from its neighbour
+    wide = _face(-0.4, 0.4, 0.2, 0.78)
+    pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
+    placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]))
+    np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
+    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2))
+    np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
 
 
 def test_the_doors_of_a_pair_hinge_on_their_outer_sides():

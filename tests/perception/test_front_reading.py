@@ -18,6 +18,7 @@ from nfr_drake.perception.front_reading import (
     hinge_points,
     read_front,
     shut_edges,
+    upright,
 )
 from nfr_drake.perception.handle_triangulation import TriangulatedHandle, project
 
@@ -60,8 +61,8 @@ def _true_map(frame: CaptureFrame, corners: np.ndarray) -> FrontMap:
     h = w = FRONT_HEIGHT_PX
     uv = np.array([project(frame, c) for c in corners]) / scale
     centres = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), -1)[:, :, None]
-    return FrontMap(np.full((h, w), 0.9, np.float32), (uv[None, None] - centres).astype(np.float32),
-                    np.array([scale, scale]))
+    return FrontMap(np.ones((h, w), np.float32), np.full((h, w), 0.9, np.float32),
+                    (uv[None, None] - centres).astype(np.float32), np.array([scale, scale]))
 
 
 @pytest.mark.parametrize("hinge_left", [True, False])
@@ -105,3 +106,42 @@ def test_the_generator_records_each_fronts_face_corners():
             side = [0, 2] if np.allclose(shut[[0, 2]], hinge) else [1, 3]
             np.testing.assert_allclose(front.face_corners(0.7)[side], hinge, atol=1e-9)
             assert np.all(open_[[i for i in range(4) if i not in side], 0] > shut[0, 0] + 0.1)
+
+
+def test_a_read_front_takes_its_corners_from_the_pixels_near_them():
+    """Pixels vote for their own front's corners with an error that grows with the distance
+    (10 % of it, all one way): the read front's corners lean on the pixels near each corner,
+    closer than the handle's guess, and the neighbouring front's votes do not count."""
+    h = w = FRONT_HEIGHT_PX
+    rows, cols = np.mgrid[0:h, 0:w]
+    centres = np.stack([cols + 0.5, rows + 0.5], -1)
+    fronts = {"a": (np.array([[10, 10], [30, 10], [10, 50], [30, 50]], float), 0.95),
+              "b": (np.array([[31, 10], [55, 10], [31, 30], [55, 30]], float), 0.05)}
+    front = np.zeros((h, w), np.float32)
+    door = np.zeros((h, w), np.float32)
+    offsets = np.zeros((h, w, 4, 2), np.float32)
+    for corners, p_door in fronts.values():
+        inside = ((centres >= corners[0]) & (centres <= corners[3])).all(-1)
+        to = corners[None, None] - centres[:, :, None]
+        err = 0.1 * np.linalg.norm(to, axis=-1, keepdims=True) * np.array([1.0, 0.0])
+        offsets[inside] = (to + err)[inside]
+        front[inside], door[inside] = 1.0, p_door
+    handle = np.array([27.0, 30.0])
+    guess = (centres[:, :, None] + offsets)[np.linalg.norm(centres - handle, axis=-1) <= 1.5].mean(0)
+    guess_error = np.linalg.norm(guess - fronts["a"][0], axis=1)
+    p_door, corners = FrontMap(front, door, offsets, np.array([1.0, 1.0])).read(handle)
+    error = np.linalg.norm(corners - fronts["a"][0], axis=1)
+    assert guess_error.min() > 2.0 and np.all(error < guess_error) and error.mean() < 0.6 * guess_error.mean()
+    assert p_door == pytest.approx(0.95)
+    assert FrontMap(front * 0, door, offsets, np.array([1.0, 1.0])).read(handle) is None
+
+
+def test_upright_squares_a_face_up_and_keeps_a_rectangle():
+    corners, _ = _door(30.0, True)
+    np.testing.assert_allclose(upright(corners), corners, atol=1e-12)
+    noisy = corners + np.random.default_rng(0).normal(0.0, 0.01, corners.shape)
+    square = upright(noisy)
+    np.testing.assert_allclose(square[0, :2], square[2, :2])
+    np.testing.assert_allclose(square[1, :2], square[3, :2])
+    assert square[0, 2] == square[1, 2] and square[2, 2] == square[3, 2]
+    assert np.abs(square - corners).mean() < np.abs(noisy - corners).mean()

@@ -46,6 +46,7 @@ def train_detector_command(data: list[Path], out: Path,
           + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
                       for k, v in record["held_out_handle_iou"].items()))
     if fronts:
-        print("held-out door accuracy, corner error (px at the front scale) "
-              + ", ".join(f"{k} {v:.3f}, {record['held_out_corner_error_px'][k]:.2f} px"
+        print("held-out front IoU, door accuracy, corner error (px at the front scale) "
+              + ", ".join(f"{k} {record['held_out_front_iou'][k]:.3f}, {v:.3f}, "
+                          f"{record['held_out_corner_error_px'][k]:.2f} px"
                           for k, v in record["held_out_door_accuracy"].items()))

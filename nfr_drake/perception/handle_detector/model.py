@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+
 import cv2
 import numpy as np
 import torch
@@ -53,10 +54,12 @@ def _conv(c_in: int, c_out: int, stride: int = 1, dilation: int = 1) -> nn.Seque
 
 
 class FrontNet(nn.Module):
-    """(B, 3, H, W) RGB in [0, 1] (the image scaled to `FRONT_HEIGHT_PX` rows) -> door logits (B, H, W) and offsets to the projected face corners (B, 4, 2, H, W),
-    pixels. An encoder-decoder: three stride-2 stages (channels c, 1.5 c, 2 c, 3 c) and two dilated
-    convolutions at 1/8 scale see the whole image (a front is read from its edges and gaps, far
-    from the handle); each decoder stage doubles the scale and joins the encoder's features there."""
+    """(B, 3, H, W) RGB in [0, 1] (the image scaled to `FRONT_HEIGHT_PX` rows) -> front logits
+    (the pixel shows a door or a drawer) and door logits (its front is a door), (B, H, W) each,
+    and offsets to its front's projected face corners (B, 4, 2, H, W), pixels. An encoder-decoder:
+    three stride-2 stages (channels c, 1.5 c, 2 c, 3 c) and two dilated convolutions at 1/8 scale
+    see the whole image (a front is read from its edges and gaps, far from the handle); each
+    decoder stage doubles the scale and joins the encoder's features there."""
 
     def __init__(self, c: int):
         super().__init__()
@@ -67,9 +70,9 @@ class FrontNet(nn.Module):
         self.middle = nn.Sequential(_conv(widths[-1], widths[-1], dilation=2),
                                     _conv(widths[-1], widths[-1], dilation=4))
         self.up = nn.ModuleList([_conv(a + b, b) for a, b in zip(widths[:0:-1], widths[-2::-1], strict=True)])
-        self.out = nn.Conv2d(widths[0], 9, 1)
+        self.out = nn.Conv2d(widths[0], 10, 1)
 
-    def forward(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         x, skips = rgb - 0.5, []
         for stage in self.down:
             x = stage(x)
@@ -80,7 +83,7 @@ class FrontNet(nn.Module):
                                                            align_corners=False), skip], 1))
         out = self.out(x)
         B, _, H, W = out.shape
-        return out[:, 0], out[:, 1:].view(B, 4, 2, H, W) * CORNER_SCALE_PX
+        return out[:, 0], out[:, 1], out[:, 2:].view(B, 4, 2, H, W) * CORNER_SCALE_PX
 
 
 class HandleDetector(nn.Module):
@@ -136,8 +139,9 @@ class HandleDetector(nn.Module):
             width = max(8, round(img.shape[1] * FRONT_HEIGHT_PX / img.shape[0]))
             small = cv2.resize(img, (width, FRONT_HEIGHT_PX), interpolation=cv2.INTER_AREA)
             x = torch.from_numpy(np.ascontiguousarray(small, np.float32) / 255.0).permute(2, 0, 1)
-            door, corners = self.fronts(x[None])
-            out.append(FrontMap(torch.sigmoid(door)[0].numpy(), corners[0].permute(2, 3, 0, 1).numpy(),
+            front, door, corners = self.fronts(x[None])
+            out.append(FrontMap(torch.sigmoid(front)[0].numpy(), torch.sigmoid(door)[0].numpy(),
+                                corners[0].permute(2, 3, 0, 1).numpy(),
                                 np.array([img.shape[1] / width, img.shape[0] / FRONT_HEIGHT_PX])))
         return out
 

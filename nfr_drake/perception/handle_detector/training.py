@@ -73,26 +73,32 @@ def _loss(logits: torch.Tensor, offsets: torch.Tensor, mask: torch.Tensor, true_
     return bce + dice + offset_weight * huber
 
 
-def _front_loss(door_logits: torch.Tensor, corners: torch.Tensor, front: torch.Tensor, door: torch.Tensor,
-                true_corners: torch.Tensor, corner_weight: float) -> torch.Tensor:
-    """On the front pixels: cross-entropy of the door logits (B, H, W) plus `corner_weight` times
-    the Huber loss (1 px) of the corner offsets (B, 4, 2, H, W)."""
+def _front_loss(front_logits: torch.Tensor, door_logits: torch.Tensor, corners: torch.Tensor,
+                front: torch.Tensor, door: torch.Tensor, true_corners: torch.Tensor,
+                corner_weight: float) -> torch.Tensor:
+    """Cross-entropy of the front logits (B, H, W) on every pixel; on the front pixels that of
+    the door logits (B, H, W) plus `corner_weight` times the Huber loss (1 px) of the corner
+    offsets (B, 4, 2, H, W)."""
+    loss = nn.functional.binary_cross_entropy_with_logits(front_logits, front)
     on = front > 0.5
     if not on.any():
-        return door_logits.sum() * 0.0
+        return loss
     bce = nn.functional.binary_cross_entropy_with_logits(door_logits[on], door[on])
     huber = nn.functional.huber_loss(corners.permute(0, 3, 4, 1, 2)[on],
                                      true_corners.permute(0, 3, 4, 1, 2)[on], delta=1.0)
-    return bce + corner_weight * huber
+    return loss + bce + corner_weight * huber
 
 
-def _front_measures(door_logits: torch.Tensor, corners: torch.Tensor, front: torch.Tensor,
-                    door: torch.Tensor, true_corners: torch.Tensor) -> tuple[float, float]:
-    """Door accuracy and median corner error (map px) on the front pixels."""
+def _front_measures(front_logits: torch.Tensor, door_logits: torch.Tensor, corners: torch.Tensor,
+                    front: torch.Tensor, door: torch.Tensor, true_corners: torch.Tensor
+                    ) -> tuple[float, float, float]:
+    """Front IoU, door accuracy and median corner error (map px), the last two on the front
+    pixels."""
     on = front > 0.5
+    iou = _iou(front_logits, front)
     accuracy = ((door_logits[on] > 0) == (door[on] > 0.5)).float().mean()
     error = (corners - true_corners).norm(dim=2).permute(0, 2, 3, 1)[on]
-    return float(accuracy), float(error.median())
+    return iou, float(accuracy), float(error.median())
 
 
 def _offset_error_px(offsets: torch.Tensor, mask: torch.Tensor, true_offsets: torch.Tensor) -> float:
@@ -116,8 +122,8 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     Each step draws `images_per_batch` crops from every dataset (and, with front outputs, as
     many whole images scaled for them). The last 5% of each dataset's objects are held out; the
     handle IoU and the median offset error (px, on handle pixels) on 64 of their full images per
-    dataset are reported, with front outputs also the door accuracy and the median corner error
-    (px of the scaled image) on their front pixels. `init` (front outputs only): a trained
+    dataset are reported, with front outputs also the front IoU and, on their front pixels, the
+    door accuracy and the median corner error (px of the scaled image). `init` (front outputs only): a trained
     detector folder whose handle network is taken and kept fixed (`HandleDetector.start_from`);
     then only the front network trains.
     OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
@@ -184,7 +190,7 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     val_rng = np.random.default_rng(12345)
     net.eval()
     with torch.no_grad():
-        ious, offset_errors, door_accuracy, corner_errors = {}, {}, {}, {}
+        ious, offset_errors, front_ious, door_accuracy, corner_errors = {}, {}, {}, {}, {}
         for v in val_sets:
             rgb, mask, true_offsets = sample_batch(v, 64, v.spec.size, val_rng)
             logits, offsets = net(rgb)
@@ -192,14 +198,15 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
             offset_errors[str(v.root)] = _offset_error_px(offsets, mask, true_offsets)
             if model.fronts:
                 rgb, *targets = sample_front_batch(v, 64, val_rng)
-                door_accuracy[str(v.root)], corner_errors[str(v.root)] = _front_measures(
-                    *net.fronts(rgb), *targets)
+                front_ious[str(v.root)], door_accuracy[str(v.root)], corner_errors[str(v.root)] = \
+                    _front_measures(*net.fronts(rgb), *targets)
     record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
               "init": None if init is None else str(init),
               "data": [str(d) for d in data_dirs], "command": command, "seconds": run.seconds,
               "final_loss": float(np.mean(run.losses[-100:])), "held_out_handle_iou": ious,
               "held_out_offset_error_px": offset_errors}
     if model.fronts:
-        record.update(held_out_door_accuracy=door_accuracy, held_out_corner_error_px=corner_errors)
+        record.update(held_out_front_iou=front_ious, held_out_door_accuracy=door_accuracy,
+                      held_out_corner_error_px=corner_errors)
     save_detector(out, net, record)
     return record
