@@ -45,10 +45,6 @@ from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.perception.front_reading import SightedFront, hinge_points, shut_edges
 
-FRONT_COLUMN_M = 0.08
-"""`front_order`: read fronts whose shut left edges lie closer than this in y share a column, m
-(a column's fronts share their left edge; columns are a front's width apart)."""
-
 
 @dataclass(frozen=True)
 class FurnitureFitConfig:
@@ -91,9 +87,9 @@ class FurnitureFitConfig:
     """`pair_hinges`: a door's sighted handle with another level one closer than this in y is one
     of a pair, hinged on the side away from it, m (0: the head's hinge side always)."""
     read_fronts: bool = True
-    """Take each sighted front's type, a door's hinge points and the order of the sightings from
-    what the detector read of the fronts, where it read them (`place_fronts`, `front_order`;
-    with the "order" pairing only)."""
+    """Take each sighted front's type, a door's hinge points and the goal's place from what the
+    detector read of the fronts, where it read them (`place_fronts`; with the "order" pairing
+    only)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -192,8 +188,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     if fronts is None or not config.read_fronts or not in_order:
         fronts = [None] * len(handles)
     if in_order:
-        order = (front_order(fronts) if fronts and all(f is not None for f in fronts)
-                 else sighting_order(handles, config.column_gap_m))
+        order = sighting_order(handles, config.column_gap_m)
         handles, fronts = handles[order], [fronts[i] for i in order]
     handles, fronts = handles[:S], fronts[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
@@ -243,13 +238,6 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
-
-
-def front_order(fronts: list[SightedFront]) -> np.ndarray:
-    """Indices (M,) that put read fronts in the canonical order (by shut left edge, in columns
-    `FRONT_COLUMN_M` wide, then top edge, `shut_edges`)."""
-    edges = np.array([[0.0, *shut_edges(f)] for f in fronts]).reshape(-1, 3)
-    return sighting_order(edges, FRONT_COLUMN_M, level_m=0.0)  # a column's fronts are never level
 
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],

@@ -16,7 +16,6 @@ from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
     HandleTerm,
     fit_furniture,
-    front_order,
     handle_shift,
     pair_hinges,
     part_trajectory,
@@ -185,18 +184,10 @@ def _face(y0, y1, z0, z1, x=0.3):
     return np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]], float)
 
 
-def test_read_fronts_give_the_canonical_order_types_and_hinges():
-    """A tall door hinged left (handle near its right edge) beside a column of drawers: the
-    handles alone look like one column (`sighting_order` puts the top drawer first), the fronts'
-    shut left edges give the canonical order (the door's column first). A read door gets its
-    hinge on its face's edge away from the handle and its goal at the face's middle, a read
-    drawer the head took for a door a pull line along +x through its handle."""
-    tall = SightedFront(np.array([0.33, -0.05, 1.0]), 0.9, _face(-0.4, 0.0, 0.1, 1.8), 5)
-    top = SightedFront(np.array([0.33, 0.1, 1.3]), 0.1, _face(-0.05, 0.25, 1.2, 1.4), 5)
-    low = SightedFront(np.array([0.33, 0.1, 1.0]), 0.1, _face(-0.05, 0.25, 0.9, 1.1), 5)
-    handles = np.array([f.p_O for f in (low, top, tall)])
-    assert sighting_order(handles, 0.2).tolist() == [1, 2, 0]
-    assert front_order([low, top, tall]).tolist() == [2, 1, 0]
+def test_read_fronts_give_the_types_hinges_and_goals():
+    """A read door gets its hinge on its face's edge away from the handle, a read drawer the head
+    took for a door a pull line along +x through its handle; the goals move to the faces' middles
+    and bottom edges; a slot without a read front keeps the head's."""
     drawer = SightedFront(np.array([0.33, 0.0, 0.9]), 0.1, _face(-0.4, 0.4, 0.8, 1.0), 5)
     left_door = SightedFront(np.array([0.33, -0.05, 0.6]), 0.9, _face(-0.4, 0.0, 0.2, 0.78), 5)
     right_door = SightedFront(np.array([0.33, 0.05, 0.6]), 0.9, _face(0.0, 0.4, 0.2, 0.78), 5)
