@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from nfr_drake.data.camera import PinholeCamera
+from nfr_drake.data.camera_placement import look_at
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.objects import object_rng, sample_object
 from nfr_drake.objects.articulated import FACE_CORNERS
@@ -23,19 +24,9 @@ from nfr_drake.perception.front_reading import (
 from nfr_drake.perception.handle_triangulation import TriangulatedHandle, project
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    X = np.eye(4)
-    X[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    X[:3, 3] = eye
-    return X
-
-
 def _frames(n: int = 5, size: int = 128) -> list[CaptureFrame]:
     cam = PinholeCamera.from_fov(size, size, np.radians(50.0))
-    return [CaptureFrame(Path(f"{az}.png"), _look_at(np.array([2.0 * np.cos(np.radians(az)),
+    return [CaptureFrame(Path(f"{az}.png"), look_at(np.array([2.0 * np.cos(np.radians(az)),
                                                                2.0 * np.sin(np.radians(az)), 1.0]),
                                                      np.array([0.0, 0.0, 0.5])), cam)
             for az in np.linspace(-40, 40, n)]
