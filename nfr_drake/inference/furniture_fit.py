@@ -24,8 +24,10 @@ w log(1 + d^2 / s^2) per pair, averaged: robust as the closets' sighting term. A
 the fit, each matched slot is translated onto its sighting (`snap_to_handles`): its keypoints and
 its swept path move rigidly by the sighting minus the head's handle, so the head gives the part's
 layout (hinge and goal about the handle, the way it moves) and the sighting where it is; the doors
-of a pair are hinged on their outer sides (`pair_hinges`), and each part moves as a rigid front
-on its joint (`slot_path`).
+of a pair are hinged on their outer sides (`pair_hinges`); where the detector read the front
+behind a sighting (`nfr_drake.perception.front_reading`), its type, a door's hinge points and the
+goal's place come from that front (`place_fronts`); and each part moves as a rigid front on its
+joint (`slot_path`).
 """
 
 from __future__ import annotations

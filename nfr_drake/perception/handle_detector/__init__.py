@@ -8,7 +8,9 @@ centre): a bar's visible pixels (posts included) are not centred on the grip, an
 are. It is trained on the same Drake renders as the neural field (label class 3 = handle), on
 images of several sizes so that it works at any resolution: the network has no pooling and no
 fully connected layer, so it runs on images of any size, and it sees about 65 px around each
-pixel (dilated convolutions).
+pixel (dilated convolutions). A furniture detector trained with `--fronts` also holds a front
+network (`FrontNet`), run on the photo scaled to 64 rows, whose outputs say what front lies behind
+each sighted handle (`nfr_drake.perception.front_reading`).
 
 Files in a model folder's `handle_detector/`: `config.json` (`HandleDetectorConfig` and training
 record) and `model.safetensors`. A training run's `checkpoint/` is a resumable safetensors + JSON

@@ -1,6 +1,6 @@
 """Training the detector: the loss, a resumable training loop on rendered datasets of any image
 sizes, and the held-out handle IoU and offset error it reports (with front outputs also the
-door accuracy and the corner error on the front pixels)."""
+front IoU, and the door accuracy and the corner error on the front pixels)."""
 
 from __future__ import annotations
 
