@@ -254,7 +254,7 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     the head took for a door gets a pull line through its handle along O's +x, `travel[k]` long
     (m), shut at q[k] (the field's q, (S,)).
     A door's q stays the field's: the face's turn (`benchmarks/front_reading.py`) is 4-6 degrees
-    off (median) and up to 17 on shut doors, where the field's is within 1."""
+    off (median), and a shut door read as ajar would be opened short by as much."""
     out, types = keypoints.copy(), types.copy()
     h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
     for k, front in enumerate(fronts[:len(out)]):
