@@ -249,8 +249,8 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
     read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
-    edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair is
-    often read as one wide face) on the edge away from its neighbour (`hinge_points`); a drawer
+    edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair can be
+    read as one wide face) on the edge away from its neighbour (`hinge_points`); a drawer
     the head took for a door gets a pull line through its handle along O's +x, `travel[k]` long
     (m), shut at q[k] (the field's q, (S,)).
     A door's q stays the field's: the face's turn (`benchmarks/front_reading.py`) is 4-6 degrees

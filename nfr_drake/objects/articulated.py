@@ -181,8 +181,8 @@ class Front:
         grip_half_length: half the length of the grip along `grip_axis_M`, m; 0 for a point grip.
         density: kg/m^3 of the link's parts, for its mass and inertia.
         damping: viscous damping of the joint, N m s/rad or N s/m.
-        face_M: the front's outer face, a rectangle of the plane x = x in M: (x, y0, y1, z0, z1),
-            m (furniture fronts; None for the closet and drawer categories).
+        face_M: the front's outer face, a rectangle in M's plane of constant x: (x, y0, y1, z0,
+            z1), m (furniture fronts; None for the closet and drawer categories).
     """
 
     kind: Literal["door", "drawer"]

@@ -20,6 +20,7 @@ front's place in the canonical order (left edge, then top edge, shut) follows fr
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -48,22 +49,31 @@ class FrontMap:
     corner_offset_px: np.ndarray
     scale: np.ndarray
 
+    @cached_property
+    def centres(self) -> np.ndarray:
+        """Map pixel centres (h, w, 2), map pixels (u, v)."""
+        rows, cols = np.mgrid[0:self.front_probability.shape[0], 0:self.front_probability.shape[1]]
+        return np.stack([cols + 0.5, rows + 0.5], -1).astype(np.float64)
+
+    @cached_property
+    def votes(self) -> np.ndarray:
+        """Each map pixel's vote for its front's corners (h, w, 4, 2), map pixels: computed once,
+        read for every handle seen in the image."""
+        return self.centres[:, :, None] + self.corner_offset_px
+
     def read(self, uv: np.ndarray) -> tuple[float, np.ndarray] | None:
         """The front at image pixel uv (2,): its door probability and its four corners' pixels
         (4, 2) in the image; None where no front is seen. The pixels within `READ_RADIUS_PX`
         of uv give a first guess of the corners (their votes' mean, weighted by the front
         probability); each corner is then the mean of the votes for it that agree with it
         (within `AGREE_PX`, twice, the radius shrinking), a pixel's weight its front probability
-        over the square of 1 + its distance to the corner (a vote's error grows with its reach). The door
-        probability is the first guess's pixels' mean, weighted as they are."""
-        h, w = self.front_probability.shape
-        rows, cols = np.mgrid[0:h, 0:w]
-        centres = np.stack([cols + 0.5, rows + 0.5], -1).astype(np.float64)  # (h, w, 2)
+        over the square of 1 + its distance to the corner (a vote's error grows with its reach).
+        The door probability is the first guess's pixels' mean, weighted as they are."""
+        centres, votes = self.centres, self.votes
         weight = self.front_probability.astype(np.float64)
         near = (np.linalg.norm(centres - np.asarray(uv, float) / self.scale, axis=-1) <= READ_RADIUS_PX)
         if weight[near].sum() < 0.5:
             return None
-        votes = centres[:, :, None] + self.corner_offset_px  # (h, w, 4, 2)
         corners = (weight[near][:, None, None] * votes[near]).sum(0) / weight[near].sum()
         for radius in AGREE_PX:
             agree = np.linalg.norm(votes - corners, axis=-1) <= radius  # (h, w, 4)
