@@ -190,7 +190,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     if fronts is None or not config.read_fronts or not in_order:
         fronts = [None] * len(handles)
     if in_order:
-        order = sighting_order(handles, config.column_gap_m)
+        order = sighting_order(handles, config.column_gap_m, fronts=fronts)
         handles, fronts = handles[order], [fronts[i] for i in order]
     handles, fronts = handles[:S], fronts[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
@@ -320,32 +320,48 @@ def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap
     return out
 
 
-def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03) -> np.ndarray:
+def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03,
+                   fronts: list[SightedFront | None] | None = None,
+                   left_edge_m: float = 0.04) -> np.ndarray:
     """Indices (M,) that put handles (M, 3) in O, m, in the order of their fronts as far as the
     handles tell it (the fronts' canonical order, `nfr_drake.objects.furniture.canonical_order`:
-    by panel left edge, then top edge): columns left to right (increasing y; handles less than
-    `column_gap_m` apart in y share one), in a column top to bottom, handles within `level_m` in
-    height left to right (a pair's doors, side by side drawers). A door's handle lies near its
-    free edge, not its left one, so some layouts come out in another order than the fronts'."""
-    if len(handles_O) == 0:
-        return np.zeros(0, int)
+    by panel left edge, then top edge): columns left to right (by their leftmost handle's y;
+    handles less than `column_gap_m` apart in y share one, and so do handles whose read fronts,
+    fronts (M,) where given (None: not read), have their shut left edges (`shut_edges`) within
+    `left_edge_m`: stacked doors with their handles on opposite sides), in a column top to
+    bottom, handles within `level_m` in height left to right (a pair's doors, side by side
+    drawers). A door's handle lies near its free edge, not its left one, so without read fronts
+    some layouts come out in another order than the fronts'."""
+    M = len(handles_O)
+    column = np.arange(M)  # a union-find forest: each handle's parent
+
+    def root(i: int) -> int:
+        while column[i] != i:
+            i = column[i]
+        return i
+
     by_y = np.argsort(handles_O[:, 1], kind="stable")
-    columns = [[by_y[0]]]
-    for i in by_y[1:]:
-        if handles_O[i, 1] - handles_O[columns[-1][-1], 1] < column_gap_m:
-            columns[-1].append(i)
-        else:
-            columns.append([i])
+    for a, b in zip(by_y[:-1], by_y[1:], strict=True):
+        if handles_O[b, 1] - handles_O[a, 1] < column_gap_m:
+            column[root(b)] = root(a)
+    lefts = [None if f is None else shut_edges(f)[0] for f in (fronts or [None] * M)]
+    for a in range(M):
+        for b in range(a + 1, M):
+            if lefts[a] is not None and lefts[b] is not None and abs(lefts[a] - lefts[b]) < left_edge_m:
+                column[root(b)] = root(a)
+    columns: dict[int, list[int]] = {}
+    for i in by_y:
+        columns.setdefault(root(i), []).append(int(i))
     order = []
-    for column in columns:
-        column = sorted(column, key=lambda j: -handles_O[j, 2])
-        for a in range(1, len(column)):  # insertion: a level neighbour further left goes first
+    for members in columns.values():  # in the order of their leftmost handles
+        members = sorted(members, key=lambda j: -handles_O[j, 2])
+        for a in range(1, len(members)):  # insertion: a level neighbour further left goes first
             b = a
-            while (b > 0 and abs(handles_O[column[b], 2] - handles_O[column[b - 1], 2]) < level_m
-                   and handles_O[column[b], 1] < handles_O[column[b - 1], 1]):
-                column[b - 1], column[b] = column[b], column[b - 1]
+            while (b > 0 and abs(handles_O[members[b], 2] - handles_O[members[b - 1], 2]) < level_m
+                   and handles_O[members[b], 1] < handles_O[members[b - 1], 1]):
+                members[b - 1], members[b] = members[b], members[b - 1]
                 b -= 1
-        order += column
+        order += members
     return np.array(order, int)
 
 

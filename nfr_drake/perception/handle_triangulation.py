@@ -254,13 +254,31 @@ def _agreeing(frames: list[CaptureFrame], found: list[HandleSighting], tolerance
     return agree, errors, inside
 
 
+SIDE_BY_SIDE_M = 0.04
+"""`triangulate_handles`: two handles side by side at least this far apart are two even where
+they project within a few pixels of each other in every view, m. A pair of doors' handles can be
+9 cm apart, 5-7 px at 128 px (pipeline pieces 52, 69, 70 of seed 200 lost one of them to the
+projection test); a bar the detector splits in two gives two points along it, and a door's bar
+is upright (so the test stays for points one above the other)."""
+
+
+def _side_by_side(a: np.ndarray, b: np.ndarray, apart_m: float) -> bool:
+    """Whether points a, b (3,) in O lie side by side (further apart in xy than in z) and at
+    least `apart_m` apart."""
+    horizontal = float(np.linalg.norm(a[:2] - b[:2]))
+    return horizontal > abs(float(a[2] - b[2])) and horizontal >= apart_m
+
+
 def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
                         max_error_px: float = 3.0, min_views: int = MIN_VIEWS,
-                        min_share: float = 0.0) -> list[TriangulatedHandle]:
+                        min_share: float = 0.0, side_by_side_m: float = SIDE_BY_SIDE_M
+                        ) -> list[TriangulatedHandle]:
     """Several handles from the sightings of all views (module docstring), strongest first; a
     point that projects within 2 `max_error_px` of an earlier one in all its views is the same
-    handle and dropped. A point must agree with at least `min_share` of the views it projects
-    into (sightings that agree by chance across a few views do not)."""
+    handle and dropped, unless the two lie side by side (further apart horizontally in O than
+    vertically) and at least `side_by_side_m` apart: the handles of a pair of doors, near the
+    edge where the doors meet (`SIDE_BY_SIDE_M`). A point must agree with at least `min_share`
+    of the views it projects into (sightings that agree by chance across a few views do not)."""
     found = list(found)
     tolerance = np.array([max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
                           for s in found])
@@ -307,9 +325,10 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         errors_p = _agreeing(frames, found, tolerance, p[None])[1]
         rms_px = float(np.sqrt(np.mean(errors_p[0, inliers] ** 2)))
         frames_in = tuple(int(view[k]) for k in inliers)
-        same = any(all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
-                                      - _project_many(frames[f], p[None])[0])
-                       <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
+        same = any(not _side_by_side(h.p_O, p, side_by_side_m)
+                   and all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
+                                          - _project_many(frames[f], p[None])[0])
+                           <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
                    for h in handles)
         if not same:
             handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))

@@ -184,6 +184,19 @@ def _face(y0, y1, z0, z1, x=0.3):
     return np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]], float)
 
 
+def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
+    """Two doors one above the other, the upper one's handle on the right and the lower one's on
+    the left: by the handles alone they are two columns (the lower door first); their read fronts
+    share the left edge, so they are one column, top to bottom, as the fronts' canonical order."""
+    handles = np.array([[0.42, -0.33, 0.96],   # lower door, handle on its left
+                        [0.42, 0.33, 1.13]])   # upper door, handle on its right
+    lower = SightedFront(handles[0], 0.9, _face(-0.4, 0.4, 0.1, 0.9), 5)
+    upper = SightedFront(handles[1], 0.9, _face(-0.4, 0.4, 0.92, 1.7), 5)
+    assert sighting_order(handles, 0.2).tolist() == [0, 1]
+    assert sighting_order(handles, 0.2, fronts=[lower, upper]).tolist() == [1, 0]
+    assert sighting_order(handles, 0.2, fronts=[lower, None]).tolist() == [0, 1]  # one not read
+
+
 def test_read_fronts_give_the_types_hinges_and_goals():
     """A read door gets its hinge on its face's edge away from the handle, a read drawer the head
     took for a door a pull line along +x through its handle; the goals move to the faces' middles

@@ -219,3 +219,17 @@ def test_a_point_seen_in_few_of_the_views_it_is_in_is_dropped_with_min_share():
     assert len(triangulate_handles(frames, found)) == 2
     (kept,) = triangulate_handles(frames, found, min_share=0.5)
     assert np.linalg.norm(kept.p_O - P_TRUE) < 0.005
+
+
+@pytest.mark.parametrize("step, points", [((0.0, 0.06, 0.0), 2), ((0.0, 0.0, 0.05), 1)])
+def test_close_handles_side_by_side_stay_two(step, points):
+    """Two sighted points 3-6 px apart in every view: side by side (a pair of doors' handles, 6 cm
+    apart in y) they are two handles; one above the other (a bar the detector split in two) one.
+    Without the side-by-side exception the pair is one handle too."""
+    frames = _frames(8, 128)
+    pair = [P_TRUE, P_TRUE + np.array(step)]
+    assert all(2.5 < np.linalg.norm(_project(f, pair[0]) - _project(f, pair[1])) < 6.0 for f in frames)
+    found = [s for i, f in enumerate(frames)
+             for s in sightings(_votes_map(128, [_project(f, p) for p in pair], spread=1), i)]
+    assert len(triangulate_handles(frames, found)) == points
+    assert len(triangulate_handles(frames, found, side_by_side_m=np.inf)) == 1
