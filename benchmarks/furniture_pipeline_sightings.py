@@ -1,0 +1,114 @@
+"""Whose handle each slot gets: the handle detector's sightings on the pipeline's own photos of
+shut furniture, in the order the fit pairs them with slots, against the true fronts.
+
+Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
+       [--csv-path F]
+For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
+to open, `object_scenario`), its perception cameras photograph it shut
+(`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
+(`locate_handles`, `read_front`) and the fit's `sighting_order` puts them in slot order. A
+sighting is a front's when within `--cm` of its true handle. Each piece's part to open is then:
+"right" (slot k has front k's handle), or why not, first that applies: "part unsighted" (no
+sighting is the part's), "extra sighting" (a sighting is no front's), "other unsighted" (another
+front has none: later slots shift), "order" (every front sighted once, in another order). Also
+the read type (door or drawer) of every matched sighting against its front's. Nothing is fitted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+from collections import Counter
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from nfr_drake.data.capture import CaptureFrame
+from nfr_drake.eval.pipeline_eval import object_scenario
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, sighting_order
+from nfr_drake.jsonio import write_rows_csv
+from nfr_drake.perception.front_reading import read_front
+from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
+from nfr_drake.perception.handle_triangulation import locate_handles
+from nfr_drake.systems.pipeline import perception_photos
+from nfr_drake.systems.scenario import Scenario
+
+OUTCOMES = ("right", "part unsighted", "extra sighting", "other unsighted", "order")
+
+
+def piece_outcome(true_handles: np.ndarray, sighted: np.ndarray, part: int, cm: float
+                  ) -> tuple[str, list[int]]:
+    """The part's outcome (`OUTCOMES`, module docstring) and, per sighting in slot order
+    (sighted (M, 3) in O), the index of the true front whose handle (true_handles (N, 3)) it is,
+    -1 for none within `cm`."""
+    owner = []
+    for p in sighted:
+        d = np.linalg.norm(true_handles - p, axis=1)
+        owner.append(int(d.argmin()) if d.min() < cm / 100.0 else -1)
+    if part < len(owner) and owner[part] == part:
+        return "right", owner
+    if part not in owner:
+        return "part unsighted", owner
+    if -1 in owner:
+        return "extra sighting", owner
+    if len(set(owner)) < len(true_handles):
+        return "other unsighted", owner
+    return "order", owner
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", type=Path, default=Path("models/furniture"))
+    parser.add_argument("--seed", type=int, default=200)
+    parser.add_argument("--objects", type=int, nargs="+", default=list(range(100)))
+    parser.add_argument("--cm", type=float, default=5.0,
+                        help="a sighting within this of a true handle is that front's")
+    parser.add_argument("--csv-path", type=Path)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    base = Scenario(category="furniture", model=str(args.model), seed=args.seed)
+    detector, _ = load_detector(args.model / DETECTOR_DIR)
+    gap = FurnitureFitConfig().column_gap_m
+    rows, types = [], Counter()
+    for index in args.objects:
+        scenario = object_scenario(base, index)
+        obj = scenario.sample_object()
+        images, X_WCs, cameras = perception_photos(scenario)
+        X_OW = np.linalg.inv(scenario.X_WO.GetAsMatrix4())
+        frames = [CaptureFrame(Path(f"camera_{i}"), X_OW @ X_WC, camera)
+                  for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
+        handles = locate_handles(detector.detect(images), frames)
+        maps = detector.read_fronts(images)
+        fronts = [read_front(h, maps, frames) for h in handles]
+        order = sighting_order(np.array([h.p_O for h in handles]).reshape(-1, 3), gap, fronts=fronts)
+        sighted = np.array([handles[i].p_O for i in order]).reshape(-1, 3)
+        truth = np.array([f.keypoints(0.0)["handle"] for f in obj.fronts])
+        outcome, owner = piece_outcome(truth, sighted, scenario.part, args.cm)
+        for i, k in zip(order, owner, strict=True):
+            if k >= 0:
+                read = "unread" if fronts[i] is None else ("door" if fronts[i].is_door else "drawer")
+                types[(obj.fronts[k].kind, read)] += 1
+        rows.append({"index": index, "part": scenario.part, "part_type": obj.fronts[scenario.part].kind,
+                     "fronts": len(truth), "sightings": len(sighted), "outcome": outcome,
+                     "sighted_fronts": len(set(owner) - {-1}), "owners": " ".join(map(str, owner))})
+        print(f"{index}: part {scenario.part} of {len(truth)}, {len(sighted)} sightings of fronts "
+              f"{owner}: {outcome}", flush=True)
+    print(f"\n{date.today()}, {platform.machine()}, {args.model}, seed {args.seed}, {len(rows)} pieces, "
+          f"a sighting within {args.cm} cm")
+    print("| the part to open | pieces | doors | drawers |\n|---|---|---|---|")
+    for outcome in OUTCOMES:
+        these = [r for r in rows if r["outcome"] == outcome]
+        print(f"| {outcome} | {len(these)} | {sum(r['part_type'] == 'door' for r in these)} "
+              f"| {sum(r['part_type'] == 'drawer' for r in these)} |")
+    owners = [int(k) for r in rows for k in r["owners"].split()]
+    print(f"\nfronts sighted {sum(r['sighted_fronts'] for r in rows)} of {sum(r['fronts'] for r in rows)}; "
+          f"sightings {len(owners)}, of no front {owners.count(-1)}; read types of the fronts' "
+          "sightings: " + ", ".join(f"{kind} read {read} {n}" for (kind, read), n in sorted(types.items())))
+    if args.csv_path is not None:
+        write_rows_csv(args.csv_path, rows)
+
+
+if __name__ == "__main__":
+    main()
