@@ -229,15 +229,11 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
     sighting_gap_m: the distance, m, from the slot's handle to the nearest sighted one (0 when
     none); the identity of the part's sighting, with sighted_O in the fit's order (slot k paired
     with sighting k, `furniture_fit.sighting_order`): part_unsighted (1: handles were sighted but
-    none is this slot's, k >= M: the part's keypoints are the head's alone) and count_gap: how
-    many more or fewer slots the keypoint head finds (existence logit > 0) than handles were
-    sighted (0 without sightings): a missed or extra sighting moves every later slot onto
-    another front's handle. z (D,): the fit.
+    none is this slot's, k >= M: the part's keypoints are the head's alone). z (D,): the fit.
     """
     with torch.no_grad():
         S = model.config.num_slots
-        every = model.slot_logits(z.detach().float()[None])[0]
-        logits = every[slot]
+        logits = model.slot_logits(z.detach().float()[None])[0, slot]
         handles = model.keypoints(torch.cat([z.detach().float()[None], start_z.detach().float()])
                                   ).view(-1, S, len(SLOT_KEYPOINTS), 3)[:, slot, 0].double().numpy()
     spread = float(np.linalg.norm(handles[1:, None] - handles[None, 1:], axis=-1).max())
@@ -256,7 +252,6 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
     M = len(sighted)
     return {"sighting_missing": float(not M), "sighting_gap_m": gap,
             "part_unsighted": float(0 < M <= slot),
-            "count_gap": float(abs(int((every[:, 0] > 0).sum()) - M)) if M else 0.0,
             "part_exists_logit": float(logits[0]),
             "part_type_margin": float(abs(logits[1] - logits[2])), "start_spread_m": spread,
             "part_image_loss": float(np.mean(local if local else [v.image_loss for v in views]))}
@@ -373,9 +368,6 @@ ADVICE = {
     "start_spread_m": "the fit's starts disagree on this part's handle: take more views, closer",
     "part_unsighted": ("the handle detector sighted no handle of this part: photograph it closer, "
                        "from in front"),
-    "count_gap": ("the handle detector sighted more or fewer handles than the model finds fronts, "
-                  "so this part may be paired with another front's handle: photograph every "
-                  "handle, closer"),
     "part_image_loss": ("the fitted part does not match the photos around its handle: photograph "
                         "this part closer, or use a model of this kind of object"),
     "room": ("in a room this model's fit confidence is not calibrated (no confidence_room.json in "
