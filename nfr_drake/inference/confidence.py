@@ -228,8 +228,9 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
     (1: the handle detector sighted no handle, sighted_O (M, 3) in O empty or None) and
     sighting_gap_m: the distance, m, from the slot's handle to the nearest sighted one (0 when
     none); the identity of the part's sighting, with sighted_O in the fit's order (slot k paired
-    with sighting k, `furniture_fit.sighting_order`): part_unsighted (1: handles were sighted but
-    none is this slot's, k >= M: the part's keypoints are the head's alone). z (D,): the fit.
+    with sighting k, `furniture_fit.sighting_order`): part_unsighted (1: no sighted handle is this
+    slot's, k >= M, none sighted included: the part's keypoints are the head's alone). z (D,): the
+    fit.
     """
     with torch.no_grad():
         S = model.config.num_slots
@@ -251,7 +252,7 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
     gap = float(np.linalg.norm(sighted - handles[0], axis=-1).min()) if len(sighted) else 0.0
     M = len(sighted)
     return {"sighting_missing": float(not M), "sighting_gap_m": gap,
-            "part_unsighted": float(0 < M <= slot),
+            "part_unsighted": float(slot >= M),
             "part_exists_logit": float(logits[0]),
             "part_type_margin": float(abs(logits[1] - logits[2])), "start_spread_m": spread,
             "part_image_loss": float(np.mean(local if local else [v.image_loss for v in views]))}

@@ -74,7 +74,7 @@ def test_part_features_measure_the_starts_spread_the_sighting_and_the_existence(
 
 def test_part_features_say_whether_the_part_has_a_sighting_of_its_own(furniture_model_folder, capture_dir):
     """Slot k is paired with sighting k: with 2 sightings slot 1 has one and slot 5 not; without
-    sightings no slot is counted unsighted (`sighting_missing` says so)."""
+    sightings no slot has one."""
     fitted = FittedModel(furniture_model_folder)
     capture = read_capture_set(capture_dir)
     z = _code(fitted, 0)
@@ -83,7 +83,7 @@ def test_part_features_say_whether_the_part_has_a_sighting_of_its_own(furniture_
     with torch.no_grad():
         paired, unpaired, none = (part_features(fitted.model, z, z[None], k, capture.frames, views, h)
                                   for k, h in ((1, two), (5, two), (5, None)))
-    assert (paired["part_unsighted"], unpaired["part_unsighted"], none["part_unsighted"]) == (0.0, 1.0, 0.0)
+    assert (paired["part_unsighted"], unpaired["part_unsighted"], none["part_unsighted"]) == (0.0, 1.0, 1.0)
     assert none["sighting_missing"] == 1.0
 
 
