@@ -92,6 +92,10 @@ class FurnitureFitConfig:
     """Take each sighted front's type, a door's hinge points and the goal's place from what the
     detector read of the fronts, where it read them (`place_fronts`; with the "order" pairing
     only)."""
+    head_type_weight: float = 0.1
+    """`place_fronts`: the weight of the keypoint head's door margin (door logit minus drawer
+    logit, about -12 to 12) added to the read door probability's log-odds (0: the read type
+    alone)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -236,16 +240,21 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     q = q.double().cpu().numpy()
     if any(f is not None for f in fronts):
         travel = [drawer_travel(model, z_best, k) for k in range(S)]
-        placed, types = place_fronts(placed, types, q, travel, fronts, sides)
+        margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
+        placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
-                 fronts: list[SightedFront | None], sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 fronts: list[SightedFront | None], sides: np.ndarray,
+                 door_margin: np.ndarray | None = None, head_type_weight: float = 0.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
-    slot's front (fronts[k] for slot k; None: the field's): its type; its goal (a door's
+    slot's front (fronts[k] for slot k; None: the field's): its type (a door where the read door
+    probability's log-odds plus `head_type_weight` times the keypoint head's door margin,
+    door_margin (S,) its door logit minus its drawer logit, are positive); its goal (a door's
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
     read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
@@ -263,12 +272,15 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         left, _ = shut_edges(front)
         width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
-        if front.is_door:
+        p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
+        head = 0.0 if door_margin is None else head_type_weight * float(door_margin[k])
+        door = np.log(p / (1.0 - p)) + head > 0.0
+        if door:
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
         elif PART_TYPES[int(types[k])] == "door":
             out[k, a0] = out[k, h] - [q[k] * travel[k], 0.0, 0.0]
             out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
-        types[k] = PART_TYPES.index("door" if front.is_door else "drawer")
+        types[k] = PART_TYPES.index("door" if door else "drawer")
     return out, types
 
 
