@@ -17,14 +17,15 @@ Handles (`--handles`): "detector", those triangulated from the 2D handle detecto
 "none", the fit without them; "true", gt.json's handles and fronts (the ceiling of what sightings
 and front reading can give, for diagnosis only). A detector with front outputs also reads each
 sighted handle's front (type, face corners: `FurnitureFitConfig.read_fronts`; `--no-fronts` turns
-it off). The handle count and the time to sight them are in each row.
+it off; `--head-type-weight 0` takes the read type alone, `FurnitureFitConfig.head_type_weight`).
+The handle count and the time to sight them are in each row.
 On captures of the model's own training objects (`nfr-drake captures --training-objects`) each
 part also gets the keypoint RMSE of the head at the object's training code and the true q
 (`own_code_keypoint_rmse_cm`): what a fit that found the training code again would give.
 
     python benchmarks/furniture_fit.py --model MODEL --captures DIR [--n 10] [--out rows.json] [--starts S]
         [--handles detector|encoder|none|true] [--detector DIR] [--baseline DIR] [--pairing order|nearest]
-        [--no-fronts]
+        [--no-fronts] [--head-type-weight W]
 """
 
 from __future__ import annotations
@@ -167,6 +168,8 @@ def main() -> None:
                         help="how sighted handles pair with slots (FurnitureFitConfig.handle_pairing)")
     parser.add_argument("--no-fronts", action="store_true",
                         help="not what the detector reads of the fronts (FurnitureFitConfig.read_fronts)")
+    parser.add_argument("--head-type-weight", type=float, default=FurnitureFitConfig.head_type_weight,
+                        help="the keypoint head's weight in a read front's type (0: the read type alone)")
     args = parser.parse_args()
     detector = baseline = None
     if args.handles == "detector":
@@ -179,7 +182,7 @@ def main() -> None:
     for p in model.parameters():
         p.requires_grad_(False)
     config = FurnitureFitConfig(steps=args.steps, starts=args.starts, handle_pairing=args.pairing,
-                                read_fronts=not args.no_fronts)
+                                read_fronts=not args.no_fronts, head_type_weight=args.head_type_weight)
     dirs = sorted(d for d in args.captures.iterdir() if (d / "gt.json").is_file())[:args.n]
     rows = []
     for d in dirs:
