@@ -233,6 +233,14 @@ def test_front_outputs_start_from_a_handle_detector_and_train(furniture_dataset,
     assert 0.0 <= record["held_out_door_accuracy"][str(furniture_dataset)] <= 1.0
     trained = load_detector(out)[0]
     assert record["init"] == str(handles_only) and trained.config.fronts
+    # Started from a detector with front outputs, the front network goes on from its weights.
+    more = HandleDetector(fronts)
+    more.start_from(trained)
+    (x,), (y,) = trained.read_fronts([image]), more.read_fronts([image])
+    np.testing.assert_allclose(x.door_probability, y.door_probability, atol=1e-6)
+    with pytest.raises(ConfigError, match="another width"):
+        HandleDetector(HandleDetectorConfig(channels=8, dilations=(1, 2, 1), fronts=True,
+                                            front_channels=16)).start_from(trained)
     (c,) = trained.detect([image])  # the handle network was kept as it was
     np.testing.assert_allclose(c.probability, a.probability, atol=1e-6)
     both = train_detector([furniture_dataset], tmp_path / "both", replace(config, steps=4), fronts)

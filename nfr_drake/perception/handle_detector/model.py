@@ -108,12 +108,18 @@ class HandleDetector(nn.Module):
 
     def start_from(self, other: HandleDetector) -> None:
         """Take another detector's handle network (same channels and dilations) and keep it
-        fixed: a trained handle detector to which front outputs are added."""
+        fixed: a trained handle detector to which front outputs are added; where both have front
+        outputs of the same width, its front network too, to train on."""
         if (other.config.channels, other.config.dilations) != (self.config.channels, self.config.dilations):
             raise ConfigError("handle detector: the detector to start from has another architecture "
                               f"({other.config.channels} channels, dilations {other.config.dilations})")
         self.net.load_state_dict(other.net.state_dict())
         self.net.requires_grad_(False)
+        if self.fronts is not None and other.fronts is not None:
+            if other.config.front_channels != self.config.front_channels:
+                raise ConfigError("handle detector: the detector to start from has front outputs of "
+                                  f"another width ({other.config.front_channels} channels)")
+            self.fronts.load_state_dict(other.fronts.state_dict())
 
     @torch.no_grad()
     def detect(self, images: list[np.ndarray]) -> list[HandleMap]:

@@ -125,7 +125,7 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
     dataset are reported, with front outputs also the front IoU and, on their front pixels, the
     door accuracy and the median corner error (px of the scaled image). `init` (front outputs only): a trained
     detector folder whose handle network is taken and kept fixed (`HandleDetector.start_from`);
-    then only the front network trains.
+    then only the front network trains, from the folder's own front network where it has one.
     OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
     A dataset missing objects is refused unless `allow_incomplete`.
     Returns the training record written into OUT/config.json.
