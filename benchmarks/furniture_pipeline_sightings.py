@@ -7,7 +7,8 @@ For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed,
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
 (`locate_handles`, `read_front`) and the fit's `sighting_order` puts them in slot order. A
-sighting is a front's when within `--cm` of its true handle. Each piece's part to open is then:
+sighting is a front's when within `--cm` of its true handle; how many doors and drawers are
+sighted. Each piece's part to open is then:
 "right" (slot k has front k's handle), or why not, first that applies: "part unsighted" (no
 sighting is the part's), "extra sighting" (a sighting is no front's), "other unsighted" (another
 front has none: later slots shift), "order" (every front sighted once, in another order). Also
@@ -71,7 +72,7 @@ def main() -> None:
     base = Scenario(category="furniture", model=str(args.model), seed=args.seed)
     detector, _ = load_detector(args.model / DETECTOR_DIR)
     gap = FurnitureFitConfig().column_gap_m
-    rows, types = [], Counter()
+    rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -86,6 +87,8 @@ def main() -> None:
         sighted = np.array([handles[i].p_O for i in order]).reshape(-1, 3)
         truth = np.array([f.keypoints(0.0)["handle"] for f in obj.fronts])
         outcome, owner = piece_outcome(truth, sighted, scenario.part, args.cm)
+        kinds.update(f.kind for f in obj.fronts)
+        sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         for i, k in zip(order, owner, strict=True):
             if k >= 0:
                 read = "unread" if fronts[i] is None else ("door" if fronts[i].is_door else "drawer")
@@ -103,7 +106,9 @@ def main() -> None:
         print(f"| {outcome} | {len(these)} | {sum(r['part_type'] == 'door' for r in these)} "
               f"| {sum(r['part_type'] == 'drawer' for r in these)} |")
     owners = [int(k) for r in rows for k in r["owners"].split()]
-    print(f"\nfronts sighted {sum(r['sighted_fronts'] for r in rows)} of {sum(r['fronts'] for r in rows)}; "
+    print(f"\nfronts sighted {sum(r['sighted_fronts'] for r in rows)} of {sum(r['fronts'] for r in rows)} "
+          f"(doors {sighted_kinds['door']} of {kinds['door']}, drawers {sighted_kinds['drawer']} of "
+          f"{kinds['drawer']}); "
           f"sightings {len(owners)}, of no front {owners.count(-1)}; read types of the fronts' "
           "sightings: " + ", ".join(f"{kind} read {read} {n}" for (kind, read), n in sorted(types.items())))
     if args.csv_path is not None:

@@ -248,9 +248,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
 
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
-                 fronts: list[SightedFront | None], sides: np.ndarray,
-                 door_margin: np.ndarray | None = None, head_type_weight: float = 0.0
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
+                 head_type_weight: float) -> tuple[np.ndarray, np.ndarray]:
     """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
     slot's front (fronts[k] for slot k; None: the field's): its type (a door where the read door
     probability's log-odds plus `head_type_weight` times the keypoint head's door margin,
@@ -273,8 +272,7 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
         p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
-        head = 0.0 if door_margin is None else head_type_weight * float(door_margin[k])
-        door = np.log(p / (1.0 - p)) + head > 0.0
+        door = np.log(p / (1.0 - p)) + head_type_weight * float(door_margin[k]) > 0.0
         if door:
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
         elif PART_TYPES[int(types[k])] == "door":

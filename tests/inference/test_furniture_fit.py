@@ -210,7 +210,7 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
-    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4))
+    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4), 0.1)
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
@@ -220,10 +220,30 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     # a pair read as one wide face: each door hinges on the edge away from its neighbour
     wide = _face(-0.4, 0.4, 0.2, 0.78)
     pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
-    placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]))
+    placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
+                             np.zeros(2), 0.1)
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
-    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2))
+    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2), 0.1)
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
+
+
+def test_a_read_type_weighs_the_heads_door_margin():
+    """A front read a door with probability 0.4 (log-odds -0.41) is a door where the head's door
+    margin times the weight outweighs that (+5 x 0.1), a drawer where the head is unsure (0) or
+    the weight is 0; a sure read (0.05) keeps its type against the head."""
+    unsure = SightedFront(np.array([0.33, 0.0, 0.6]), 0.4, _face(-0.2, 0.2, 0.2, 0.8), 5)
+    sure = SightedFront(np.array([0.33, 0.5, 0.6]), 0.05, _face(0.3, 0.7, 0.2, 0.8), 5)
+    head = np.zeros((2, 4, 3))
+    head[:, 0] = [unsure.p_O, sure.p_O]
+    types, q = np.zeros(2, int), np.zeros(2)
+
+    def read(margin, weight):
+        return [PART_TYPES[t] for t in place_fronts(head, types, q, [0.3] * 2, [unsure, sure], np.zeros(2),
+                                                    np.array(margin, float), weight)[1]]
+
+    assert read([5.0, 5.0], 0.1) == ["door", "drawer"]
+    assert read([0.0, 0.0], 0.1) == ["drawer", "drawer"]
+    assert read([5.0, 5.0], 0.0) == ["drawer", "drawer"]
 
 
 def test_the_doors_of_a_pair_hinge_on_their_outer_sides():
