@@ -243,6 +243,18 @@ def test_front_outputs_start_from_a_handle_detector_and_train(furniture_dataset,
                                             front_channels=16)).start_from(trained)
     (c,) = trained.detect([image])  # the handle network was kept as it was
     np.testing.assert_allclose(c.probability, a.probability, atol=1e-6)
+    # Tuning the handles instead: the handle network trains on, the front network stays.
+    tuned = train_detector([furniture_dataset], tmp_path / "tuned", config, fronts, init=out, tune="handles")
+    assert tuned["tune"] == "handles"
+    tuned_net = load_detector(tmp_path / "tuned")[0]
+    (f,), (h,) = tuned_net.read_fronts([image]), tuned_net.detect([image])
+    np.testing.assert_allclose(f.door_probability, x.door_probability, atol=1e-6)
+    assert np.abs(h.probability - c.probability).max() > 1e-4
+    with pytest.raises(ConfigError, match="no front outputs to keep"):
+        train_detector([furniture_dataset], tmp_path / "no_front_net", config, fronts, init=handles_only,
+                       tune="handles")
+    with pytest.raises(ConfigError, match="tune is one of"):
+        HandleDetector(fronts).start_from(trained, tune="both")
     both = train_detector([furniture_dataset], tmp_path / "both", replace(config, steps=4), fronts)
     assert set(both["held_out_handle_iou"]) == set(both["held_out_door_accuracy"]) == {str(furniture_dataset)}
     with pytest.raises(ConfigError, match="front outputs need furniture"):

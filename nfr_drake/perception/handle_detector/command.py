@@ -15,7 +15,7 @@ def train_detector_command(data: list[Path], out: Path,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
                            channels: int = HandleDetectorConfig.channels,
-                           fronts: bool = False, init: Path | None = None,
+                           fronts: bool = False, init: Path | None = None, tune: str = "fronts",
                            threads: int | None = None,
                            resume: bool = False, allow_incomplete: bool = False) -> None:
     """Train the 2D handle detector on rendered datasets of one category (any image sizes).
@@ -32,6 +32,8 @@ def train_detector_command(data: list[Path], out: Path,
             `nfr_drake.perception.front_reading`).
         init: a trained detector folder of the same width to start from (e.g. a handle
             detector to which --fronts adds the front outputs).
+        tune: with --init, the network that trains, the other kept as it was: "fronts" or
+            "handles" (the handle network trained further).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
         resume: continue a killed run from OUT/checkpoint/.
         allow_incomplete: train on the objects on disk when a dataset misses some.
@@ -41,7 +43,7 @@ def train_detector_command(data: list[Path], out: Path,
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
     record = train_detector(list(data), out, config, HandleDetectorConfig(channels=channels, fronts=fronts),
                             resume=resume, command=command,
-                            allow_incomplete=allow_incomplete, init=init)
+                            allow_incomplete=allow_incomplete, init=init, tune=tune)
     print(f"handle detector written to {out}: held-out handle IoU, offset error "
           + ", ".join(f"{k} {v:.3f}, {record['held_out_offset_error_px'][k]:.2f} px"
                       for k, v in record["held_out_handle_iou"].items()))

@@ -86,6 +86,10 @@ class FrontNet(nn.Module):
         return out[:, 0], out[:, 1], out[:, 2:].view(B, 4, 2, H, W) * CORNER_SCALE_PX
 
 
+TUNABLE = ("fronts", "handles")
+"""What `HandleDetector.start_from` can go on training: the front network or the handle network."""
+
+
 class HandleDetector(nn.Module):
     """(B, 3, H, W) RGB in [0, 1] -> handle logits (B, H, W) and offsets to the projected grip
     centre (B, 2, H, W), pixels (du right, dv down); any H and W. With front outputs also a
@@ -106,20 +110,29 @@ class HandleDetector(nn.Module):
         out = self.net(rgb - 0.5)
         return out[:, 0], out[:, 1:] * OFFSET_SCALE_PX
 
-    def start_from(self, other: HandleDetector) -> None:
-        """Take another detector's handle network (same channels and dilations) and keep it
-        fixed: a trained handle detector to which front outputs are added; where both have front
-        outputs of the same width, its front network too, to train on."""
+    def start_from(self, other: HandleDetector, tune: str = "fronts") -> None:
+        """Take another detector's handle network (same channels and dilations) and, where both
+        have front outputs of the same width, its front network; `tune` names the one that goes
+        on training, the other is kept fixed: "fronts" (front outputs added to a trained handle
+        detector, or trained further) or "handles" (the handle network trained further, the
+        front network as it was)."""
+        if tune not in TUNABLE:
+            raise ConfigError(f"handle detector: tune is one of {TUNABLE}, not {tune!r}")
         if (other.config.channels, other.config.dilations) != (self.config.channels, self.config.dilations):
             raise ConfigError("handle detector: the detector to start from has another architecture "
                               f"({other.config.channels} channels, dilations {other.config.dilations})")
         self.net.load_state_dict(other.net.state_dict())
-        self.net.requires_grad_(False)
         if self.fronts is not None and other.fronts is not None:
             if other.config.front_channels != self.config.front_channels:
                 raise ConfigError("handle detector: the detector to start from has front outputs of "
                                   f"another width ({other.config.front_channels} channels)")
             self.fronts.load_state_dict(other.fronts.state_dict())
+        elif self.fronts is not None and tune == "handles":
+            raise ConfigError("handle detector: the detector to start from has no front outputs to "
+                              "keep while its handle network trains")
+        self.net.requires_grad_(tune == "handles")
+        if self.fronts is not None:
+            self.fronts.requires_grad_(tune == "fronts")
 
     @torch.no_grad()
     def detect(self, images: list[np.ndarray]) -> list[HandleMap]:

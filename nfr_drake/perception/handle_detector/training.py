@@ -116,16 +116,19 @@ def _iou(logits: torch.Tensor, mask: torch.Tensor) -> float:
 
 def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig,
                    model: HandleDetectorConfig = HandleDetectorConfig(), resume: bool = False,
-                   command: str = "", allow_incomplete: bool = False, init: Path | None = None) -> dict:
+                   command: str = "", allow_incomplete: bool = False, init: Path | None = None,
+                   tune: str = "fronts") -> dict:
     """Train a detector on rendered datasets (of one category, any image sizes); writes OUT/.
 
     Each step draws `images_per_batch` crops from every dataset (and, with front outputs, as
     many whole images scaled for them). The last 5% of each dataset's objects are held out; the
     handle IoU and the median offset error (px, on handle pixels) on 64 of their full images per
     dataset are reported, with front outputs also the front IoU and, on their front pixels, the
-    door accuracy and the median corner error (px of the scaled image). `init` (front outputs only): a trained
-    detector folder whose handle network is taken and kept fixed (`HandleDetector.start_from`);
-    then only the front network trains, from the folder's own front network where it has one.
+    door accuracy and the median corner error (px of the scaled image). `init`: a trained
+    detector folder to start from (`HandleDetector.start_from`); `tune` names the network that
+    trains from it, the other kept fixed: "fronts" (needs front outputs; from the folder's own
+    front network where it has one) or "handles" (the handle network trained further; the front
+    network, where the model has one, the folder's).
     OUT/checkpoint/ is written every `checkpoint_every` steps; `resume` continues from it.
     A dataset missing objects is refused unless `allow_incomplete`.
     Returns the training record written into OUT/config.json.
@@ -151,9 +154,9 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
         raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
     if model.fronts and not all(s.has_parts for s in sets):
         raise ConfigError("train-handle-detector: front outputs need furniture datasets")
-    if init is not None and not model.fronts:
-        raise ConfigError("train-handle-detector: --init adds front outputs to a trained detector; "
-                          "give --fronts")
+    if init is not None and tune == "fronts" and not model.fronts:
+        raise ConfigError("train-handle-detector: --init with --tune fronts adds front outputs to a "
+                          "trained detector; give --fronts (or --tune handles)")
     train_sets, val_sets = [], []
     for s in sets:
         held = max(1, s.num_objects // 20)
@@ -165,22 +168,23 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
         val_sets.append(val)
     net = HandleDetector(model)
     if init is not None:
-        net.start_from(load_detector(Path(init))[0])
+        net.start_from(load_detector(Path(init))[0], tune)
     opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     train_options = {k: v for k, v in asdict(config).items() if k != "threads"}  # any count resumes
     run = ResumableRun(ckpt_path, net, opt, sched, rng, {"model": asdict(model), "train": train_options,
-                                                         "init": None if init is None else str(init)},
+                                                         "init": None if init is None else str(init),
+                                                         "tune": None if init is None else tune},
                        resume)
     out.mkdir(parents=True, exist_ok=True)
 
     def loss() -> torch.Tensor:  # crops from every dataset
         total = torch.zeros(())
-        if init is None:
+        if init is None or tune == "handles":
             for s in train_sets:
                 rgb, mask, offsets = sample_batch(s, config.images_per_batch, config.crop, rng)
                 total = total + _loss(*net(rgb), mask, offsets, config.pos_weight, config.offset_weight)
-        if model.fronts:
+        if model.fronts and (init is None or tune == "fronts"):
             for s in train_sets:
                 rgb, *targets = sample_front_batch(s, config.images_per_batch, rng)
                 total = total + _front_loss(*net.fronts(rgb), *targets, config.corner_weight)
@@ -201,7 +205,7 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
                 front_ious[str(v.root)], door_accuracy[str(v.root)], corner_errors[str(v.root)] = \
                     _front_measures(*net.fronts(rgb), *targets)
     record = {"category": categories.pop(), "model": asdict(model), "train": asdict(config),
-              "init": None if init is None else str(init),
+              "init": None if init is None else str(init), "tune": None if init is None else tune,
               "data": [str(d) for d in data_dirs], "command": command, "seconds": run.seconds,
               "final_loss": float(np.mean(run.losses[-100:])), "held_out_handle_iou": ious,
               "held_out_offset_error_px": offset_errors}
