@@ -2,7 +2,7 @@
 shut furniture, in the order the fit pairs them with slots, against the true fronts.
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
-       [--csv-path F]
+       [--csv-path F] [--loose-share 0.6] [--loose-rms-px 1.2]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
@@ -12,7 +12,10 @@ sighted. Each piece's part to open is then:
 "right" (slot k has front k's handle), or why not, first that applies: "part unsighted" (no
 sighting is the part's), "extra sighting" (a sighting is no front's), "other unsighted" (another
 front has none: later slots shift), "order" (every front sighted once, in another order). Also
-the read type (door or drawer) of every matched sighting against its front's. Nothing is fitted.
+the read type (door or drawer) of every matched sighting against its front's, and how many views
+agree with the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
+triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
+0 and inf: off). Nothing is fitted.
 """
 
 from __future__ import annotations
@@ -32,7 +35,12 @@ from nfr_drake.inference.furniture_fit import FurnitureFitConfig, sighting_order
 from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.perception.front_reading import read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
-from nfr_drake.perception.handle_triangulation import locate_handles
+from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_LOOSE,
+    FURNITURE_MIN_SHARE,
+    sightings,
+    triangulate_handles,
+)
 from nfr_drake.systems.pipeline import perception_photos
 from nfr_drake.systems.scenario import Scenario
 
@@ -67,12 +75,15 @@ def main() -> None:
     parser.add_argument("--cm", type=float, default=5.0,
                         help="a sighting within this of a true handle is that front's")
     parser.add_argument("--csv-path", type=Path)
+    parser.add_argument("--loose-share", type=float, default=FURNITURE_LOOSE[0])
+    parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
     args = parser.parse_args()
     torch.set_num_threads(1)
     base = Scenario(category="furniture", model=str(args.model), seed=args.seed)
     detector, _ = load_detector(args.model / DETECTOR_DIR)
     gap = FurnitureFitConfig().column_gap_m
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
+    agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -80,7 +91,9 @@ def main() -> None:
         X_OW = np.linalg.inv(scenario.X_WO.GetAsMatrix4())
         frames = [CaptureFrame(Path(f"camera_{i}"), X_OW @ X_WC, camera)
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
-        handles = locate_handles(detector.detect(images), frames)
+        found = [s for i, m in enumerate(detector.detect(images)) for s in sightings(m, i)]
+        handles = triangulate_handles(frames, found, min_share=FURNITURE_MIN_SHARE,
+                                      loose_share=args.loose_share, loose_rms_px=args.loose_rms_px)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         order = sighting_order(np.array([h.p_O for h in handles]).reshape(-1, 3), gap, fronts=fronts)
@@ -90,6 +103,8 @@ def main() -> None:
         kinds.update(f.kind for f in obj.fronts)
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         for i, k in zip(order, owner, strict=True):
+            rms_128 = handles[i].rms_px * 128.0 / frames[0].camera.height
+            agreement[k >= 0].append((len(handles[i].views), rms_128))
             if k >= 0:
                 read = "unread" if fronts[i] is None else ("door" if fronts[i].is_door else "drawer")
                 types[(obj.fronts[k].kind, read)] += 1
@@ -111,6 +126,13 @@ def main() -> None:
           f"{kinds['drawer']}); "
           f"sightings {len(owners)}, of no front {owners.count(-1)}; read types of the fronts' "
           "sightings: " + ", ".join(f"{kind} read {read} {n}" for (kind, read), n in sorted(types.items())))
+    print("\n| sightings | how many | agreeing views: 3-5 | 6-7 | 8-10 | RMS, median (px at 128 px) |"
+          "\n|---|---|---|---|---|---|")
+    for own, name in ((True, "of a front"), (False, "of no front")):
+        views = np.array([v for v, _ in agreement[own]], int)
+        rms = [r for _, r in agreement[own]]
+        print(f"| {name} | {len(views)} | {np.sum(views <= 5)} | {np.sum((views >= 6) & (views <= 7))} | "
+              f"{np.sum(views >= 8)} | {np.median(rms) if rms else float('nan'):.2f} |")
     if args.csv_path is not None:
         write_rows_csv(args.csv_path, rows)
 

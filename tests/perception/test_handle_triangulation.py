@@ -9,6 +9,7 @@ import pytest
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_LOOSE,
     HandleMap,
     inside_masks,
     sighting,
@@ -233,3 +234,28 @@ def test_close_handles_side_by_side_stay_two(step, points):
              for s in sightings(_votes_map(128, [_project(f, p) for p in pair], spread=1), i)]
     assert len(triangulate_handles(frames, found)) == points
     assert len(triangulate_handles(frames, found, side_by_side_m=np.inf)) == 1
+
+
+def test_a_point_few_views_agree_with_loosely_is_dropped_by_the_loose_rule():
+    """Sighted in 5 of the 10 views it projects into: 2 px off in alternate directions (edges that
+    line up by chance) it is a point without the loose rule and none with it
+    (`FURNITURE_LOOSE`); sighted as closely as the true handle it stays either way."""
+    frames = _frames(10, 128)
+    decoy = P_TRUE + [0.0, 0.25, 0.1]
+    share, rms_px = FURNITURE_LOOSE
+
+    def found(jitter_px: float) -> list:
+        out = []
+        for i, f in enumerate(frames):
+            seen = [_project(f, P_TRUE)]
+            if i % 2 == 0:
+                seen.append(_project(f, decoy) + [0.0, jitter_px * (-1) ** (i // 2)])
+            out += sightings(_votes_map(128, seen), i)
+        return out
+
+    loose = found(2.0)
+    assert len(triangulate_handles(frames, loose, min_share=0.5)) == 2
+    (kept,) = triangulate_handles(frames, loose, min_share=0.5, loose_share=share, loose_rms_px=rms_px)
+    assert np.linalg.norm(kept.p_O - P_TRUE) < 0.005
+    assert len(triangulate_handles(frames, found(0.0), min_share=0.5, loose_share=share,
+                                   loose_rms_px=rms_px)) == 2
