@@ -7,7 +7,9 @@ on the true shut handles of generated pieces, shuffled, and counts the fronts th
 index and the pieces whose fronts all do, for several column gaps (0: every handle its own
 column). Then the doors of a pair (`pair_hinges`: a door's handle with another level one within
 the pair gap): how many doors are such, and for how many the hinge lies on the side away from
-that handle, as the fit then puts it. No rendering: a few seconds.
+that handle, as the fit then puts it; and how much being one of a pair says of a front's type:
+the log-likelihood ratio of door against drawer for a front in a pair and for one not
+(`FurnitureFitConfig.pair_type_log_odds`). No rendering: a few seconds.
 
     python benchmarks/handle_layout.py [--pieces 400] [--seed 123] [--gaps 0 0.1 0.2 0.3]
 """
@@ -21,7 +23,7 @@ from datetime import date
 import numpy as np
 
 from nfr_drake.data.slot_dataset import PART_TYPES
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_hinges, sighting_order
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_hinges, pair_sides, sighting_order
 from nfr_drake.objects import sample_object
 
 
@@ -59,6 +61,18 @@ def main() -> None:
         fixed += int(put_right[is_door].sum())
     print(f"doors {doors}: with every hinge on the wrong side, {fixed} ({fixed / doors:.1%}) put right "
           f"by pair_hinges (pair gap {args.pair_gap} m); with every hinge right, {moved} moved")
+    in_pair = {"door": [0, 0], "drawer": [0, 0]}  # [in a pair, fronts]
+    for kps in pieces:
+        keypoints, types = slot_keypoints(kps)
+        paired = pair_sides(keypoints[:, 0], args.pair_gap) != 0
+        for kind in in_pair:
+            of_kind = types == PART_TYPES.index(kind)
+            in_pair[kind][0] += int((paired & of_kind).sum())
+            in_pair[kind][1] += int(of_kind.sum())
+    (d_pair, d_all), (w_pair, w_all) = in_pair["door"], in_pair["drawer"]
+    print(f"in a pair: doors {d_pair} of {d_all}, drawers {w_pair} of {w_all}; log-likelihood ratio, "
+          f"door against drawer: in a pair {np.log((d_pair / d_all) / (w_pair / w_all)):+.2f}, not "
+          f"{np.log((1 - d_pair / d_all) / (1 - w_pair / w_all)):+.2f}")
 
 
 def slot_keypoints(kps: list[dict]) -> tuple[np.ndarray, np.ndarray]:

@@ -96,6 +96,11 @@ class FurnitureFitConfig:
     """`place_fronts`: the weight of the keypoint head's door margin (door logit minus drawer
     logit, about -12 to 12) added to the read door probability's log-odds (0: the read type
     alone)."""
+    pair_type_log_odds: tuple[float, float] = (3.4, -0.4)
+    """`place_fronts`: what being one of a pair (`pair_sides`) or not adds to a read front's door
+    log-odds: the generator's log-likelihood ratios, door against drawer (`python
+    benchmarks/handle_layout.py`: in a pair 163 of 538 doors and 7 of 728 drawers, +3.45 and -0.35;
+    on 2000 pieces of seed 7 +3.43 and -0.39); (0, 0): not weighed."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -241,7 +246,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     if any(f is not None for f in fronts):
         travel = [drawer_travel(model, z_best, k) for k in range(S)]
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
-        placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight)
+        placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight,
+                                     config.pair_type_log_odds)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -249,11 +255,13 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
-                 head_type_weight: float) -> tuple[np.ndarray, np.ndarray]:
+                 head_type_weight: float, pair_log_odds: tuple[float, float]
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
     slot's front (fronts[k] for slot k; None: the field's): its type (a door where the read door
     probability's log-odds plus `head_type_weight` times the keypoint head's door margin,
-    door_margin (S,) its door logit minus its drawer logit, are positive); its goal (a door's
+    door_margin (S,) its door logit minus its drawer logit, plus pair_log_odds[0] for one of a
+    pair (sides[k] != 0) or pair_log_odds[1] for one not, are positive); its goal (a door's
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
     read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
@@ -272,7 +280,8 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
         p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
-        door = np.log(p / (1.0 - p)) + head_type_weight * float(door_margin[k]) > 0.0
+        pair = pair_log_odds[0] if sides[k] != 0 else pair_log_odds[1]
+        door = np.log(p / (1.0 - p)) + head_type_weight * float(door_margin[k]) + pair > 0.0
         if door:
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
         elif PART_TYPES[int(types[k])] == "door":

@@ -210,7 +210,8 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
-    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4), 0.1)
+    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4), 0.1,
+                                      (0.0, 0.0))
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
@@ -221,29 +222,38 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     wide = _face(-0.4, 0.4, 0.2, 0.78)
     pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
     placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
-                             np.zeros(2), 0.1)
+                             np.zeros(2), 0.1, (0.0, 0.0))
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
-    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2), 0.1)
+    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2), 0.1,
+                               (0.0, 0.0))
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
 
 
 def test_a_read_type_weighs_the_heads_door_margin():
     """A front read a door with probability 0.4 (log-odds -0.41) is a door where the head's door
     margin times the weight outweighs that (+5 x 0.1), a drawer where the head is unsure (0) or
-    the weight is 0; a sure read (0.05) keeps its type against the head."""
+    the weight is 0; a sure read (0.05) keeps its type against the head. Being one of a pair
+    adds the pair's log-odds, being alone the other."""
     unsure = SightedFront(np.array([0.33, 0.0, 0.6]), 0.4, _face(-0.2, 0.2, 0.2, 0.8), 5)
     sure = SightedFront(np.array([0.33, 0.5, 0.6]), 0.05, _face(0.3, 0.7, 0.2, 0.8), 5)
     head = np.zeros((2, 4, 3))
     head[:, 0] = [unsure.p_O, sure.p_O]
     types, q = np.zeros(2, int), np.zeros(2)
 
-    def read(margin, weight):
-        return [PART_TYPES[t] for t in place_fronts(head, types, q, [0.3] * 2, [unsure, sure], np.zeros(2),
-                                                    np.array(margin, float), weight)[1]]
+    def read(margin, weight, sides=(0.0, 0.0), pair_log_odds=(0.0, 0.0)):
+        read_types = place_fronts(head, types, q, [0.3] * 2, [unsure, sure], np.array(sides),
+                                  np.array(margin, float), weight, pair_log_odds)[1]
+        return [PART_TYPES[t] for t in read_types]
 
     assert read([5.0, 5.0], 0.1) == ["door", "drawer"]
     assert read([0.0, 0.0], 0.1) == ["drawer", "drawer"]
     assert read([5.0, 5.0], 0.0) == ["drawer", "drawer"]
+    # one of a pair: the generator's odds (+3.4) outweigh an unsure read, not a sure one (-2.94)
+    assert read([0.0, 0.0], 0.0, (1.0, 1.0), (3.4, -0.4)) == ["door", "door"]
+    assert read([0.0, 0.0], 0.0, (1.0, 1.0), (2.0, -0.4)) == ["door", "drawer"]
+    # a lone front: -0.4 more for a drawer (-0.41 + 0.5 - 0.4 < 0 < -0.41 + 1.0 - 0.4)
+    assert read([5.0, 5.0], 0.1, (0.0, 0.0), (3.4, -0.4)) == ["drawer", "drawer"]
+    assert read([10.0, 10.0], 0.1, (0.0, 0.0), (3.4, -0.4)) == ["door", "drawer"]
 
 
 def test_the_doors_of_a_pair_hinge_on_their_outer_sides():
