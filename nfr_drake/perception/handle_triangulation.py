@@ -17,8 +17,11 @@ Furniture has up to eight handles: `sightings` gives every peak of a view's vote
 pixel's vote, pixel + offset, weighted by its probability, summed into a vote image; peaks after
 non-maximum suppression, a peak's sighting the weighted mean of the votes near it, kept when their
 mass is at least `min_mass`), and `triangulate_handles` finds the handles one after the other: the
-point with the most agreeing mass (each view agreeing with at most one sighting, its nearest), its
-agreeing sightings removed, again, until no point has `min_views` views.
+point with the most agreeing mass (each view agreeing with at most one sighting, its nearest),
+each sighting's mass weighed by 1 - (e / tolerance)^2 for its reprojection error e (MSAC's
+truncated quadratic: a point between two close handles, agreeing loosely with one in some views
+and the other in the rest, scores below either handle), its agreeing sightings removed, again,
+until no point has `min_views` views.
 """
 
 from __future__ import annotations
@@ -310,7 +313,8 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         agree &= left
         count = agree.sum(1)
         enough = (count >= min_views) & (count >= min_share * inside)
-        score = np.where(enough, (agree * mass).sum(1), 0.0)
+        closeness = 1.0 - (np.where(agree, errors, 0.0) / tolerance) ** 2
+        score = np.where(enough, (agree * mass * closeness).sum(1), 0.0)
         if score.max() == 0.0:
             break
         rms = np.sqrt(np.where(agree, errors ** 2, 0).sum(1) / np.maximum(count, 1))

@@ -11,6 +11,7 @@ from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
     HandleMap,
+    HandleSighting,
     inside_masks,
     sighting,
     sightings,
@@ -259,3 +260,20 @@ def test_a_point_few_views_agree_with_loosely_is_dropped_by_the_loose_rule():
     assert np.linalg.norm(kept.p_O - P_TRUE) < 0.005
     assert len(triangulate_handles(frames, found(0.0), min_share=0.5, loose_share=share,
                                    loose_rms_px=rms_px)) == 2
+
+
+def test_a_point_between_two_close_handles_does_not_outscore_them():
+    """Two handles 8 cm apart, each sighted in every view, one heavy (mass 8) in the left views
+    and light (3) in the right ones, the other the reverse: a point between them at another
+    depth agrees loosely with the heavy sighting of every view and outweighs either handle by
+    mass alone; weighed by closeness (MSAC) each handle is found, within 3 mm."""
+    frames = _frames(10, 128)
+    pair = [P_TRUE, P_TRUE + np.array([0.0, 0.08, 0.0])]
+    found = []
+    for i, f in enumerate(frames):
+        masses = (8.0, 3.0) if i < 5 else (3.0, 8.0)
+        found += [HandleSighting(i, _project(f, p), m) for p, m in zip(pair, masses, strict=True)]
+    points = triangulate_handles(frames, found)
+    assert len(points) == 2
+    for p in pair:
+        assert min(np.linalg.norm(h.p_O - p) for h in points) < 0.003
