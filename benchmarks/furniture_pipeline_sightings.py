@@ -15,7 +15,9 @@ front has none: later slots shift), "order" (every front sighted once, in anothe
 the read type (door or drawer) of every matched sighting against its front's, and how many views
 agree with the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
-0 and inf: off). Nothing is fitted.
+0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
+views one of the views' own sightings lies within 2 px (at 128 px) of its handle's projection:
+in 3 or more, the detector saw it and the triangulation lost it. Nothing is fitted.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detect
 from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
     FURNITURE_MIN_SHARE,
+    project,
     sightings,
     triangulate_handles,
 )
@@ -67,6 +70,19 @@ def piece_outcome(true_handles: np.ndarray, sighted: np.ndarray, part: int, cm: 
     return "order", owner
 
 
+def views_seeing(frames: list[CaptureFrame], found: list, p_O: np.ndarray, px: float = 2.0) -> int:
+    """In how many of the frames one of the sightings `found` (`HandleSighting`s) lies within `px`
+    (at 128 px) of the projection of p_O (3,) in O."""
+    seen = 0
+    for f, frame in enumerate(frames):
+        uv = project(frame, p_O)
+        if uv is None:
+            continue
+        near = [np.linalg.norm(s.uv - uv) * 128.0 / frame.camera.height for s in found if s.frame == f]
+        seen += bool(near) and min(near) <= px
+    return seen
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=Path("models/furniture"))
@@ -84,6 +100,7 @@ def main() -> None:
     gap = FurnitureFitConfig().column_gap_m
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
+    unsighted_views: dict[str, list[int]] = {"door": [], "drawer": []}  # per unsighted front
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -102,6 +119,8 @@ def main() -> None:
         outcome, owner = piece_outcome(truth, sighted, scenario.part, args.cm)
         kinds.update(f.kind for f in obj.fronts)
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
+        for k in set(range(len(truth))) - set(owner):
+            unsighted_views[obj.fronts[k].kind].append(views_seeing(frames, found, truth[k]))
         for i, k in zip(order, owner, strict=True):
             rms_128 = handles[i].rms_px * 128.0 / frames[0].camera.height
             agreement[k >= 0].append((len(handles[i].views), rms_128))
@@ -133,6 +152,12 @@ def main() -> None:
         rms = [r for _, r in agreement[own]]
         print(f"| {name} | {len(views)} | {np.sum(views <= 5)} | {np.sum((views >= 6) & (views <= 7))} | "
               f"{np.sum(views >= 8)} | {np.median(rms) if rms else float('nan'):.2f} |")
+    print("\n| fronts without a triangulated handle | how many | seen (a view's sighting within 2 px) "
+          "in 3+ views | in 1-2 | in none |\n|---|---|---|---|---|")
+    for kind, seen in unsighted_views.items():
+        seen_in = np.array(seen, int)
+        few = np.sum((seen_in >= 1) & (seen_in <= 2))
+        print(f"| {kind}s | {len(seen_in)} | {np.sum(seen_in >= 3)} | {few} | {np.sum(seen_in == 0)} |")
     if args.csv_path is not None:
         write_rows_csv(args.csv_path, rows)
 
