@@ -255,6 +255,10 @@ def test_front_outputs_start_from_a_handle_detector_and_train(furniture_dataset,
                        tune="handles")
     with pytest.raises(ConfigError, match="tune is one of"):
         HandleDetector(fronts).start_from(trained, tune="both")
+    with pytest.raises(ConfigError, match="give --init"):
+        train_detector([furniture_dataset], tmp_path / "no_init", config, fronts, tune="handles")
+    with pytest.raises(ConfigError, match="--tune is one of"):
+        train_detector([furniture_dataset], tmp_path / "bad_tune", config, fronts, init=out, tune="both")
     both = train_detector([furniture_dataset], tmp_path / "both", replace(config, steps=4), fronts)
     assert set(both["held_out_handle_iou"]) == set(both["held_out_door_accuracy"]) == {str(furniture_dataset)}
     with pytest.raises(ConfigError, match="front outputs need furniture"):

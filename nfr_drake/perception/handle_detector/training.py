@@ -18,6 +18,7 @@ from nfr_drake.nfr.checkpoint import CheckpointError
 from nfr_drake.nfr.resumable import ResumableRun
 from nfr_drake.perception.handle_detector.data import sample_batch, sample_front_batch
 from nfr_drake.perception.handle_detector.model import (
+    TUNABLE,
     HandleDetector,
     HandleDetectorConfig,
     load_detector,
@@ -154,6 +155,10 @@ def train_detector(data_dirs: list[Path], out: Path, config: DetectorTrainConfig
         raise ConfigError(f"train-handle-detector: datasets of several categories {categories}")
     if model.fronts and not all(s.has_parts for s in sets):
         raise ConfigError("train-handle-detector: front outputs need furniture datasets")
+    if tune not in TUNABLE:
+        raise ConfigError(f"train-handle-detector: --tune is one of {TUNABLE}, not {tune!r}")
+    if init is None and tune == "handles":
+        raise ConfigError("train-handle-detector: --tune handles trains a detector further; give --init")
     if init is not None and tune == "fronts" and not model.fronts:
         raise ConfigError("train-handle-detector: --init with --tune fronts adds front outputs to a "
                           "trained detector; give --fronts (or --tune handles)")
