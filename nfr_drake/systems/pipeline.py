@@ -27,6 +27,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
 from nfr_drake.data.rooms import Room, RoomDistribution, sample_room
+from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.confidence import refusal
 from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
@@ -34,13 +35,15 @@ from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.planning.planner import grasp_planner
+from nfr_drake.systems.model_files import body_box
 from nfr_drake.systems.perception import AddNfrPerception, NfrPerceptionSystem
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
-from nfr_drake.systems.scene_objects import SceneObject
+from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
 from nfr_drake.systems.task import TaskOutcome, run_task
 from nfr_drake.world.cloud import SemanticCloud
-from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import APPROACH_KEYPOINT, KeypointTrajectory
+from nfr_drake.world.obstacles import box_corners
 
 _ROOM_STREAM = 203  # the perception room's stream (the cameras use 7, the coarse look 20, the item 23)
 
@@ -67,15 +70,21 @@ class PipelineOutcome:
     confidence: dict | None = None
     refused: str = ""
     pose_error: tuple[float, float] | None = None
+    notes: tuple[str, ...] = ()
+    """What loading a user's model file found unusual but plannable (`SceneObject.notes`)."""
 
     def report(self) -> str:
         task = self.task
         p = (self.confidence or {}).get("p_handle_within_2cm")
         confidence = "" if p is None else f"; P(handle within 2 cm) {p:.2f}"
-        lines = [f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); keypoint error "
-                 f"{self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
-                 f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]; fit "
-                 f"{self.perception_seconds:.1f} s{confidence}"] if self.perceived and self.predicted else []
+        errors = (f"keypoint error {self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
+                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]"
+                  if math.isfinite(self.handle_path_rmse_cm) or not math.isfinite(self.keypoint_rmse_cm)
+                  else f"handle {self.keypoint_rmse_cm:.2f} cm from the model's at the observed state")
+        lines = [f"warning: {note}" for note in self.notes]
+        if self.perceived and self.predicted:
+            lines.append(f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); {errors}; fit "
+                         f"{self.perception_seconds:.1f} s{confidence}")
         if self.pose_error is not None:
             lines.append(f"object pose estimated: {self.pose_error[0]:.2f} cm, "
                          f"{self.pose_error[1]:.2f} deg from the true pose")
@@ -133,15 +142,49 @@ def perceive_scene(scenario: Scenario, obj: ArticulatedObject, part: int | None 
     `perception_room`. A piece of furniture is framed as its captures are (its bounds over every
     articulation in view, `CameraDistribution` "bounds") and the trajectory is that of its part
     `part` (the perception system's `part`). `cloud`: also render the fitted field's points."""
-    simulator, perception = perception_simulator(scenario, obj, part)
+    return _fitted(*perception_simulator(scenario, obj, part), cloud)
+
+
+def _fitted(simulator: Simulator, perception: NfrPerceptionSystem, cloud: bool = False) -> Perceived:
+    """Initialise the perception diagram (the system fits there, once) and read its ports."""
     started = time.perf_counter()
-    simulator.Initialize()  # the perception system fits here, once
+    simulator.Initialize()
     seconds = time.perf_counter() - started
     context = perception.GetMyContextFromRoot(simulator.get_context())
     return Perceived(perception.get_keypoint_trajectory_output_port().Eval(context), seconds,
                      perception.get_confidence_output_port().Eval(context),
                      perception.get_X_WO_output_port().Eval(context),
                      perception.get_semantic_cloud_output_port().Eval(context) if cloud else None)
+
+
+def _camera_poses(scenario: Scenario, framing: str, X_WA: RigidTransform, p_AT: np.ndarray,
+                  bounds_A: tuple[np.ndarray, np.ndarray] | None, camera: PinholeCamera
+                  ) -> list[RigidTransform]:
+    """The perception cameras' poses X_WC around the look X_WA (`Scenario.coarse_look`), aimed near
+    p_AT (A, m, (3,)), framing `bounds_A` (min and max corners in A, m) with framing "bounds",
+    drawn from the scenario's seed and index."""
+    rng = np.random.default_rng([scenario.seed, scenario.index, 7])
+    cameras = CameraDistribution(distance_m=tuple(scenario.distance_m), framing=framing)
+    return [X_WA @ RigidTransform(X) for X in cameras.sample(rng, scenario.views, p_AT, bounds_A, camera)]
+
+
+def _perception_camera(scenario: Scenario) -> PinholeCamera:
+    return PinholeCamera.from_fov(scenario.image_size, scenario.image_size, math.radians(scenario.fov_y_deg))
+
+
+def _with_perception(builder: DiagramBuilder, plant, scene_graph, model, scenario: Scenario,
+                     X_WCs: list[RigidTransform], camera: PinholeCamera, known: RigidTransform | None,
+                     lighting=None, part: int | None = None) -> tuple[Simulator, NfrPerceptionSystem]:
+    """The perception cameras at X_WCs and `NfrPerceptionSystem` (the object `model`, its pose
+    `known` or None to estimate it) added to the finalised plant's diagram, built into a Simulator
+    not yet initialised."""
+    perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
+                                  X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
+                                  scenario.perceive, Path(scenario.segmenter), part,
+                                  room_loss=scenario.room_loss, mask_crop=scenario.mask_crop,
+                                  aimed_look=scenario.aimed_look, look_again=scenario.look_again,
+                                  paintings=tuple(scenario.paintings))
+    return Simulator(builder.Build()), perception
 
 
 def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int | None = None
@@ -153,14 +196,10 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     X_WO = scenario.X_WO
     model = add_articulated_object(plant, obj, X_WO)
-    rng = np.random.default_rng([scenario.seed, scenario.index, 7])
-    camera = PinholeCamera.from_fov(scenario.image_size, scenario.image_size,
-                                    math.radians(scenario.fov_y_deg))
-    cameras = CameraDistribution(distance_m=tuple(scenario.distance_m),
-                                 framing=resolve_framing("auto", obj.category))
-    X_WA = scenario.coarse_look()
-    X_WCs = [X_WA @ RigidTransform(X) for X in cameras.sample(rng, scenario.views,
-                                                               *cameras.target_of(obj), camera)]
+    camera = _perception_camera(scenario)
+    framing = resolve_framing("auto", obj.category)
+    X_WCs = _camera_poses(scenario, framing, scenario.coarse_look(),
+                          *CameraDistribution(framing=framing).target_of(obj), camera)
     lighting = None
     if scenario.perceive == "room":
         room = perception_room(scenario, obj, X_WCs)
@@ -168,16 +207,63 @@ def perception_simulator(scenario: Scenario, obj: ArticulatedObject, part: int |
         lighting = room.lighting.moved(X_WO.GetAsMatrix4())
     plant.Finalize()
     known = X_WO if scenario.object_pose == "given" else None
-    perception = AddNfrPerception(builder, plant, scene_graph, Path(scenario.model), model, known,
-                                  X_WCs, camera, scenario.fit, lighting, scenario.keypoints,
-                                  scenario.perceive, Path(scenario.segmenter), part,
-                                  room_loss=scenario.room_loss, mask_crop=scenario.mask_crop,
-                                  aimed_look=scenario.aimed_look, look_again=scenario.look_again,
-                                  paintings=tuple(scenario.paintings))
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
+    simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
+                                             known, lighting, part)
     set_articulation(plant, plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
                      obj, model, scenario.q_start)
+    return simulator, perception
+
+
+def canonical_part(plant, scene_graph, model, scene_object: SceneObject, X_WO: RigidTransform) -> int:
+    """The index of a model file's door or drawer among its fronts in the furniture field's
+    canonical order (docs/FURNITURE.md, "Part order": by the left edge of what each one-dof joint
+    moves, seen from the front, to the millimetre, then by its top edge, highest first), all shut,
+    in frame O (`SceneObject.category_frame`). The plant is finalised, its joints at 0."""
+    inspector = scene_graph.model_inspector()
+    context = plant.CreateDefaultContext()
+    X_OW = X_WO.inverse()
+    edges = {}
+    for name in (scene_object.joint_name, *scene_object.locked_joints):
+        joint = plant.GetJointByName(name, model)
+        if name == scene_object.joint_name:
+            set_joint_value(plant, context, joint, scene_object.shut_and_open(joint)[0])
+        corners = []
+        for index in plant.GetBodiesKinematicallyAffectedBy([joint.index()]):
+            box = body_box(plant, inspector, plant.get_body(index))
+            if box is not None:
+                X_OB = X_OW @ plant.EvalBodyPoseInWorld(context, plant.get_body(index))
+                corners.append(box_corners(X_OB @ RigidTransform((box[0] + box[1]) / 2), box[1] - box[0]))
+        if corners:
+            p_O = np.concatenate(corners)
+            edges[name] = (round(float(p_O[:, 1].min()), 3), -float(p_O[:, 2].max()))
+    return sorted(edges, key=edges.get).index(scene_object.joint_name)
+
+
+def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObject
+                                    ) -> tuple[Simulator, NfrPerceptionSystem]:
+    """`perception_simulator` for a user's model file (`Scenario.object_file`, loaded as
+    `scene_object`): the model as its file and pose place it, the door or drawer at q_start and
+    its other joints shut, the cameras framing its shut bounds (framing "bounds", as furniture's)
+    around its frame O (`SceneObject.category_frame`, or a coarse look at it when the pose is
+    estimated); the fit is given that O with `Scenario.object_pose` "given"."""
+    X_WO, bounds_O = scene_object.category_frame()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    model = scene_object.add_to(plant)
+    plant.Finalize()
+    camera = _perception_camera(scenario)
+    X_WCs = _camera_poses(scenario, "bounds", scenario.coarse_look(X_WO), (bounds_O[0] + bounds_O[1]) / 2,
+                          bounds_O, camera)
+    furniture = read_model_config(Path(scenario.model)).get("category") == "furniture"
+    part = canonical_part(plant, scene_graph, model, scene_object, X_WO) if furniture else None
+    simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
+                                             X_WO if scenario.object_pose == "given" else None, part=part)
+    context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    joint = plant.GetJointByName(scene_object.joint_name, model)
+    shut, opened = scene_object.shut_and_open(joint)
+    set_joint_value(plant, context, joint, shut + scenario.q_start * (opened - shut))
+    for name in scene_object.locked_joints:
+        set_joint_value(plant, context, plant.GetJointByName(name, model), 0.0)
     return simulator, perception
 
 
@@ -228,6 +314,8 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
     the keypoint paths the planner used and, with perception, the true ones. A piece of furniture
     is opened at its part `Scenario.sample_piece` names, the others held shut. NfrDrakeError first
     when the model is not of the scenario's category."""
+    if scenario.object_file:
+        return _run_model_file(scenario)
     if scenario.perceives:
         check_category(Path(scenario.model), read_model_config(Path(scenario.model)).get("category"),
                        scenario.category, "scenario", "object")
@@ -266,3 +354,51 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
         handle_path_rmse_cm=_rmse_cm(predicted.point("handle", grid), truth.point("handle", grid)),
         perception_seconds=perceived.seconds, predicted=predicted, truth=truth, task=task,
         confidence=confidence, refused=refused or "", pose_error=pose_error)
+
+
+def _run_model_file(scenario: Scenario) -> PipelineOutcome:
+    """`run_scenario` on a user's model file (`Scenario.object_file`): photographed alone and fitted
+    (`model_file_perception_simulator`) with `Scenario.model` or, left empty, the model of the
+    joint's kind (models/closet, models/drawer; a furniture model fits every front and gives the
+    joint's, `canonical_part`), planned with the fitted keypoints and simulated on the model. The
+    error is the handle's alone: the hinge keypoints of a model's joint lie on its axis either side
+    of the handle, the field's at the door's top and bottom edges. NfrDrakeError for a sliding door
+    (no model of them) or a model of another kind than the joint's."""
+    scene_object = scenario.model_file_object()
+    if APPROACH_KEYPOINT in scene_object.ground_truth.names:
+        raise NfrDrakeError(f"joint {scenario.joint!r} slides sideways (a sliding door): no neural field "
+                            "model of sliding doors; plan with its own keypoints (nfr-drake plan --object)")
+    truth = scene_object.ground_truth
+    replay = Path(scenario.replay) if scenario.replay else None
+    planner = grasp_planner(scenario.planner, scenario.grasp)
+    simulation = replace(scenario.simulation, grasp=scenario.grasp)
+    if not scenario.perceives:
+        task = run_task(scene_object, scenario.q_target, replay=replay, planner_config=planner,
+                        simulation_config=simulation)
+        return PipelineOutcome(q_estimate=scenario.q_start, q_true=scenario.q_start, keypoint_rmse_cm=0.0,
+                               handle_path_rmse_cm=0.0, perception_seconds=0.0, predicted=truth, truth=truth,
+                               task=task, perceived=False, notes=scene_object.notes)
+    model = Path(scenario.model or f"models/{scene_object.category}")
+    if read_model_config(model).get("category") != "furniture":  # a furniture model has doors and drawers
+        check_category(model, read_model_config(model).get("category"), scene_object.category,
+                       f"{scenario.object_file}: joint {scenario.joint!r}",
+                       "door" if scene_object.category == "closet" else "drawer")
+    scenario = replace(scenario, model=str(model))
+    try:
+        perceived = _fitted(*model_file_perception_simulator(scenario, scene_object))
+    except ObjectPoseError as err:
+        return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
+                               handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
+                               truth=truth, task=None, refused=f"nothing planned: {err}",
+                               notes=scene_object.notes)
+    predicted, confidence = perceived.trajectory, perceived.confidence
+    handle_error = 100.0 * float(np.linalg.norm(predicted.point("handle", predicted.q_current)
+                                                - truth.point("handle", truth.q_current)))
+    refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
+    task = None if refused else run_task(scene_object, scenario.q_target, keypoints=predicted,
+                                         replay=replay, reference=truth, planner_config=planner,
+                                         simulation_config=simulation)
+    return PipelineOutcome(
+        q_estimate=predicted.q_current, q_true=scenario.q_start, keypoint_rmse_cm=handle_error,
+        handle_path_rmse_cm=math.nan, perception_seconds=perceived.seconds, predicted=predicted, truth=truth,
+        task=task, confidence=confidence, refused=refused or "", notes=scene_object.notes)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import FitConfig
@@ -25,7 +25,7 @@ from nfr_drake.objects import (
 from nfr_drake.perception.segmentation.crop import AimedLook
 from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.systems.articulation import GRASPS, SimulationConfig
-from nfr_drake.systems.scene_objects import object_pose, random_part
+from nfr_drake.systems.scene_objects import SceneObject, object_pose, random_part
 from nfr_drake.world.items import Item, sample_item
 
 _ITEM_STREAM = 23  # the item's random stream beside the object's (the issue's number)
@@ -142,6 +142,24 @@ class Scenario:
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning
     evaluation does (`sample_piece`). A closet or a drawer has part 0 alone."""
+    object_file: str = ""
+    """A user's SDFormat or URDF model to perceive and open instead of a generated object ("" for
+    none): the door or drawer on `joint`, its handle the centre of `handle_body`'s geometry, placed
+    by `object_xyz`, `object_yaw_deg` and `object_rpy_deg` (`SceneObject.from_model_file`, whose
+    refusals say what to change). Photographed alone, fitted with `model` ("" for the model of the
+    joint's kind: models/closet for a revolute joint, models/drawer for a prismatic one; the joint
+    decides, not `category`) in the frame O its carcass gives (`SceneObject.category_frame`) or,
+    with `object_pose` "estimated", in the frame estimated from the photos; then opened."""
+    joint: str = ""
+    """`object_file`: the joint of the door or drawer to open."""
+    handle_body: str = ""
+    """`object_file`: the body whose geometry's centre is the handle."""
+    closed_at: str = ""
+    """`object_file`: which limit of `joint` is shut, "lower" or "upper" ("" for the rule of
+    docs/PLANNING.md, "Users' model files")."""
+    object_rpy_deg: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    """`object_file`: roll, pitch, yaw of the model in W, degrees, before `object_yaw_deg` (a model
+    drawn lying on its side: 90 0 0 stands a Y-up export up)."""
 
     def __post_init__(self):
         if self.category not in ("closet", "drawer", "furniture"):
@@ -180,7 +198,18 @@ class Scenario:
             raise ConfigError("min_confidence must be at most 1 (below 0: the calibrated threshold)")
         if self.views < 1 or self.image_size < 8:
             raise ConfigError("views must be >= 1 and image_size >= 8")
-        object_pose(self.object_xyz, self.object_yaw_deg)  # ConfigError for a non-finite pose
+        object_pose(self.object_xyz, self.object_yaw_deg, self.object_rpy_deg)  # ConfigError if not finite
+        if self.object_file:
+            if not (self.joint and self.handle_body):
+                raise ConfigError("object_file needs joint and handle_body")
+            if self.task != "open" or self.perceive != "alone":
+                raise ConfigError("a model file (object_file) is perceived alone and opened: task open, "
+                                  "perceive alone")
+            if self.closed_at not in ("", "lower", "upper"):
+                raise ConfigError(f"closed_at must be lower, upper or empty, got {self.closed_at!r}")
+        elif self.joint or self.handle_body or self.closed_at or any(self.object_rpy_deg):
+            raise ConfigError("joint, handle_body, closed_at and object_rpy_deg apply to a model file "
+                              "(object_file)")
 
     @classmethod
     def load(cls, path: Path) -> "Scenario":
@@ -197,17 +226,26 @@ class Scenario:
 
     @property
     def X_WO(self) -> RigidTransform:
-        return object_pose(self.object_xyz, self.object_yaw_deg)
+        """The object's pose in W: frame O of a generated object, the model's own frame of a
+        model file (`object_file`)."""
+        return object_pose(self.object_xyz, self.object_yaw_deg, self.object_rpy_deg)
 
-    def coarse_look(self) -> RigidTransform:
-        """Where the perception cameras are placed around: X_WO, or with an estimated pose the
-        true one off by the coarse look's errors (drawn from the seed and index)."""
+    def coarse_look(self, X_WO: RigidTransform | None = None) -> RigidTransform:
+        """Where the perception cameras are placed around: X_WO (default: the scenario's), or with
+        an estimated pose that one off by the coarse look's errors (drawn from the seed and
+        index) along W's x and y and about its z."""
+        X_WO = self.X_WO if X_WO is None else X_WO
         if self.object_pose == "given":
-            return self.X_WO
+            return X_WO
         rng = np.random.default_rng([self.seed, self.index, _COARSE_LOOK_STREAM])
         dx, dy = rng.normal(0.0, self.coarse_look_m, 2)
-        return object_pose([self.object_xyz[0] + dx, self.object_xyz[1] + dy, self.object_xyz[2]],
-                           self.object_yaw_deg + rng.normal(0.0, self.coarse_look_deg))
+        turn = RotationMatrix.MakeZRotation(np.radians(rng.normal(0.0, self.coarse_look_deg)))
+        return RigidTransform(turn @ X_WO.rotation(), X_WO.translation() + [dx, dy, 0.0])
+
+    def model_file_object(self) -> SceneObject:
+        """`object_file` loaded at q_start (`SceneObject.from_model_file`)."""
+        return SceneObject.from_model_file(Path(self.object_file), self.joint, self.handle_body, self.X_WO,
+                                           self.q_start, self.closed_at or None)
 
     def sample_object(self) -> ArticulatedObject:
         return self.sample_piece()[0]

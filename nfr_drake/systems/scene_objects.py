@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
@@ -162,6 +162,35 @@ class SceneObject:
         if self.joint_range is not None:
             return self.joint_range
         return float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
+
+    def category_frame(self) -> tuple[RigidTransform, tuple[np.ndarray, np.ndarray]]:
+        """Frame O of the neural field's objects (docs/CONVENTIONS.md) for this object, shut, and
+        its bounds in O (min and max corners (3,), m): O's origin lies under the centre of the
+        footprint of what the joint does not move (the smallest rectangle about its collision
+        boxes, the carcass), at their lowest point; +x points out of the rectangle's side the shut
+        handle stands furthest out of; +z is W's. The bounds hold those boxes and the shut
+        handle. NfrDrakeError when nothing but the moving part has collision geometry."""
+        if not self.obstacles:
+            raise NfrDrakeError("the model has no collision geometry besides its moving part: the "
+                                "cameras and the neural field's frame need the carcass's")
+        corners = np.concatenate([box_corners(b.X_WB, b.size) for b in self.obstacles])
+        handle = self.ground_truth.point("handle", 0.0)
+        turns = np.radians(np.arange(0.0, 90.0, 0.25))
+        axes = np.stack([np.cos(turns), np.sin(turns)], -1)  # (T, 2): the rectangle's first axis
+        along = corners[:, :2] @ axes.T, corners[:, :2] @ np.stack([-axes[:, 1], axes[:, 0]], -1).T
+        areas = np.ptp(along[0], axis=0) * np.ptp(along[1], axis=0)
+        u = axes[int(np.argmin(areas))]
+        normals = np.array([u, -u, [-u[1], u[0]], [u[1], -u[0]]])
+        spans = corners[:, :2] @ normals.T  # (N, 4): each side's outward coordinate
+        mid = np.array([(spans[:, 0].max() - spans[:, 1].max()) / 2.0,
+                        (spans[:, 2].max() - spans[:, 3].max()) / 2.0])
+        centre_xy = mid[0] * u + mid[1] * normals[2]
+        beyond = handle[:2] @ normals.T - spans.max(0)  # how far the handle stands out of each side
+        x = normals[int(np.argmax(beyond))]
+        X_WO = RigidTransform(RotationMatrix.MakeZRotation(float(np.arctan2(x[1], x[0]))),
+                              [*centre_xy, float(corners[:, 2].min())])
+        in_O = X_WO.inverse().multiply(np.vstack([corners, handle]).T).T
+        return X_WO, (in_O.min(0), in_O.max(0))
 
     @staticmethod
     def from_articulated_object(obj: ArticulatedObject, X_WO: RigidTransform, q: float,

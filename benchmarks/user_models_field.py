@@ -1,0 +1,79 @@
+"""The neural field on users' own model files: `nfr-drake demo --object FILE` on realistic furniture.
+
+    python benchmarks/user_models_field.py [--only NAME ...] [--models closet-or-drawer furniture]
+
+Writes the models of tests/fixtures/user_models.py (SDFormat, URDF, .obj meshes) into a temporary
+folder and, for each one that `plan --object` opens with its true keypoints (sliding doors left
+out: no field models them), runs the pipeline of `demo --object` (`Scenario.object_file`: ten
+128 px photos of the model alone, the fit in the frame its carcass gives, the plan with the fitted
+keypoints, the simulation on the model) with the model of the joint's kind (models/closet or
+models/drawer, "closet-or-drawer") and with models/furniture. Every fit is planned on (the
+confidence's threshold is not applied, `min_confidence` 0), so that the table shows what a refusal
+would have prevented. One row per model and field: the handle's error at the observed state,
+P(handle within 2 cm), whether the calibrated threshold refuses it, the simulated outcome, the
+fit's time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime
+import io
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import tyro
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+
+from fixtures.user_models import OPENS, write_models  # noqa: E402
+
+from nfr_drake.cpu import set_torch_threads  # noqa: E402
+from nfr_drake.inference.confidence import refusal  # noqa: E402
+from nfr_drake.systems.pipeline import run_scenario  # noqa: E402
+from nfr_drake.systems.scenario import Scenario  # noqa: E402
+from nfr_drake.systems.task import OPEN_TARGET  # noqa: E402
+
+
+def run(model, field: str) -> list[str]:
+    """One row: the pipeline on `model` with the field "closet-or-drawer" or "furniture"."""
+    args = dict(zip(model.plan_args()[1::2], model.plan_args()[2::2], strict=True))
+    scenario = Scenario(object_file=args["--object"], joint=args["--joint"],
+                        handle_body=args["--handle-body"], closed_at=args.get("--closed-at", ""),
+                        model="" if field == "closet-or-drawer" else "models/furniture", min_confidence=0.0)
+    kind = scenario.model_file_object().category
+    scenario.q_target = OPEN_TARGET[kind]
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        outcome = run_scenario(scenario)
+    wall = time.perf_counter() - t0
+    p = (outcome.confidence or {}).get("p_handle_within_2cm", float("nan"))
+    refused = "refused" if refusal(outcome.confidence) else "kept"
+    task = outcome.task
+    result = ("no plan" if task.plan is None else "opened" if task.success else "failed") if task else "-"
+    return [model.name, kind, field, f"{outcome.keypoint_rmse_cm:.1f}", f"{p:.2f}", refused, result,
+            f"{outcome.perception_seconds:.1f}", f"{wall:.0f}"]
+
+
+def main(only: tuple[str, ...] = (), models: tuple[str, ...] = ("closet-or-drawer", "furniture"),
+         threads: int = 1) -> None:
+    """Print the table (markdown) with the date and machine."""
+    set_torch_threads(threads)
+    with tempfile.TemporaryDirectory() as folder:
+        chosen = [m for m in write_models(Path(folder)) if m.expect == OPENS and "sliding" not in m.name
+                  and (not only or m.name in only)]
+        print(f"{datetime.date.today()}, {platform.node()}, {os.cpu_count()} cores, torch threads {threads}")
+        print("| model | joint | field | handle error (cm) | P(handle within 2 cm) | calibrated threshold "
+              "| planned on the fit | fit (s) | wall (s) |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for model in chosen:
+            for field in models:
+                print("| " + " | ".join(run(model, field)) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    tyro.cli(main)

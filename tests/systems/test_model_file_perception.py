@@ -1,0 +1,101 @@
+"""The neural field on a user's own model file (`demo --object`, `Scenario.object_file`): the frame O
+its carcass gives, its fronts' canonical order, the scenario's checks and the whole pipeline."""
+
+import numpy as np
+import pytest
+from fixtures.user_models import write_models
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder
+
+from nfr_drake.cli import main
+from nfr_drake.errors import ConfigError, NfrDrakeError
+from nfr_drake.systems.pipeline import canonical_part, run_scenario
+from nfr_drake.systems.scenario import Scenario
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    return {m.name: m for m in write_models(tmp_path_factory.mktemp("user_models"))}
+
+
+def scenario_of(user_model, **kw) -> Scenario:
+    return Scenario(object_file=str(user_model.path), joint=user_model.joint,
+                    handle_body=user_model.handle_body, **kw)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 200.0])
+def test_the_frame_of_a_model_file_faces_out_of_its_front_at_its_footprints_centre(models, yaw_deg):
+    """The base cabinet's carcass spans x -0.3..0.3, y -0.3..0.3 of its file's frame, its door and
+    handle in front at +x; placed anywhere, O's +x points out of that front and its origin lies
+    under the carcass's centre, on the floor."""
+    model = models["base_cabinet_door_on_floor"]
+    xyz = [0.4, -0.7, 0.0]
+    obj = scenario_of(model, object_xyz=xyz, object_yaw_deg=yaw_deg).model_file_object()
+    X_WO, (lo, hi) = obj.category_frame()
+    turn = np.radians(yaw_deg)
+    np.testing.assert_allclose(X_WO.rotation().col(0), [np.cos(turn), np.sin(turn), 0.0], atol=1e-2)
+    np.testing.assert_allclose(X_WO.rotation().col(2), [0.0, 0.0, 1.0], atol=1e-9)
+    carcass = np.concatenate([b.X_WB.translation()[None] for b in obj.obstacles])
+    np.testing.assert_allclose(X_WO.translation()[:2], xyz[:2], atol=0.03)
+    assert abs(X_WO.translation()[2]) < 1e-3 and carcass[:, 2].min() > 0.0
+    handle_O = X_WO.inverse() @ obj.ground_truth.point("handle", 0.0)
+    assert handle_O[0] > 0.25 and np.all(handle_O >= lo - 1e-9) and np.all(handle_O <= hi + 1e-9)
+
+
+def test_a_model_without_a_carcass_has_no_frame(models):
+    obj = scenario_of(models["base_cabinet_door_on_floor"]).model_file_object()
+    with pytest.raises(NfrDrakeError, match="no collision geometry besides its moving part"):
+        type(obj).category_frame(type(obj)(**{**obj.__dict__, "obstacles": None}))
+
+
+def test_the_fronts_of_a_kitchen_counter_in_canonical_order(models):
+    """Seen from the front: the pair of doors on the left (left door first), the column of three
+    drawers on the right, top to bottom."""
+    model = models["kitchen_counter_door_of_a_pair"]
+    expected = {"left_door_hinge": 0, "right_door_hinge": 1, "top_slide": 2, "middle_slide": 3,
+                "bottom_slide": 4}
+    handles = {"left_door_hinge": "left_door_handle", "right_door_hinge": "right_door_handle",
+               "top_slide": "top_pull", "middle_slide": "middle_pull", "bottom_slide": "bottom_pull"}
+    for joint, index in expected.items():
+        obj = Scenario(object_file=str(model.path), joint=joint, handle_body=handles[joint],
+                       object_yaw_deg=75.0).model_file_object()
+        X_WO, _ = obj.category_frame()
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        instance = obj.add_to(plant)
+        plant.Finalize()
+        assert canonical_part(plant, scene_graph, instance, obj, X_WO) == index, joint
+
+
+def test_a_model_file_scenario_is_checked(models):
+    model = models["base_cabinet_door_on_floor"]
+    with pytest.raises(ConfigError, match="needs joint and handle_body"):
+        Scenario(object_file=str(model.path), joint="hinge")
+    with pytest.raises(ConfigError, match="task open, perceive alone"):
+        scenario_of(model, task="open-and-place")
+    with pytest.raises(ConfigError, match="apply to a model file"):
+        Scenario(joint="hinge")
+
+
+def test_a_sliding_door_has_no_field_to_fit(models):
+    with pytest.raises(NfrDrakeError, match="no neural field model of sliding doors"):
+        run_scenario(scenario_of(models["sliding_door"], model=""))
+
+
+def test_a_door_of_a_model_file_is_perceived_and_opened_with_the_fitted_keypoints(models, tmp_path, capsys):
+    """`demo --object`: photographed alone, fitted with the closet model, planned on its fitted
+    keypoints and simulated on the model; the handle is found within a few centimetres (the file's
+    door is plain, one colour, unlike the training closets), so the door opens."""
+    model = models["base_cabinet_door_on_floor"]
+    args = ["demo", "--object", str(model.path), "--joint", model.joint, "--handle-body", model.handle_body,
+            "--threads", "1", "--replay", str(tmp_path / "r.html")]
+    status = main([*args, "--min-confidence", "0"])
+    out = capsys.readouterr().out
+    handle_cm = float(out.split("handle ")[1].split(" cm from the model's")[0])
+    assert handle_cm < 5.0, out
+    assert status == 0 and "SUCCESS" in out, out
+    # Planned only above the model's calibrated threshold: refused (exit 2, one line) below it.
+    p = float(out.split("P(handle within 2 cm) ")[1].split()[0])
+    status = main([*args, "--min-confidence", f"{p + 0.01:.2f}"])
+    out = capsys.readouterr().out
+    assert status == 2 and "refused" in out and "SUCCESS" not in out, out
