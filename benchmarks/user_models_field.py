@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from fixtures.user_models import OPENS, write_models  # noqa: E402
 
 from nfr_drake.cpu import set_torch_threads  # noqa: E402
+from nfr_drake.errors import NfrDrakeError  # noqa: E402
 from nfr_drake.inference.confidence import refusal  # noqa: E402
 from nfr_drake.systems.pipeline import run_scenario  # noqa: E402
 from nfr_drake.systems.scenario import Scenario  # noqa: E402
@@ -48,8 +49,12 @@ def run(model, field: str) -> list[str]:
     kind = scenario.model_file_object().category
     scenario.q_target = OPEN_TARGET[kind]
     t0 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        outcome = run_scenario(scenario)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            outcome = run_scenario(scenario)
+    except NfrDrakeError as err:  # refused in one line: the row says why
+        wall = time.perf_counter() - t0
+        return [model.name, kind, field, "-", "-", f"refused: {err}", "-", "-", f"{wall:.0f}"]
     wall = time.perf_counter() - t0
     p = (outcome.confidence or {}).get("p_handle_within_2cm", float("nan"))
     refused = "refused" if refusal(outcome.confidence) else "kept"

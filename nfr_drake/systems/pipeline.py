@@ -256,8 +256,15 @@ def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObjec
                           bounds_O, camera)
     furniture = read_model_config(Path(scenario.model)).get("category") == "furniture"
     part = canonical_part(plant, scene_graph, model, scene_object, X_WO) if furniture else None
-    simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
-                                             X_WO if scenario.object_pose == "given" else None, part=part)
+    try:
+        simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
+                                                 X_WO if scenario.object_pose == "given" else None, part=part)
+    except RuntimeError as err:  # Drake's VTK renderer reads an .obj only with vertex normals
+        if "has no normals" not in str(err):
+            raise
+        raise NfrDrakeError(f"{scenario.object_file}: the cameras cannot render it: {err} (Drake's renderer "
+                            "needs vertex normals, 'vn' lines, in an .obj visual: export the mesh with "
+                            "normals)") from err
     context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
     joint = plant.GetJointByName(scene_object.joint_name, model)
     shut, opened = scene_object.shut_and_open(joint)

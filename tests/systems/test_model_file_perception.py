@@ -82,6 +82,15 @@ def test_a_sliding_door_has_no_field_to_fit(models):
         run_scenario(scenario_of(models["sliding_door"], model=""))
 
 
+def test_a_model_the_cameras_cannot_render_is_refused_in_one_line(models, tmp_path, capsys):
+    """The wardrobe's handle is an .obj without vertex normals, which Drake's VTK renderer rejects."""
+    model = models["wardrobe_handle_mesh_off_frame"]
+    assert main(["demo", "--object", str(model.path), "--joint", model.joint,
+                 "--handle-body", model.handle_body, "--replay", str(tmp_path / "r.html")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "u_handle.obj" in err and "vertex normals" in err and len(err.splitlines()) == 1, err
+
+
 def test_a_door_of_a_model_file_is_perceived_and_opened_with_the_fitted_keypoints(models, tmp_path, capsys):
     """`demo --object`: photographed alone, fitted with the closet model, planned on its fitted
     keypoints and simulated on the model; the handle is found within a few centimetres (the file's
