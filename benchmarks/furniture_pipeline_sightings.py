@@ -17,7 +17,14 @@ agree with the sightings of fronts and of no front, and how closely (RMS, px at 
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
 0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
 views one of the views' own sightings lies within 2 px (at 128 px) of its handle's projection:
-in 3 or more, the detector saw it and the triangulation lost it. Nothing is fitted.
+in 3 or more, the detector saw it and the triangulation lost it. Then, for the matched sightings
+of fronts that are not one of a pair (`pair_sides`), where the handle sits across its read face
+(`handle_offset`, in the bins of `FurnitureFitConfig.offset_edges`): doors and drawers per bin
+and the log-likelihood ratio, door against drawer (`FurnitureFitConfig.offset_type_log_odds`
+is chosen from this on the development seed 901); and the read types as the fit takes them
+(the read door probability's log-odds plus the pair's odds, `pair_type_log_odds`, and the
+offset's, `--offset-log-odds`; the keypoint head's margin left out): how many are wrong, with
+and without the offset's odds. Nothing is fitted.
 """
 
 from __future__ import annotations
@@ -33,9 +40,9 @@ import torch
 
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.eval.pipeline_eval import object_scenario
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, sighting_order
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_sides, sighting_order
 from nfr_drake.jsonio import write_rows_csv
-from nfr_drake.perception.front_reading import read_front
+from nfr_drake.perception.front_reading import handle_offset, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
@@ -93,11 +100,15 @@ def main() -> None:
     parser.add_argument("--csv-path", type=Path)
     parser.add_argument("--loose-share", type=float, default=FURNITURE_LOOSE[0])
     parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
+    parser.add_argument("--offset-log-odds", type=float, nargs="+",
+                        default=list(FurnitureFitConfig.offset_type_log_odds))
     args = parser.parse_args()
     torch.set_num_threads(1)
     base = Scenario(category="furniture", model=str(args.model), seed=args.seed)
     detector, _ = load_detector(args.model / DETECTOR_DIR)
-    gap = FurnitureFitConfig().column_gap_m
+    config = FurnitureFitConfig(offset_type_log_odds=tuple(args.offset_log_odds))
+    gap = config.column_gap_m
+    typed: list[tuple[str, float, bool, float]] = []  # per matched sighting: kind, log-odds, paired, offset
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
     unsighted_views: dict[str, list[int]] = {"door": [], "drawer": []}  # per unsighted front
@@ -121,12 +132,17 @@ def main() -> None:
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         for k in set(range(len(truth))) - set(owner):
             unsighted_views[obj.fronts[k].kind].append(views_seeing(frames, found, truth[k]))
-        for i, k in zip(order, owner, strict=True):
+        sides = pair_sides(sighted, config.pair_gap_m)
+        for i, k, side in zip(order, owner, sides, strict=True):
             rms_128 = handles[i].rms_px * 128.0 / frames[0].camera.height
             agreement[k >= 0].append((len(handles[i].views), rms_128))
             if k >= 0:
                 read = "unread" if fronts[i] is None else ("door" if fronts[i].is_door else "drawer")
                 types[(obj.fronts[k].kind, read)] += 1
+                if fronts[i] is not None:
+                    p = float(np.clip(fronts[i].door_probability, 1e-6, 1.0 - 1e-6))
+                    typed.append((obj.fronts[k].kind, np.log(p / (1.0 - p)), side != 0,
+                                  handle_offset(fronts[i])))
         rows.append({"index": index, "part": scenario.part, "part_type": obj.fronts[scenario.part].kind,
                      "fronts": len(truth), "sightings": len(sighted), "outcome": outcome,
                      "sighted_fronts": len(set(owner) - {-1}), "owners": " ".join(map(str, owner))})
@@ -158,8 +174,35 @@ def main() -> None:
         seen_in = np.array(seen, int)
         few = np.sum((seen_in >= 1) & (seen_in <= 2))
         print(f"| {kind}s | {len(seen_in)} | {np.sum(seen_in >= 3)} | {few} | {np.sum(seen_in == 0)} |")
+    print_offset_types(typed, config)
     if args.csv_path is not None:
         write_rows_csv(args.csv_path, rows)
+
+
+def print_offset_types(typed: list[tuple[str, float, bool, float]], config: FurnitureFitConfig) -> None:
+    """The tables of where the handle sits across its read face and of the read types (docstring)."""
+    edges = config.offset_edges
+    lone = [(kind, offset) for kind, _, paired, offset in typed if not paired]
+    bins = {kind: np.bincount([int(np.searchsorted(edges, o, side="right")) for k, o in lone if k == kind],
+                              minlength=len(edges) + 1) for kind in ("door", "drawer")}
+    names = [f"{lo:g}-{hi:g}" for lo, hi in zip((0.0, *edges), (*edges, np.inf), strict=True)]
+    print("\n| handle across its read face (lone fronts) | " + " | ".join(names) + " |\n|---|"
+          + "---|" * len(names))
+    for kind in ("door", "drawer"):
+        print(f"| {kind}s ({bins[kind].sum()}) | " + " | ".join(map(str, bins[kind])) + " |")
+    share = {kind: bins[kind] / max(bins[kind].sum(), 1) for kind in bins}
+    with np.errstate(divide="ignore"):
+        ratio = np.log(share["door"] / share["drawer"])
+    print("| log-likelihood ratio, door against drawer | " + " | ".join(f"{r:+.2f}" for r in ratio) + " |")
+    for name, odds in (("without the offset's odds", (0.0,) * len(names)),
+                       ("with " + " / ".join(f"{o:+.2f}" for o in config.offset_type_log_odds),
+                        config.offset_type_log_odds)):
+        wrong = Counter()
+        for kind, log_odds, paired, offset in typed:
+            pair = config.pair_type_log_odds[0] if paired else config.pair_type_log_odds[1]
+            extra = 0.0 if paired else odds[int(np.searchsorted(edges, offset, side="right"))]
+            wrong[kind] += int((log_odds + pair + extra > 0.0) != (kind == "door"))
+        print(f"read types wrong ({name}): doors {wrong['door']}, drawers {wrong['drawer']} of {len(typed)}")
 
 
 if __name__ == "__main__":

@@ -9,9 +9,9 @@ out: no field models them), runs the pipeline of `demo --object` (`Scenario.obje
 keypoints, the simulation on the model) with the model of the joint's kind (models/closet or
 models/drawer, "closet-or-drawer") and with models/furniture. Every fit is planned on (the
 confidence's threshold is not applied, `min_confidence` 0), so that the table shows what a refusal
-would have prevented. One row per model and field: the handle's error at the observed state,
-P(handle within 2 cm), whether the calibrated threshold refuses it, the simulated outcome, the
-fit's time.
+would have prevented. One row per model and field: what the fit read the part as (door or
+drawer), the handle's error at the observed state, P(handle within 2 cm), whether the calibrated
+threshold refuses it, the simulated outcome, the fit's time.
 """
 
 from __future__ import annotations
@@ -46,21 +46,23 @@ def run(model, field: str) -> list[str]:
     scenario = Scenario(object_file=args["--object"], joint=args["--joint"],
                         handle_body=args["--handle-body"], closed_at=args.get("--closed-at", ""),
                         model="" if field == "closet-or-drawer" else "models/furniture", min_confidence=0.0)
-    kind = scenario.model_file_object().category
-    scenario.q_target = OPEN_TARGET[kind]
+    category = scenario.model_file_object().category
+    scenario.q_target = OPEN_TARGET[category]
+    kind = {"closet": "door", "drawer": "drawer"}[category]
     t0 = time.perf_counter()
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             outcome = run_scenario(scenario)
     except NfrDrakeError as err:  # refused in one line: the row says why
         wall = time.perf_counter() - t0
-        return [model.name, kind, field, "-", "-", f"refused: {err}", "-", "-", f"{wall:.0f}"]
+        return [model.name, kind, field, "-", "-", "-", f"refused: {err}", "-", "-", f"{wall:.0f}"]
     wall = time.perf_counter() - t0
     p = (outcome.confidence or {}).get("p_handle_within_2cm", float("nan"))
     refused = "refused" if refusal(outcome.confidence) else "kept"
     task = outcome.task
     result = ("no plan" if task.plan is None else "opened" if task.success else "failed") if task else "-"
-    return [model.name, kind, field, f"{outcome.keypoint_rmse_cm:.1f}", f"{p:.2f}", refused, result,
+    read = {"closet": "door", "drawer": "drawer"}[outcome.predicted.category] if outcome.predicted else "-"
+    return [model.name, kind, field, read, f"{outcome.keypoint_rmse_cm:.1f}", f"{p:.2f}", refused, result,
             f"{outcome.perception_seconds:.1f}", f"{wall:.0f}"]
 
 
@@ -72,9 +74,9 @@ def main(only: tuple[str, ...] = (), models: tuple[str, ...] = ("closet-or-drawe
         chosen = [m for m in write_models(Path(folder)) if m.expect == OPENS and "sliding" not in m.name
                   and (not only or m.name in only)]
         print(f"{datetime.date.today()}, {platform.node()}, {os.cpu_count()} cores, torch threads {threads}")
-        print("| model | joint | field | handle error (cm) | P(handle within 2 cm) | calibrated threshold "
-              "| planned on the fit | fit (s) | wall (s) |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print("| model | joint | field | fitted as | handle error (cm) | P(handle within 2 cm) | calibrated "
+              "threshold | planned on the fit | fit (s) | wall (s) |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for model in chosen:
             for field in models:
                 print("| " + " | ".join(run(model, field)) + " |", flush=True)

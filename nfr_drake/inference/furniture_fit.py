@@ -45,7 +45,7 @@ from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
-from nfr_drake.perception.front_reading import SightedFront, hinge_points, shut_edges
+from nfr_drake.perception.front_reading import SightedFront, handle_offset, hinge_points, shut_edges
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,17 @@ class FurnitureFitConfig:
     log-odds: the generator's log-likelihood ratios, door against drawer (`python
     benchmarks/handle_layout.py`: in a pair 163 of 538 doors and 7 of 728 drawers, +3.45 and -0.35;
     on 2000 pieces of seed 7 +3.43 and -0.39); (0, 0): not weighed."""
+    offset_edges: tuple[float, ...] = (0.1, 0.5)
+    """`place_fronts`: bins of where a handle sits across its read face (`handle_offset`: 0 in the
+    middle, 1 at a vertical edge), between these edges."""
+    offset_type_log_odds: tuple[float, ...] = (-0.9, -0.3, 2.6)
+    """`place_fronts`: what each bin of `offset_edges` adds to the door log-odds of a read front
+    that is not one of a pair (a pair's two faces can be read as one wide face, whose middle lies
+    between their handles): one value per bin, zeros: not weighed. A drawer's pull sits in its
+    middle, a door's handle by its free edge; read faces are a few cm off, so the bins overlap:
+    the log-likelihood ratios, door against drawer, of the read offsets of the development
+    pipeline's photos (`python benchmarks/furniture_pipeline_sightings.py --seed 901`: lone doors
+    23 / 31 / 51 of 105, drawers 121 / 88 / 8 of 217; -0.93, -0.32, +2.58)."""
 
     def __post_init__(self):
         if min(self.starts, self.lookup_rays, self.keep, self.steps, self.rays_per_step) < 1:
@@ -114,6 +125,10 @@ class FurnitureFitConfig:
         if self.handle_pairing not in ("order", "nearest") or min(self.column_gap_m, self.pair_gap_m) < 0:
             raise ConfigError("FurnitureFitConfig: handle_pairing is \"order\" or \"nearest\", "
                               "column_gap_m and pair_gap_m >= 0")
+        if (len(self.offset_type_log_odds) != len(self.offset_edges) + 1
+                or np.any(np.diff(self.offset_edges) <= 0)):
+            raise ConfigError("FurnitureFitConfig: offset_type_log_odds needs one value per bin of "
+                              "offset_edges (one more than the edges, which increase)")
 
 
 @dataclass
@@ -247,7 +262,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         travel = [drawer_travel(model, z_best, k) for k in range(S)]
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
         placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight,
-                                     config.pair_type_log_odds)
+                                     config.pair_type_log_odds,
+                                     (config.offset_edges, config.offset_type_log_odds))
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -255,13 +271,16 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
-                 head_type_weight: float, pair_log_odds: tuple[float, float]
+                 head_type_weight: float, pair_log_odds: tuple[float, float],
+                 offset_log_odds: tuple[tuple[float, ...], tuple[float, ...]]
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
     slot's front (fronts[k] for slot k; None: the field's): its type (a door where the read door
     probability's log-odds plus `head_type_weight` times the keypoint head's door margin,
     door_margin (S,) its door logit minus its drawer logit, plus pair_log_odds[0] for one of a
-    pair (sides[k] != 0) or pair_log_odds[1] for one not, are positive); its goal (a door's
+    pair (sides[k] != 0) or pair_log_odds[1] for one not, plus for one not the value of
+    offset_log_odds[1] in the bin of offset_log_odds[0] (edges) its `handle_offset` falls in, are
+    positive); its goal (a door's
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
     read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
@@ -281,6 +300,9 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
         p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
         pair = pair_log_odds[0] if sides[k] != 0 else pair_log_odds[1]
+        if sides[k] == 0:
+            edges, odds = offset_log_odds
+            pair += odds[int(np.searchsorted(edges, handle_offset(front), side="right"))]
         door = np.log(p / (1.0 - p)) + head_type_weight * float(door_margin[k]) + pair > 0.0
         if door:
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)

@@ -148,6 +148,15 @@ def hinge_points(front: SightedFront, left: bool | None = None) -> np.ndarray:
     return front.corners[[0, 2]] if left else front.corners[[1, 3]]
 
 
+def handle_offset(front: SightedFront) -> float:
+    """Where the handle sits across its read face: its horizontal distance from the face's middle
+    along the face's top edge (so at any opening) over half the face's width; 0 at the middle
+    (a drawer's pull), near 1 by a vertical edge (a door's, by its free edge)."""
+    across = (front.corners[1] - front.corners[0])[:2]
+    width = max(float(np.linalg.norm(across)), 1e-3)
+    return float(abs((front.p_O - front.corners.mean(0))[:2] @ across) / width / (width / 2))
+
+
 def shut_edges(front: SightedFront) -> tuple[float, float]:
     """The front's left edge y and top edge z in O, m, when shut: a drawer's face keeps its y and
     z when pulled; a door hinged on its right edge has its left edge one face width (the corners'

@@ -6,6 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from pydrake.math import RotationMatrix
 
 from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.captures import captures_command
@@ -26,7 +27,7 @@ from nfr_drake.inference.furniture_fit import (
 )
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRModel
-from nfr_drake.perception.front_reading import SightedFront
+from nfr_drake.perception.front_reading import SightedFront, handle_offset
 
 S = 8
 TINY = NFRModelConfig(latent_obj_dim=4, hyper_hidden=8, field_width=8, field_layers=2,
@@ -180,6 +181,10 @@ def test_sighting_order_follows_the_fronts_canonical_order():
     assert sighting_order(np.zeros((0, 3)), 0.2).tolist() == []
 
 
+NO_OFFSET_ODDS = ((), (0.0,))
+"""`place_fronts`'s offset odds that weigh nothing."""
+
+
 def _face(y0, y1, z0, z1, x=0.3):
     return np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]], float)
 
@@ -211,7 +216,7 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
     placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4), 0.1,
-                                      (0.0, 0.0))
+                                      (0.0, 0.0), NO_OFFSET_ODDS)
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
@@ -222,10 +227,10 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     wide = _face(-0.4, 0.4, 0.2, 0.78)
     pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
     placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
-                             np.zeros(2), 0.1, (0.0, 0.0))
+                             np.zeros(2), 0.1, (0.0, 0.0), NO_OFFSET_ODDS)
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
     unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2), 0.1,
-                               (0.0, 0.0))
+                               (0.0, 0.0), NO_OFFSET_ODDS)
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
 
 
@@ -242,7 +247,7 @@ def test_a_read_type_weighs_the_heads_door_margin():
 
     def read(margin, weight, sides=(0.0, 0.0), pair_log_odds=(0.0, 0.0)):
         read_types = place_fronts(head, types, q, [0.3] * 2, [unsure, sure], np.array(sides),
-                                  np.array(margin, float), weight, pair_log_odds)[1]
+                                  np.array(margin, float), weight, pair_log_odds, NO_OFFSET_ODDS)[1]
         return [PART_TYPES[t] for t in read_types]
 
     assert read([5.0, 5.0], 0.1) == ["door", "drawer"]
@@ -254,6 +259,33 @@ def test_a_read_type_weighs_the_heads_door_margin():
     # a lone front: -0.4 more for a drawer (-0.41 + 0.5 - 0.4 < 0 < -0.41 + 1.0 - 0.4)
     assert read([5.0, 5.0], 0.1, (0.0, 0.0), (3.4, -0.4)) == ["drawer", "drawer"]
     assert read([10.0, 10.0], 0.1, (0.0, 0.0), (3.4, -0.4)) == ["door", "drawer"]
+
+
+def test_a_lone_front_whose_handle_sits_by_an_edge_is_more_likely_a_door():
+    """`handle_offset`: 0 for a handle in the middle of its face, 0.8 for one 4 cm from the edge of
+    a 40 cm face, whatever the face's turn. The offset's odds (here -1 in the middle, +2.7 by an
+    edge) turn an unsure read (0.3, log-odds -0.85) into a door by an edge and leave a centred
+    handle's front a drawer; one of a pair (a pair can be read as one wide face) is not weighed."""
+    face = _face(-0.2, 0.2, 0.2, 0.8)
+    by_edge = SightedFront(np.array([0.33, 0.16, 0.6]), 0.3, face, 5)
+    centred = SightedFront(np.array([0.33, 0.0, 0.6]), 0.3, face, 5)
+    assert handle_offset(centred) == pytest.approx(0.0, abs=1e-9)
+    assert handle_offset(by_edge) == pytest.approx(0.8)
+    turn = RotationMatrix.MakeZRotation(0.7).matrix()
+    turned = SightedFront(turn @ by_edge.p_O, 0.3, face @ turn.T, 5)
+    assert handle_offset(turned) == pytest.approx(0.8)
+    head = np.zeros((2, 4, 3))
+    head[:, 0] = [by_edge.p_O, centred.p_O]
+    odds = ((0.1, 0.5), (-1.0, -0.3, 2.7))
+
+    def read(sides, offset_odds):
+        read_types = place_fronts(head, np.zeros(2, int), np.zeros(2), [0.3] * 2, [by_edge, centred],
+                                  np.array(sides), np.zeros(2), 0.0, (0.0, 0.0), offset_odds)[1]
+        return [PART_TYPES[t] for t in read_types]
+
+    assert read([0.0, 0.0], NO_OFFSET_ODDS) == ["drawer", "drawer"]
+    assert read([0.0, 0.0], odds) == ["door", "drawer"]
+    assert read([1.0, -1.0], odds) == ["drawer", "drawer"]
 
 
 def test_the_doors_of_a_pair_hinge_on_their_outer_sides():
