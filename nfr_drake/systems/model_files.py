@@ -17,17 +17,19 @@ what to change (`SceneObject.from_model_file` composes these).
 - Placement (`check_placement`): height, up axis (the joint's axis), floor; a refusal suggests the
   `--object-xyz` / `--object-rpy-deg` that fix it.
 - Meshes (`mesh_problems`): Drake collides with a mesh's convex hull; a concave one is reported and
-  one whose hull covers the handle refused.
+  one whose hull covers the handle refused. Drake's VTK renderer draws an .obj only with vertex
+  normals: `obj_with_normals` writes a copy with its faces' normals for the cameras.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Mesh, ReadObjToTriangleSurfaceMesh, Role, SceneGraphInspector
+from pydrake.geometry import Mesh, ReadObjToTriangleSurfaceMesh, Rgba, Role, SceneGraph, SceneGraphInspector
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
@@ -432,4 +434,63 @@ def mesh_problems(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_c
             if fill < CONCAVE_FILL:
                 notes.append(f"the collision mesh {name} of body {body.name()!r} is concave (fills "
                              f"{fill:.0%} of its convex hull): Drake collides with the hull")
+    return notes
+
+
+def obj_with_normals(path: Path, folder: Path) -> Path | None:
+    """A copy in `folder` of the Wavefront .obj at `path` with each face's normal (flat shading: the
+    normal of its first triangle, 'vn' lines first, faces as v/vt/vn), for Drake's VTK renderer, which
+    refuses an .obj without normals; None when the file has normals already. Its material library
+    is referred to where it lies. The copy's name holds a hash of the path (one copy per mesh)."""
+    lines = Path(path).read_text().splitlines()
+    if any(line.startswith("vn ") for line in lines):
+        return None
+    vertices = [np.array(line.split()[1:4], float) for line in lines if line.startswith("v ")]
+    out, normals = [], []
+    for line in lines:
+        tokens = line.split()
+        if tokens[:1] == ["mtllib"]:
+            out.append(f"mtllib {(Path(path).parent / ' '.join(tokens[1:])).resolve()}")
+        elif tokens[:1] == ["f"]:
+            corners = [t.split("/") for t in tokens[1:]]
+            index = [int(c[0]) - 1 if int(c[0]) > 0 else len(vertices) + int(c[0]) for c in corners]
+            a, b, c = (vertices[i] for i in index[:3])
+            n = np.cross(b - a, c - a)
+            normals.append(n / max(float(np.linalg.norm(n)), 1e-12))
+            uv = [c[1] if len(c) > 1 else "" for c in corners]
+            k = len(normals)
+            out.append("f " + " ".join(f"{c[0]}/{t}/{k}" for c, t in zip(corners, uv, strict=True)))
+        else:
+            out.append(line)
+    tag = hashlib.sha1(str(Path(path).resolve()).encode()).hexdigest()[:10]
+    copy = Path(folder) / f"{Path(path).stem}_{tag}_normals.obj"
+    copy.write_text("\n".join([f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in normals] + out) + "\n")
+    return copy
+
+
+def meshes_with_normals(plant: MultibodyPlant, scene_graph: SceneGraph, model: ModelInstanceIndex,
+                        folder: Path) -> list[str]:
+    """For the cameras, each .obj mesh of `model` that the renderer sees and that has no normals
+    swapped for a copy with them (`obj_with_normals`, in `folder`): the copy is registered as a
+    visual geometry of the same body, at the same pose and scale, in the same diffuse colour, and
+    the original loses its perception role (it keeps the others). Call before `Finalize`. One
+    note per mesh swapped."""
+    inspector = scene_graph.model_inspector()
+    swaps = []
+    for index in plant.GetBodyIndices(model):
+        for g in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(index), Role.kPerception):
+            shape = inspector.GetShape(g)
+            if isinstance(shape, Mesh) and shape.source().is_path() and shape.extension() == ".obj":
+                copy = obj_with_normals(Path(shape.source().path()), folder)
+                if copy is not None:
+                    swaps.append((plant.get_body(index), g, shape, copy))
+    notes = []
+    for body, g, shape, copy in swaps:
+        colour = inspector.GetPerceptionProperties(g).GetPropertyOrDefault("phong", "diffuse",
+                                                                           Rgba(0.9, 0.9, 0.9, 1.0))
+        plant.RegisterVisualGeometry(body, inspector.GetPoseInFrame(g), Mesh(str(copy), shape.scale3()),
+                                     f"{inspector.GetName(g).split('::')[-1]}_with_normals", colour.rgba)
+        scene_graph.RemoveRole(plant.get_source_id(), g, Role.kPerception)
+        notes.append(f"the visual mesh {Path(shape.source().path()).name} of body {body.name()!r} has no "
+                     "normals, which Drake's renderer needs: the cameras see a copy with its faces' normals")
     return notes

@@ -14,6 +14,7 @@ object's own keypoints.
 """
 
 import math
+import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -35,7 +36,7 @@ from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.planning.planner import grasp_planner
-from nfr_drake.systems.model_files import body_box
+from nfr_drake.systems.model_files import body_box, meshes_with_normals
 from nfr_drake.systems.perception import AddNfrPerception, NfrPerceptionSystem
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
@@ -240,38 +241,33 @@ def canonical_part(plant, scene_graph, model, scene_object: SceneObject, X_WO: R
 
 
 def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObject
-                                    ) -> tuple[Simulator, NfrPerceptionSystem]:
+                                    ) -> tuple[Simulator, NfrPerceptionSystem, list[str]]:
     """`perception_simulator` for a user's model file (`Scenario.object_file`, loaded as
     `scene_object`): the model as its file and pose place it, the door or drawer at q_start and
     its other joints shut, the cameras framing its shut bounds (framing "bounds", as furniture's)
     around its frame O (`SceneObject.category_frame`, or a coarse look at it when the pose is
-    estimated); the fit is given that O with `Scenario.object_pose` "given"."""
+    estimated); the fit is given that O with `Scenario.object_pose` "given". Also the notes of
+    `meshes_with_normals` (visual meshes the cameras see a copy of)."""
     X_WO, bounds_O = scene_object.category_frame()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     model = scene_object.add_to(plant)
+    notes = meshes_with_normals(plant, scene_graph, model, Path(tempfile.gettempdir()) / "nfr_drake_meshes")
     plant.Finalize()
     camera = _perception_camera(scenario)
     X_WCs = _camera_poses(scenario, "bounds", scenario.coarse_look(X_WO), (bounds_O[0] + bounds_O[1]) / 2,
                           bounds_O, camera)
     furniture = read_model_config(Path(scenario.model)).get("category") == "furniture"
     part = canonical_part(plant, scene_graph, model, scene_object, X_WO) if furniture else None
-    try:
-        simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
-                                                 X_WO if scenario.object_pose == "given" else None, part=part)
-    except RuntimeError as err:  # Drake's VTK renderer reads an .obj only with vertex normals
-        if "has no normals" not in str(err):
-            raise
-        raise NfrDrakeError(f"{scenario.object_file}: the cameras cannot render it: {err} (Drake's renderer "
-                            "needs vertex normals, 'vn' lines, in an .obj visual: export the mesh with "
-                            "normals)") from err
+    simulator, perception = _with_perception(builder, plant, scene_graph, model, scenario, X_WCs, camera,
+                                             X_WO if scenario.object_pose == "given" else None, part=part)
     context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
     joint = plant.GetJointByName(scene_object.joint_name, model)
     shut, opened = scene_object.shut_and_open(joint)
     set_joint_value(plant, context, joint, shut + scenario.q_start * (opened - shut))
     for name in scene_object.locked_joints:
         set_joint_value(plant, context, plant.GetJointByName(name, model), 0.0)
-    return simulator, perception
+    return simulator, perception, notes
 
 
 def perception_photos(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray], list[PinholeCamera]]:
@@ -391,13 +387,14 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
                        f"{scenario.object_file}: joint {scenario.joint!r}",
                        "door" if scene_object.category == "closet" else "drawer")
     scenario = replace(scenario, model=str(model))
+    simulator, perception, drawn = model_file_perception_simulator(scenario, scene_object)
+    notes = (*scene_object.notes, *drawn)
     try:
-        perceived = _fitted(*model_file_perception_simulator(scenario, scene_object))
+        perceived = _fitted(simulator, perception)
     except ObjectPoseError as err:
         return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
-                               truth=truth, task=None, refused=f"nothing planned: {err}",
-                               notes=scene_object.notes)
+                               truth=truth, task=None, refused=f"nothing planned: {err}", notes=notes)
     predicted, confidence = perceived.trajectory, perceived.confidence
     handle_error = 100.0 * float(np.linalg.norm(predicted.point("handle", predicted.q_current)
                                                 - truth.point("handle", truth.q_current)))
@@ -408,4 +405,4 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start, keypoint_rmse_cm=handle_error,
         handle_path_rmse_cm=math.nan, perception_seconds=perceived.seconds, predicted=predicted, truth=truth,
-        task=task, confidence=confidence, refused=refused or "", notes=scene_object.notes)
+        task=task, confidence=confidence, refused=refused or "", notes=notes)
