@@ -1,6 +1,7 @@
 """The neural field on users' own model files: `nfr-drake demo --object FILE` on realistic furniture.
 
     python benchmarks/user_models_field.py [--only NAME ...] [--models closet-or-drawer furniture]
+        [--random N --seed S]
 
 Writes the models of tests/fixtures/user_models.py (SDFormat, URDF, .obj meshes) into a temporary
 folder and, for each one that `plan --object` opens with its true keypoints (sliding doors left
@@ -30,7 +31,7 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from fixtures.user_models import OPENS, write_models  # noqa: E402
+from fixtures.user_models import OPENS, random_models, write_models  # noqa: E402
 
 from nfr_drake.cpu import set_torch_threads  # noqa: E402
 from nfr_drake.errors import NfrDrakeError  # noqa: E402
@@ -40,12 +41,27 @@ from nfr_drake.systems.scenario import Scenario  # noqa: E402
 from nfr_drake.systems.task import OPEN_TARGET  # noqa: E402
 
 
+def placement(args: tuple[str, ...]) -> dict:
+    """The Scenario fields of a fixture's extra `plan` arguments (--object-xyz X Y Z,
+    --object-yaw-deg D, --object-rpy-deg R P Y, --closed-at L)."""
+    fields, values = {}, list(args)
+    while values:
+        flag = values.pop(0)
+        if flag in ("--object-xyz", "--object-rpy-deg"):
+            fields[flag[2:].replace("-", "_")] = [float(values.pop(0)) for _ in range(3)]
+        elif flag in ("--object-yaw-deg", "--closed-at"):
+            value = values.pop(0)
+            fields[flag[2:].replace("-", "_")] = float(value) if flag == "--object-yaw-deg" else value
+        else:
+            raise ValueError(f"unknown fixture argument {flag}")
+    return fields
+
+
 def run(model, field: str) -> list[str]:
     """One row: the pipeline on `model` with the field "closet-or-drawer" or "furniture"."""
-    args = dict(zip(model.plan_args()[1::2], model.plan_args()[2::2], strict=True))
-    scenario = Scenario(object_file=args["--object"], joint=args["--joint"],
-                        handle_body=args["--handle-body"], closed_at=args.get("--closed-at", ""),
-                        model="" if field == "closet-or-drawer" else "models/furniture", min_confidence=0.0)
+    scenario = Scenario(object_file=str(model.path), joint=model.joint, handle_body=model.handle_body,
+                        model="" if field == "closet-or-drawer" else "models/furniture", min_confidence=0.0,
+                        **placement(model.args))
     category = scenario.model_file_object().category
     scenario.q_target = OPEN_TARGET[category]
     kind = {"closet": "door", "drawer": "drawer"}[category]
@@ -67,11 +83,14 @@ def run(model, field: str) -> list[str]:
 
 
 def main(only: tuple[str, ...] = (), models: tuple[str, ...] = ("closet-or-drawer", "furniture"),
-         threads: int = 1) -> None:
-    """Print the table (markdown) with the date and machine."""
+         threads: int = 1, random: int = 0, seed: int = 0) -> None:
+    """Print the table (markdown) with the date and machine. `random`: that many random models
+    (`random_models` of seed `seed`: doors, drawers and sliding doors in turn, the sliding doors
+    left out) instead of the fixed ones."""
     set_torch_threads(threads)
     with tempfile.TemporaryDirectory() as folder:
-        chosen = [m for m in write_models(Path(folder)) if m.expect == OPENS and "sliding" not in m.name
+        written = random_models(Path(folder), random, seed) if random else write_models(Path(folder))
+        chosen = [m for m in written if m.expect == OPENS and "sliding" not in m.name
                   and (not only or m.name in only)]
         print(f"{datetime.date.today()}, {platform.node()}, {os.cpu_count()} cores, torch threads {threads}")
         print("| model | joint | field | fitted as | handle error (cm) | P(handle within 2 cm) | calibrated "
