@@ -9,7 +9,8 @@ column). Then the doors of a pair (`pair_hinges`: a door's handle with another l
 the pair gap): how many doors are such, and for how many the hinge lies on the side away from
 that handle, as the fit then puts it; and how much being one of a pair says of a front's type:
 the log-likelihood ratio of door against drawer for a front in a pair and for one not
-(`FurnitureFitConfig.pair_type_log_odds`). No rendering: a few seconds.
+(`FurnitureFitConfig.pair_type_log_odds`); and where each front's handle sits across its face
+(`FurnitureFitConfig.offset_type_log_odds`). No rendering: a few seconds.
 
     python benchmarks/handle_layout.py [--pieces 400] [--seed 123] [--gaps 0 0.1 0.2 0.3]
 """
@@ -35,7 +36,8 @@ def main() -> None:
     parser.add_argument("--pair-gap", type=float, default=FurnitureFitConfig.pair_gap_m)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
-    pieces = [sample_object("furniture", rng).front_keypoints(0.0) for _ in range(args.pieces)]
+    objects = [sample_object("furniture", rng) for _ in range(args.pieces)]
+    pieces = [obj.front_keypoints(0.0) for obj in objects]
     handles = [np.array([k["handle"] for k in kps]) for kps in pieces]
     print(f"{date.today()}, {platform.machine()}, {args.pieces} pieces of seed {args.seed}, "
           f"{sum(map(len, handles))} fronts")
@@ -70,6 +72,19 @@ def main() -> None:
             in_pair[kind][0] += int((paired & of_kind).sum())
             in_pair[kind][1] += int(of_kind.sum())
     (d_pair, d_all), (w_pair, w_all) = in_pair["door"], in_pair["drawer"]
+    offsets = {"door": [], "drawer": []}  # the handle's distance from its face's middle / half width
+    for obj in objects:
+        for front in obj.fronts:
+            corners = np.asarray(front.face_corners(0.0))
+            y0, y1 = corners[:, 1].min(), corners[:, 1].max()
+            handle_y = front.keypoints(0.0)["handle"][1]
+            offsets[front.kind].append(abs(handle_y - (y0 + y1) / 2) / ((y1 - y0) / 2))
+    edges = (0.1, 0.2, 0.5)
+    bins = " / ".join(f"{lo:g}-{hi:g}" for lo, hi in zip((0.0, *edges), (*edges, np.inf), strict=True))
+    print(f"where the handle sits across its face (0: the middle, 1: an edge), fronts per bin {bins}: "
+          + "; ".join(f"{kind}s " + " / ".join(map(str, np.bincount(np.searchsorted(edges, o, side="right"),
+                                                                       minlength=len(edges) + 1)))
+                      for kind, o in offsets.items()))
     print(f"in a pair: doors {d_pair} of {d_all}, drawers {w_pair} of {w_all}; log-likelihood ratio, "
           f"door against drawer: in a pair {np.log((d_pair / d_all) / (w_pair / w_all)):+.2f}, not "
           f"{np.log((1 - d_pair / d_all) / (1 - w_pair / w_all)):+.2f}")
