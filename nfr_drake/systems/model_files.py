@@ -454,8 +454,8 @@ def obj_with_normals(path: Path, folder: Path) -> Path | None:
         elif tokens[:1] == ["f"]:
             corners = [t.split("/") for t in tokens[1:]]
             index = [int(c[0]) - 1 if int(c[0]) > 0 else len(vertices) + int(c[0]) for c in corners]
-            a, b, c = (vertices[i] for i in index[:3])
-            n = np.cross(b - a, c - a)
+            p0, p1, p2 = (vertices[i] for i in index[:3])
+            n = np.cross(p1 - p0, p2 - p0)
             normals.append(n / max(float(np.linalg.norm(n)), 1e-12))
             uv = [c[1] if len(c) > 1 else "" for c in corners]
             k = len(normals)

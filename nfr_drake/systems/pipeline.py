@@ -51,13 +51,15 @@ _ROOM_STREAM = 203  # the perception room's stream (the cameras use 7, the coars
 
 @dataclass
 class PipelineOutcome:
-    """q_estimate / q_true in [0, 1]; keypoint_rmse_cm at the observed state; handle_path_rmse_cm
-    over [0, 1]; perception_seconds of the fit; predicted and true trajectories in W; the task
-    (None when the fit was refused). Without perception (ground-truth keypoints, `perceived`
-    False) the prediction is the truth. confidence: the fit result's `confidence` (or None);
-    refused: why the planner did not act on the fit (`inference.confidence.refusal`), or on
-    nothing (the object's masks gave no pose: predicted None, the errors inf), or "";
-    pose_error: with an estimated object pose, its position (cm, xy) and yaw (degrees) errors."""
+    """q_estimate / q_true in [0, 1]; keypoint_rmse_cm at the observed state (of a user's model
+    file, `Scenario.object_file`, the handle's error alone); handle_path_rmse_cm over [0, 1] (nan
+    for a model file, whose q need not span the field's); perception_seconds of the fit; predicted
+    and true trajectories in W; the task (None when the fit was refused). Without perception
+    (ground-truth keypoints, `perceived` False) the prediction is the truth. confidence: the fit
+    result's `confidence` (or None); refused: why the planner did not act on the fit
+    (`inference.confidence.refusal`), or on nothing (the object's masks gave no pose: predicted
+    None, the errors inf), or ""; pose_error: with an estimated object pose, its position (cm, xy)
+    and yaw (degrees) errors."""
 
     q_estimate: float
     q_true: float
@@ -78,10 +80,10 @@ class PipelineOutcome:
         task = self.task
         p = (self.confidence or {}).get("p_handle_within_2cm")
         confidence = "" if p is None else f"; P(handle within 2 cm) {p:.2f}"
-        errors = (f"keypoint error {self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, handle path "
-                  f"{self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]"
-                  if math.isfinite(self.handle_path_rmse_cm) or not math.isfinite(self.keypoint_rmse_cm)
-                  else f"handle {self.keypoint_rmse_cm:.2f} cm from the model's at the observed state")
+        errors = (f"handle {self.keypoint_rmse_cm:.2f} cm from the model's at the observed state"
+                  if math.isnan(self.handle_path_rmse_cm)  # a model file's: the handle alone compared
+                  else f"keypoint error {self.keypoint_rmse_cm:.2f} cm RMSE at the observed state, "
+                  f"handle path {self.handle_path_rmse_cm:.2f} cm RMSE over q in [0, 1]")
         lines = [f"warning: {note}" for note in self.notes]
         if self.perceived and self.predicted:
             lines.append(f"estimated q {self.q_estimate:.3f} (true {self.q_true:.3f}); {errors}; fit "
