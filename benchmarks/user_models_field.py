@@ -62,10 +62,11 @@ def placement(args: tuple[str, ...]) -> dict:
 def run(model, field: str) -> list[str]:
     """One row: the pipeline on `model` with the field "closet-or-drawer" or "furniture"."""
     scenario = Scenario(object_file=str(model.path), joint=model.joint, handle_body=model.handle_body,
-                        model="" if field == "closet-or-drawer" else "models/furniture", min_confidence=0.0,
-                        **placement(model.args))
+                        model="models/furniture", min_confidence=0.0, **placement(model.args))
     category = scenario.model_file_object().category
     scenario.q_target = OPEN_TARGET[category]
+    if field == "closet-or-drawer":
+        scenario.model = f"models/{category}"
     kind = {"closet": "door", "drawer": "drawer"}[category]
     t0 = time.perf_counter()
     try:

@@ -31,8 +31,8 @@ def demo_command(model: Path | None = None, seed: int = 100, index: int = 0,
     forward-simulated, the planner opens the door with those keypoints in simulation (and, with
     `--task open-and-place`, then picks an item from a table beside the robot and places it at the
     goal keypoint inside). With `--object FILE --joint J --handle-body B` the same on your own
-    SDFormat or URDF model: photographed alone, fitted with the model of the joint's kind
-    (models/closet for a door, models/drawer for a drawer), opened with the fitted keypoints in
+    SDFormat or URDF model: photographed alone, fitted with models/furniture (or `--model`: a
+    closet or drawer model for a door or a drawer), opened with the fitted keypoints in
     simulation on your model (docs/PLANNING.md, "The neural field on your own model").
 
     Prints the estimated q, the keypoint error against ground truth, the fit's confidence, the
@@ -41,8 +41,8 @@ def demo_command(model: Path | None = None, seed: int = 100, index: int = 0,
     threshold (one line says why and what to do; nothing is planned).
 
     Args:
-        model: neural-field model folder (default: models/closet; with --object the model of the
-            joint's kind).
+        model: neural-field model folder (default: models/closet; with --object
+            models/furniture).
         seed: capture seed of the unseen closet.
         index: object index within the seed.
         q_target: articulation to open to (default 0.6 for a door, 1.0 for a drawer with --object;

@@ -363,9 +363,9 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
 
 def _run_model_file(scenario: Scenario) -> PipelineOutcome:
     """`run_scenario` on a user's model file (`Scenario.object_file`): photographed alone and fitted
-    (`model_file_perception_simulator`) with `Scenario.model` or, left empty, the model of the
-    joint's kind (models/closet, models/drawer; a furniture model fits every front and gives the
-    joint's, `canonical_part`), planned with the fitted keypoints and simulated on the model. The
+    (`model_file_perception_simulator`) with `Scenario.model` or, left empty, models/furniture
+    (which fits every front and gives the joint's, `canonical_part`; a closet or drawer model must
+    be of the joint's kind), planned with the fitted keypoints and simulated on the model. The
     error is the handle's alone: the hinge keypoints of a model's joint lie on its axis either side
     of the handle, the field's at the door's top and bottom edges. NfrDrakeError for a sliding door
     (no model of them) or a model of another kind than the joint's."""
@@ -383,7 +383,7 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
         return PipelineOutcome(q_estimate=scenario.q_start, q_true=scenario.q_start, keypoint_rmse_cm=0.0,
                                handle_path_rmse_cm=0.0, perception_seconds=0.0, predicted=truth, truth=truth,
                                task=task, perceived=False, notes=scene_object.notes)
-    model = Path(scenario.model or f"models/{scene_object.category}")
+    model = Path(scenario.model or "models/furniture")
     if read_model_config(model).get("category") != "furniture":  # a furniture model has doors and drawers
         check_category(model, read_model_config(model).get("category"), scene_object.category,
                        f"{scenario.object_file}: joint {scenario.joint!r}",

@@ -146,10 +146,10 @@ class Scenario:
     """A user's SDFormat or URDF model to perceive and open instead of a generated object ("" for
     none): the door or drawer on `joint`, its handle the centre of `handle_body`'s geometry, placed
     by `object_xyz`, `object_yaw_deg` and `object_rpy_deg` (`SceneObject.from_model_file`, whose
-    refusals say what to change). Photographed alone, fitted with `model` ("" for the model of the
-    joint's kind: models/closet for a revolute joint, models/drawer for a prismatic one; the joint
-    decides, not `category`) in the frame O its carcass gives (`SceneObject.category_frame`) or,
-    with `object_pose` "estimated", in the frame estimated from the photos; then opened."""
+    refusals say what to change). Photographed alone, fitted with `model` ("" for
+    models/furniture; a closet or drawer model must be of the joint's kind: the joint decides, not
+    `category`) in the frame O its carcass gives (`SceneObject.category_frame`) or, with
+    `object_pose` "estimated", in the frame estimated from the photos; then opened."""
     joint: str = ""
     """`object_file`: the joint of the door or drawer to open."""
     handle_body: str = ""

@@ -113,13 +113,25 @@ def test_an_obj_without_normals_gets_its_faces_normals(tmp_path):
     assert obj_with_normals(copy, tmp_path) is None
 
 
+def test_a_drawer_of_a_model_file_is_opened_with_the_furniture_fields_keypoints(models, tmp_path, capsys):
+    """`demo --object` by default fits models/furniture: the drawer under a worktop is found (its
+    handle within a few centimetres) and pulled open in simulation on the model."""
+    model = models["worktop_drawer"]
+    status = main(["demo", "--object", str(model.path), "--joint", model.joint, "--handle-body",
+                   model.handle_body, "--threads", "1", "--replay", str(tmp_path / "r.html")])
+    out = capsys.readouterr().out
+    handle_cm = float(out.split("handle ")[1].split(" cm from the model's")[0])
+    assert handle_cm < 5.0 and status == 0 and "SUCCESS" in out, out
+
+
 def test_a_door_of_a_model_file_is_perceived_and_opened_with_the_fitted_keypoints(models, tmp_path, capsys):
-    """`demo --object`: photographed alone, fitted with the closet model, planned on its fitted
-    keypoints and simulated on the model; the handle is found within a few centimetres (the file's
-    door is plain, one colour, unlike the training closets), so the door opens."""
+    """`demo --object --model models/closet`: photographed alone, fitted with the closet model,
+    planned on its fitted keypoints and simulated on the model; the handle is found within a few
+    centimetres (the file's door is plain, one colour, unlike the training closets), so the door
+    opens."""
     model = models["base_cabinet_door_on_floor"]
     args = ["demo", "--object", str(model.path), "--joint", model.joint, "--handle-body", model.handle_body,
-            "--threads", "1", "--replay", str(tmp_path / "r.html")]
+            "--model", "models/closet", "--threads", "1", "--replay", str(tmp_path / "r.html")]
     status = main([*args, "--min-confidence", "0"])
     out = capsys.readouterr().out
     handle_cm = float(out.split("handle ")[1].split(" cm from the model's")[0])
