@@ -397,7 +397,7 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
         return PipelineOutcome(q_estimate=math.nan, q_true=scenario.q_start, keypoint_rmse_cm=math.inf,
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
                                truth=truth, task=None, refused=f"nothing planned: {err}", notes=notes)
-    predicted, confidence = perceived.trajectory, perceived.confidence
+    predicted, confidence = scene_object.in_joint_units(perceived.trajectory), perceived.confidence
     handle_error = 100.0 * float(np.linalg.norm(predicted.point("handle", predicted.q_current)
                                                 - truth.point("handle", truth.q_current)))
     refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)

@@ -102,7 +102,7 @@ def plan_command(
     scene_object = replace(scene_object, ground_truth=scene_object.ground_truth.with_current(q0))
     planned = None
     if keypoints is not None:
-        planned = fitted_keypoints(keypoints, X_WO)
+        planned = scene_object.in_joint_units(fitted_keypoints(keypoints, X_WO))
         if planned.category != scene_object.category:
             raise NfrDrakeError(f"{keypoints}: keypoints of a {planned.category}, but the object's joint "
                                 f"makes it a {scene_object.category}")

@@ -163,6 +163,17 @@ class SceneObject:
             return self.joint_range
         return float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
 
+    def in_joint_units(self, keypoints: KeypointTrajectory) -> KeypointTrajectory:
+        """Fitted or given door keypoints, whose q is 90 degrees per unit (the fields' convention,
+        docs/CONVENTIONS.md), told in this object's q, its joint's fraction from shut to open
+        (`joint_range`): a model file's door that opens 100 degrees is at 54 degrees at its q 0.54,
+        the keypoints' 0.6. Drawers (their travel is fitted, not known) and objects without a
+        `joint_range` (generated ones, 90 degrees) are returned as they are."""
+        if keypoints.category != "closet" or self.category != "closet" or self.joint_range is None:
+            return keypoints
+        span = abs(self.joint_range[1] - self.joint_range[0])
+        return keypoints.rescaled(np.pi / 2 / span)
+
     def category_frame(self) -> tuple[RigidTransform, tuple[np.ndarray, np.ndarray]]:
         """Frame O of the neural field's objects (docs/CONVENTIONS.md) for this object, shut, and
         its bounds in O (min and max corners (3,), m): O's origin lies under the centre of the

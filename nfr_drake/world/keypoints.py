@@ -37,7 +37,8 @@ class KeypointTrajectory:
 
     Attributes:
         category: "closet" (a door on a hinge) or "drawer" (a slide); tells which keypoints exist.
-        q_grid: articulations, increasing, in [0, 1], shape (N,).
+        q_grid: articulations, increasing, in [0, 1] (a door's told in another joint's range may
+            pass 1, `rescaled`), shape (N,).
         names: keypoint names, length K (always includes "handle"; closets add "hinge_top" and
             "hinge_bottom").
         p_WK: keypoint positions in W at each grid articulation, m, shape (N, K, 3).
@@ -90,6 +91,13 @@ class KeypointTrajectory:
     def with_current(self, q_current: float) -> KeypointTrajectory:
         """The same trajectory with another present articulation."""
         return KeypointTrajectory(self.category, self.q_grid, self.names, self.p_WK, q_current)
+
+    def rescaled(self, factor: float) -> KeypointTrajectory:
+        """The same motion with its articulations multiplied by `factor` > 0 (q_grid and q_current):
+        a door's keypoints, whose q is 90 degrees per unit, told in the q of a joint whose range
+        from shut to open is another angle (`SceneObject.in_joint_units`)."""
+        return KeypointTrajectory(self.category, self.q_grid * factor, self.names, self.p_WK,
+                                  self.q_current * factor)
 
     def shifted(self, offset_W: np.ndarray) -> KeypointTrajectory:
         """All keypoints translated by `offset_W` (m, (3,)): a deliberately wrong estimate."""

@@ -13,6 +13,7 @@ from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.systems.model_files import obj_with_normals
 from nfr_drake.systems.pipeline import canonical_part, model_file_perception_simulator, run_scenario
 from nfr_drake.systems.scenario import Scenario
+from nfr_drake.world.keypoints import KeypointTrajectory
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +43,24 @@ def test_the_frame_of_a_model_file_faces_out_of_its_front_at_its_footprints_cent
     assert abs(X_WO.translation()[2]) < 1e-3 and carcass[:, 2].min() > 0.0
     handle_O = X_WO.inverse() @ obj.ground_truth.point("handle", 0.0)
     assert handle_O[0] > 0.25 and np.all(handle_O >= lo - 1e-9) and np.all(handle_O <= hi + 1e-9)
+
+
+def test_fitted_door_keypoints_are_told_in_the_models_joint_range(models):
+    """The base cabinet's door opens 1.75 rad (100 degrees) from shut to open; the fields' q is 90
+    degrees per unit. Told in the model's q, its own keypoints (re-sampled at 90 degrees per unit)
+    give its handle where the model has it at every q; a drawer's are left as they are."""
+    door = scenario_of(models["base_cabinet_door_on_floor"]).model_file_object()
+    assert door.joint_range == pytest.approx((0.0, 1.75))
+    truth = door.ground_truth
+    q_field = np.linspace(0.0, 1.0, 41)
+    as_fitted = KeypointTrajectory(truth.category, q_field, truth.names,
+                                   truth.at(q_field * (np.pi / 2) / 1.75), 0.0)
+    told = door.in_joint_units(as_fitted)
+    for q in (0.0, 0.3, 0.6, 0.85):
+        np.testing.assert_allclose(told.point("handle", q), truth.point("handle", q), atol=2e-3)
+    assert not np.allclose(as_fitted.point("handle", 0.6), truth.point("handle", 0.6), atol=0.02)
+    drawer = scenario_of(models["worktop_drawer"]).model_file_object()
+    assert drawer.in_joint_units(drawer.ground_truth) is drawer.ground_truth
 
 
 def test_a_model_without_a_carcass_has_no_frame(models):
