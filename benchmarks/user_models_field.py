@@ -1,7 +1,7 @@
 """The neural field on users' own model files: `nfr-drake demo --object FILE` on realistic furniture.
 
     python benchmarks/user_models_field.py [--only NAME ...] [--models closet-or-drawer furniture]
-        [--random N --seed S]
+        [--random N --seed S] [--image-size 128]
 
 Writes the models of tests/fixtures/user_models.py (SDFormat, URDF, .obj meshes) into a temporary
 folder and, for each one that `plan --object` opens with its true keypoints (sliding doors left
@@ -59,10 +59,12 @@ def placement(args: tuple[str, ...]) -> dict:
     return fields
 
 
-def run(model, field: str) -> list[str]:
-    """One row: the pipeline on `model` with the field "closet-or-drawer" or "furniture"."""
+def run(model, field: str, image_size: int) -> list[str]:
+    """One row: the pipeline on `model` with the field "closet-or-drawer" or "furniture", its
+    photos `image_size` px square."""
     scenario = Scenario(object_file=str(model.path), joint=model.joint, handle_body=model.handle_body,
-                        model="models/furniture", min_confidence=0.0, **placement(model.args))
+                        model="models/furniture", min_confidence=0.0, image_size=image_size,
+                        **placement(model.args))
     category = scenario.model_file_object().category
     scenario.q_target = OPEN_TARGET[category]
     if field == "closet-or-drawer":
@@ -93,22 +95,23 @@ def run(model, field: str) -> list[str]:
 
 
 def main(only: tuple[str, ...] = (), models: tuple[str, ...] = ("closet-or-drawer", "furniture"),
-         threads: int = 1, random: int = 0, seed: int = 0) -> None:
+         threads: int = 1, random: int = 0, seed: int = 0, image_size: int = Scenario.image_size) -> None:
     """Print the table (markdown) with the date and machine. `random`: that many random models
     (`random_models` of seed `seed`: doors, drawers and sliding doors in turn, the sliding doors
-    left out) instead of the fixed ones."""
+    left out) instead of the fixed ones; `image_size`: the photos' side, px."""
     set_torch_threads(threads)
     with tempfile.TemporaryDirectory() as folder:
         written = random_models(Path(folder), random, seed) if random else write_models(Path(folder))
         chosen = [m for m in written if m.expect == OPENS and "sliding" not in m.name
                   and (not only or m.name in only)]
-        print(f"{datetime.date.today()}, {platform.node()}, {os.cpu_count()} cores, torch threads {threads}")
+        print(f"{datetime.date.today()}, {platform.node()}, {os.cpu_count()} cores, torch threads {threads}, "
+              f"photos {image_size} px")
         print("| model | joint | field | fitted as | handle error (cm) | hinge line off (cm) "
               "| P(handle within 2 cm) | calibrated threshold | planned on the fit | fit (s) | wall (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|---|")
         for model in chosen:
             for field in models:
-                print("| " + " | ".join(run(model, field)) + " |", flush=True)
+                print("| " + " | ".join(run(model, field, image_size)) + " |", flush=True)
 
 
 if __name__ == "__main__":
