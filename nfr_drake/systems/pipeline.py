@@ -295,6 +295,14 @@ def perception_room(scenario: Scenario, obj: ArticulatedObject, X_WCs: list[Rigi
     return sample_room(rng, obj, p_OC, RoomDistribution(style="heldout"))
 
 
+def _pose_error(X_WO: RigidTransform, X_WO_estimated: RigidTransform) -> tuple[float, float]:
+    """How far an estimated object pose is from the true one: position on the floor (cm) and yaw
+    (degrees)."""
+    error = X_WO.inverse() @ X_WO_estimated
+    return (100.0 * float(np.linalg.norm(error.translation()[:2])),
+            abs(math.degrees(RollPitchYaw(error.rotation()).yaw_angle())))
+
+
 def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
     return float(100.0 * np.sqrt(np.mean(np.sum((a - b) ** 2, axis=-1))))
 
@@ -342,12 +350,8 @@ def run_scenario(scenario: Scenario) -> PipelineOutcome:
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
                                truth=truth, task=None, refused=f"nothing planned: {err}",
                                pose_error=(math.inf, math.inf))
-    pose_error = None
     predicted, confidence = perceived.trajectory, perceived.confidence
-    if scenario.object_pose == "estimated":
-        error = scenario.X_WO.inverse() @ perceived.X_WO
-        pose_error = (100.0 * float(np.linalg.norm(error.translation()[:2])),
-                      abs(math.degrees(RollPitchYaw(error.rotation()).yaw_angle())))
+    pose_error = _pose_error(scenario.X_WO, perceived.X_WO) if scenario.object_pose == "estimated" else None
     names = [n for n in truth.names if n in predicted.names]
     now = lambda kt: np.stack([kt.point(n, kt.q_current) for n in names])  # noqa: E731
     grid = truth.q_grid
@@ -389,6 +393,7 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
                        f"{scenario.object_file}: joint {scenario.joint!r}",
                        "door" if scene_object.category == "closet" else "drawer")
     scenario = replace(scenario, model=str(model))
+    X_WO = scene_object.category_frame()[0]
     simulator, perception, drawn = model_file_perception_simulator(scenario, scene_object)
     notes = (*scene_object.notes, *drawn)
     try:
@@ -398,6 +403,7 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
                                truth=truth, task=None, refused=f"nothing planned: {err}", notes=notes)
     predicted, confidence = scene_object.in_joint_units(perceived.trajectory), perceived.confidence
+    pose_error = _pose_error(X_WO, perceived.X_WO) if scenario.object_pose == "estimated" else None
     handle_error = 100.0 * float(np.linalg.norm(predicted.point("handle", predicted.q_current)
                                                 - truth.point("handle", truth.q_current)))
     refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
@@ -407,4 +413,4 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start, keypoint_rmse_cm=handle_error,
         handle_path_rmse_cm=math.nan, perception_seconds=perceived.seconds, predicted=predicted, truth=truth,
-        task=task, confidence=confidence, refused=refused or "", notes=notes)
+        task=task, confidence=confidence, refused=refused or "", pose_error=pose_error, notes=notes)

@@ -143,6 +143,18 @@ def test_a_drawer_of_a_model_file_is_opened_with_the_furniture_fields_keypoints(
     assert handle_cm < 5.0 and status == 0 and "SUCCESS" in out, out
 
 
+def test_a_model_files_pose_can_be_estimated_from_its_photos(models):
+    """With `object_pose` "estimated" the cameras stand around a coarse look at the model and its
+    frame O is estimated from the photos' masks; the outcome reports how far that lies from the
+    frame its carcass gives (a few cm and degrees on the plain base cabinet)."""
+    scenario = scenario_of(models["base_cabinet_drawn_open"], model="models/closet", object_pose="estimated",
+                           min_confidence=1.0, object_xyz=[0.3, -0.2, 0.0], object_yaw_deg=25.0)
+    outcome = run_scenario(scenario)
+    assert outcome.task is None and outcome.refused  # refused at P >= 1: nothing planned
+    assert outcome.pose_error is not None
+    assert outcome.pose_error[0] < 5.0 and outcome.pose_error[1] < 5.0, outcome.pose_error
+
+
 def test_a_door_of_a_model_file_is_perceived_and_opened_with_the_fitted_keypoints(models, tmp_path, capsys):
     """`demo --object --model models/closet`: photographed alone, fitted with the closet model,
     planned on its fitted keypoints and simulated on the model; the handle is found within a few
