@@ -69,7 +69,8 @@ def plan_command(
         keypoints: a fit result JSON (`nfr-drake infer`) to plan with instead of the object's own
             keypoints: in W when `infer --estimate-pose` estimated the object's pose (photos
             posed by `nfr-drake poses --world floor`), else in O and placed by --object-xyz and
-            --object-yaw-deg. It plans from the fitted q; the object (--object or --category) is
+            --object-yaw-deg. It plans from the fitted q (a door's, 90 degrees per unit, told in
+            the joint's range: `SceneObject.in_joint_units`); the object (--object or --category) is
             the true one the motion is simulated on, shown in the replay beside the fitted
             keypoints with its own ("keypoints_true"). Without --object or --category (photos of
             a real object, no model of it) the motion is planned and replayed, not simulated.
