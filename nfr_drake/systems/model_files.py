@@ -18,7 +18,7 @@ what to change (`SceneObject.from_model_file` composes these).
   `--object-xyz` / `--object-rpy-deg` that fix it.
 - Meshes (`mesh_problems`): Drake collides with a mesh's convex hull; a concave one is reported and
   one whose hull covers the handle refused. Drake's VTK renderer draws an .obj only with vertex
-  normals: `obj_with_normals` writes a copy with its faces' normals for the cameras.
+  normals and PNG textures: `drawable_obj` writes a copy it draws for the cameras.
 """
 
 from __future__ import annotations
@@ -28,8 +28,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
-from pydrake.geometry import Mesh, ReadObjToTriangleSurfaceMesh, Rgba, Role, SceneGraph, SceneGraphInspector
+from pydrake.geometry import (
+    GeometryInstance,
+    IllustrationProperties,
+    Mesh,
+    PerceptionProperties,
+    ReadObjToTriangleSurfaceMesh,
+    Rgba,
+    Role,
+    SceneGraph,
+    SceneGraphInspector,
+)
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
@@ -437,21 +448,57 @@ def mesh_problems(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_c
     return notes
 
 
-def obj_with_normals(path: Path, folder: Path) -> Path | None:
-    """A copy in `folder` of the Wavefront .obj at `path` with each face's normal (flat shading: the
-    normal of its first triangle, 'vn' lines first, faces as v/vt/vn), for Drake's VTK renderer, which
-    refuses an .obj without normals; None when the file has normals already. Its material library
-    is referred to where it lies. The copy's name holds a hash of the path (one copy per mesh)."""
-    lines = Path(path).read_text().splitlines()
-    if any(line.startswith("vn ") for line in lines):
-        return None
+def _tagged(path: Path, folder: Path, suffix: str) -> Path:
+    """A file in `folder` named after `path` and a hash of its absolute path (one copy per file)."""
+    tag = hashlib.sha1(str(Path(path).resolve()).encode()).hexdigest()[:10]
+    return Path(folder) / f"{Path(path).stem}_{tag}{suffix}"
+
+
+def _png_materials(mtl: Path, folder: Path) -> tuple[Path, list[str]]:
+    """The material library `mtl` with every texture map in PNG (Drake's VTK renderer draws only
+    PNG maps; a JPEG one leaves the face white and misdrawn), and the names of the maps that were
+    not: where one was not, a copy of the library in `folder` naming PNG copies of all its maps,
+    beside it in `folder` (the renderer reads a map beside its library); else (`mtl`, [])."""
+    lines = mtl.read_text().splitlines()
+    maps = [(mtl.parent / line.split()[-1]).resolve() for line in lines
+            if line.split()[:1] and line.split()[0].startswith("map_") and len(line.split()) > 1]
+    copied = [m.name for m in maps if m.suffix.lower() != ".png" and m.is_file()]
+    if not copied:
+        return mtl, []
+    out = []
+    for line in lines:
+        tokens = line.split()
+        if tokens and tokens[0].startswith("map_") and len(tokens) > 1:
+            texture = (mtl.parent / tokens[-1]).resolve()
+            image = cv2.imread(str(texture), cv2.IMREAD_UNCHANGED)
+            if image is not None:
+                png = _tagged(texture, folder, ".png")
+                cv2.imwrite(str(png), image)
+                line = " ".join([*tokens[:-1], png.name])
+        out.append(line)
+    copy = _tagged(mtl, folder, "_png.mtl")
+    copy.write_text("\n".join(out) + "\n")
+    return copy, copied
+
+
+def drawable_obj(path: Path, folder: Path) -> tuple[Path, list[str]] | None:
+    """A copy in `folder` of the Wavefront .obj at `path` that Drake's VTK renderer draws, and what
+    it changed; None when the file needs none. The renderer refuses an .obj without vertex normals:
+    the copy gives each face its normal (flat shading: the normal of its first triangle, 'vn' lines
+    first, faces as v/vt/vn). It draws only PNG texture maps: the copy's material library names PNG
+    copies of the others (`_png_materials`). Its material library is referred to where it lies."""
+    path = Path(path)
+    lines = path.read_text().splitlines()
+    normals_missing = not any(line.startswith("vn ") for line in lines)
     vertices = [np.array(line.split()[1:4], float) for line in lines if line.startswith("v ")]
-    out, normals = [], []
+    out, normals, changed = [], [], []
     for line in lines:
         tokens = line.split()
         if tokens[:1] == ["mtllib"]:
-            out.append(f"mtllib {(Path(path).parent / ' '.join(tokens[1:])).resolve()}")
-        elif tokens[:1] == ["f"]:
+            mtl, copied = _png_materials((path.parent / " ".join(tokens[1:])).resolve(), folder)
+            changed += [f"a texture that is not a PNG ({name})" for name in copied]
+            out.append(f"mtllib {mtl.name if copied else mtl}")  # a copy lies beside the obj's copy
+        elif tokens[:1] == ["f"] and normals_missing:
             corners = [t.split("/") for t in tokens[1:]]
             index = [int(c[0]) - 1 if int(c[0]) > 0 else len(vertices) + int(c[0]) for c in corners]
             p0, p1, p2 = (vertices[i] for i in index[:3])
@@ -462,35 +509,45 @@ def obj_with_normals(path: Path, folder: Path) -> Path | None:
             out.append("f " + " ".join(f"{c[0]}/{t}/{k}" for c, t in zip(corners, uv, strict=True)))
         else:
             out.append(line)
-    tag = hashlib.sha1(str(Path(path).resolve()).encode()).hexdigest()[:10]
-    copy = Path(folder) / f"{Path(path).stem}_{tag}_normals.obj"
+    if normals_missing:
+        changed.insert(0, "no vertex normals")
+    if not changed:
+        return None
+    copy = _tagged(path, folder, "_drawable.obj")
     copy.write_text("\n".join([f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in normals] + out) + "\n")
-    return copy
+    return copy, changed
 
 
-def meshes_with_normals(plant: MultibodyPlant, scene_graph: SceneGraph, model: ModelInstanceIndex,
-                        folder: Path) -> list[str]:
-    """For the cameras, each .obj mesh of `model` that the renderer sees and that has no normals
-    swapped for a copy with them (`obj_with_normals`, in `folder`): the copy is registered as a
-    visual geometry of the same body, at the same pose and scale, in the same diffuse colour, and
-    the original loses its perception role (it keeps the others). Call before `Finalize`. One
-    note per mesh swapped."""
+def drawable_meshes(plant: MultibodyPlant, scene_graph: SceneGraph, model: ModelInstanceIndex,
+                    folder: Path) -> list[str]:
+    """For the cameras, each .obj mesh of `model` that the renderer sees and cannot draw as it is
+    swapped for a copy it can (`drawable_obj`, in `folder`): the copy is registered as a visual
+    geometry of the same body, at the same pose and scale, in the same diffuse colour, and the
+    original loses its perception role (it keeps the others). Call before `Finalize`. One note per
+    mesh swapped."""
     inspector = scene_graph.model_inspector()
     swaps = []
     for index in plant.GetBodyIndices(model):
         for g in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(index), Role.kPerception):
             shape = inspector.GetShape(g)
             if isinstance(shape, Mesh) and shape.source().is_path() and shape.extension() == ".obj":
-                copy = obj_with_normals(Path(shape.source().path()), folder)
-                if copy is not None:
-                    swaps.append((plant.get_body(index), g, shape, copy))
+                drawable = drawable_obj(Path(shape.source().path()), folder)
+                if drawable is not None:
+                    swaps.append((plant.get_body(index), g, shape, *drawable))
     notes = []
-    for body, g, shape, copy in swaps:
-        colour = inspector.GetPerceptionProperties(g).GetPropertyOrDefault("phong", "diffuse",
-                                                                           Rgba(0.9, 0.9, 0.9, 1.0))
-        plant.RegisterVisualGeometry(body, inspector.GetPoseInFrame(g), Mesh(str(copy), shape.scale3()),
-                                     f"{inspector.GetName(g).split('::')[-1]}_with_normals", colour.rgba)
+    for body, g, shape, copy, changed in swaps:
+        name, mesh = f"{inspector.GetName(g).split('::')[-1]}_drawable", Mesh(str(copy), shape.scale3())
+        if any(line.startswith("mtllib") for line in copy.read_text().splitlines()):  # its own materials
+            instance = GeometryInstance(inspector.GetPoseInFrame(g), mesh, name)
+            instance.set_illustration_properties(IllustrationProperties())
+            instance.set_perception_properties(PerceptionProperties())
+            plant.RegisterVisualGeometry(body, instance)
+        else:
+            colour = inspector.GetPerceptionProperties(g).GetPropertyOrDefault("phong", "diffuse",
+                                                                               Rgba(0.9, 0.9, 0.9, 1.0))
+            plant.RegisterVisualGeometry(body, inspector.GetPoseInFrame(g), mesh, name, colour.rgba)
         scene_graph.RemoveRole(plant.get_source_id(), g, Role.kPerception)
-        notes.append(f"the visual mesh {Path(shape.source().path()).name} of body {body.name()!r} has no "
-                     "normals, which Drake's renderer needs: the cameras see a copy with its faces' normals")
+        notes.append(f"the visual mesh {Path(shape.source().path()).name} of body {body.name()!r} has "
+                     f"{' and '.join(changed)}, which Drake's renderer cannot draw: the cameras see a "
+                     "copy that it can")
     return notes

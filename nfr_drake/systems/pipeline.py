@@ -36,7 +36,7 @@ from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
 from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.planning.planner import grasp_planner
-from nfr_drake.systems.model_files import body_box, meshes_with_normals
+from nfr_drake.systems.model_files import body_box, drawable_meshes
 from nfr_drake.systems.perception import AddNfrPerception, NfrPerceptionSystem
 from nfr_drake.systems.place_task import PlaceSimulationConfig, PlaceTaskOutcome, run_place_task
 from nfr_drake.systems.scenario import Scenario
@@ -249,12 +249,12 @@ def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObjec
     its other joints shut, the cameras framing its shut bounds (framing "bounds", as furniture's)
     around its frame O (`SceneObject.category_frame`, or a coarse look at it when the pose is
     estimated); the fit is given that O with `Scenario.object_pose` "given". Also the notes of
-    `meshes_with_normals` (visual meshes the cameras see a copy of)."""
+    `drawable_meshes` (visual meshes the cameras see a copy of)."""
     X_WO, bounds_O = scene_object.category_frame()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     model = scene_object.add_to(plant)
-    notes = meshes_with_normals(plant, scene_graph, model, Path(tempfile.gettempdir()) / "nfr_drake_meshes")
+    notes = drawable_meshes(plant, scene_graph, model, Path(tempfile.gettempdir()) / "nfr_drake_meshes")
     plant.Finalize()
     camera = _perception_camera(scenario)
     X_WCs = _camera_poses(scenario, "bounds", scenario.coarse_look(X_WO), (bounds_O[0] + bounds_O[1]) / 2,

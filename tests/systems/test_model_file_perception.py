@@ -1,6 +1,7 @@
 """The neural field on a user's own model file (`demo --object`, `Scenario.object_file`): the frame O
 its carcass gives, its fronts' canonical order, the scenario's checks and the whole pipeline."""
 
+import cv2
 import numpy as np
 import pytest
 from fixtures.user_models import write_models
@@ -10,7 +11,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.cli import main
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.errors import ConfigError, NfrDrakeError
-from nfr_drake.systems.model_files import obj_with_normals
+from nfr_drake.systems.model_files import drawable_obj
 from nfr_drake.systems.pipeline import canonical_part, model_file_perception_simulator, run_scenario
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -120,16 +121,86 @@ def test_a_visual_mesh_without_normals_is_drawn_from_a_copy_with_them(models, tm
     assert grey.sum() >= 20
 
 
+def _textured_box_obj(folder, size, texture_name: str) -> str:
+    """A box (full `size`, m) as an .obj with normals and texture coordinates, its material's
+    diffuse map `texture_name`, written into `folder`; its file name."""
+    half = np.asarray(size) / 2
+    corners = [(x, y, z) for x in (-half[0], half[0]) for y in (-half[1], half[1])
+               for z in (-half[2], half[2])]
+    faces = [((0, 1, 3, 2), (-1, 0, 0)), ((4, 6, 7, 5), (1, 0, 0)), ((0, 4, 5, 1), (0, -1, 0)),
+             ((2, 3, 7, 6), (0, 1, 0)), ((0, 2, 6, 4), (0, 0, -1)), ((1, 5, 7, 3), (0, 0, 1))]
+    lines = ["mtllib box.mtl", "usemtl skin", *(f"v {x} {y} {z}" for x, y, z in corners),
+             "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", *(f"vn {n[0]} {n[1]} {n[2]}" for _, n in faces)]
+    lines += ["f " + " ".join(f"{v + 1}/{k + 1}/{i + 1}" for k, v in enumerate(f))
+              for i, (f, _) in enumerate(faces)]
+    (folder / "box.obj").write_text("\n".join(lines) + "\n")
+    (folder / "box.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {texture_name}\n")
+    return "box.obj"
+
+
+def test_a_door_with_a_jpeg_texture_is_photographed_with_it(models, tmp_path):
+    """The base cabinet's door drawn as a mesh with a JPEG texture, half green, half blue: the
+    photos show both colours (not the white, misdrawn face the renderer makes of a JPEG map)."""
+    texture = np.zeros((16, 16, 3), np.uint8)
+    texture[:, :8], texture[:, 8:] = (40, 200, 40), (200, 120, 20)  # BGR: green, then blue
+    cv2.imwrite(str(tmp_path / "paint.jpg"), texture)
+    mesh = _textured_box_obj(tmp_path, (0.018, 0.596, 0.721), "paint.jpg")
+    urdf = models["base_cabinet_door_on_floor"].path.read_text().replace(
+        '<visual><origin xyz="0.009 0.3 0.3595" rpy="0 0 0"/><geometry><box size="0.018 0.596 0.721"/>',
+        f'<visual><origin xyz="0.009 0.3 0.3595" rpy="0 0 0"/><geometry><mesh filename="{mesh}"/>', 1)
+    assert mesh in urdf
+    (tmp_path / "cabinet.urdf").write_text(urdf)
+    scenario = Scenario(object_file=str(tmp_path / "cabinet.urdf"), joint="hinge", handle_body="handle",
+                        model="models/closet", views=4)
+    simulator, _, notes = model_file_perception_simulator(scenario, scenario.model_file_object())
+    assert len(notes) == 1 and "paint.jpg" in notes[0]
+    green = blue = 0
+    for i in range(4):
+        sensor = simulator.get_system().GetSubsystemByName(f"nfr_camera_{i}")
+        image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(simulator.get_context()))
+        rgb = image.data[..., :3].astype(int)
+        green += int(((rgb[..., 1] > rgb[..., 0] + 40) & (rgb[..., 1] > rgb[..., 2] + 40)).sum())
+        blue += int(((rgb[..., 2] > rgb[..., 0] + 40) & (rgb[..., 2] > rgb[..., 1] + 20)).sum())
+    assert green > 200 and blue > 200, (green, blue)
+
+
 def test_an_obj_without_normals_gets_its_faces_normals(tmp_path):
     """A unit square in z = 0, two triangles wound counter-clockwise seen from +z, with texture
     coordinates on one face: the copy's faces point at one normal each, +z."""
     path = tmp_path / "square.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\nf 1 3 4\n")
-    copy = obj_with_normals(path, tmp_path)
+    copy, changed = drawable_obj(path, tmp_path)
+    assert changed == ["no vertex normals"]
     lines = copy.read_text().splitlines()
     assert [line for line in lines if line.startswith("vn")] == ["vn 0.000000 0.000000 1.000000"] * 2
     assert [line for line in lines if line.startswith("f")] == ["f 1/1/1 2/1/1 3/1/1", "f 1//2 3//2 4//2"]
-    assert obj_with_normals(copy, tmp_path) is None
+    assert drawable_obj(copy, tmp_path) is None
+
+
+def test_an_obj_with_a_jpeg_texture_is_drawn_from_png_copies(tmp_path):
+    """A JPEG diffuse map, which Drake's VTK renderer does not draw: the copy's material library
+    names a PNG of the same picture, and the PNG map too is copied beside it."""
+    folder = tmp_path / "model"
+    folder.mkdir()
+    picture = np.zeros((8, 8, 3), np.uint8)
+    picture[:, 4:] = (20, 120, 220)
+    cv2.imwrite(str(folder / "wood.jpg"), picture)
+    cv2.imwrite(str(folder / "steel.png"), picture)
+    (folder / "cab.mtl").write_text("newmtl wood\nKd 1 1 1\nmap_Kd wood.jpg\n"
+                                    "newmtl steel\nmap_Kd steel.png\n")
+    obj = folder / "cab.obj"
+    obj.write_text("mtllib cab.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nvt 0 0\n"
+                   "usemtl wood\nf 1/1/1 2/1/1 3/1/1\n")
+    copy, changed = drawable_obj(obj, tmp_path)
+    assert changed == ["a texture that is not a PNG (wood.jpg)"]
+    (library,) = [line.split()[1] for line in copy.read_text().splitlines() if line.startswith("mtllib")]
+    mtl = copy.parent / library
+    maps = [mtl.parent / line.split()[-1] for line in mtl.read_text().splitlines()
+            if line.startswith("map_Kd")]
+    assert all(m.suffix == ".png" and m.parent == mtl.parent for m in maps)
+    np.testing.assert_array_equal(cv2.imread(str(maps[0])), cv2.imread(str(folder / "wood.jpg")))
+    np.testing.assert_array_equal(cv2.imread(str(maps[1])), cv2.imread(str(folder / "steel.png")))
+    assert drawable_obj(folder / "cab.obj", tmp_path) is not None  # the original still names the JPEG
 
 
 def test_a_drawer_of_a_model_file_is_opened_with_the_furniture_fields_keypoints(models, tmp_path, capsys):
