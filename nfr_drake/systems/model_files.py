@@ -518,23 +518,57 @@ def drawable_obj(path: Path, folder: Path) -> tuple[Path, list[str]] | None:
     return copy, changed
 
 
+def stl_as_obj(path: Path, folder: Path) -> Path:
+    """A Wavefront .obj copy in `folder` of the STL mesh (binary or ASCII) at `path`, with each
+    triangle's normal from its winding: Drake's VTK renderer ignores an STL visual (a model exported
+    for ROS would be photographed without it)."""
+    data = Path(path).read_bytes()
+    count = int(np.frombuffer(data[80:84], "<u4")[0]) if len(data) >= 84 else -1
+    if count >= 0 and len(data) == 84 + 50 * count:  # binary: 80-byte header, count, 50 bytes each
+        records = np.frombuffer(data[84:], np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+        triangles = records["v"].astype(float)
+    else:
+        vertices = [line.split()[1:4] for line in data.decode(errors="replace").splitlines()
+                    if line.strip().startswith("vertex")]
+        triangles = np.array(vertices, float).reshape(-1, 3, 3)
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    lines = [f"v {x:.6g} {y:.6g} {z:.6g}" for x, y, z in triangles.reshape(-1, 3)]
+    lines += [f"vn {x:.6f} {y:.6f} {z:.6f}" for x, y, z in normals]
+    lines += [f"f {3 * t + 1}//{t + 1} {3 * t + 2}//{t + 1} {3 * t + 3}//{t + 1}"
+              for t in range(len(triangles))]
+    copy = _tagged(path, folder, "_stl.obj")
+    copy.write_text("\n".join(lines) + "\n")
+    return copy
+
+
 def drawable_meshes(plant: MultibodyPlant, scene_graph: SceneGraph, model: ModelInstanceIndex,
                     folder: Path) -> list[str]:
-    """For the cameras, each .obj mesh of `model` that the renderer sees and cannot draw as it is
-    swapped for a copy it can (`drawable_obj`, in `folder`): the copy is registered as a visual
-    geometry of the same body, at the same pose and scale, in the same diffuse colour, and the
-    original loses its perception role (it keeps the others). Call before `Finalize`. One note per
-    mesh swapped."""
+    """For the cameras, each mesh of `model` that the renderer sees and cannot draw as it is
+    swapped for a copy it can, in `folder` (an .obj without normals or with textures that are not
+    PNG: `drawable_obj`; an STL, which the renderer ignores: `stl_as_obj`): the copy is registered
+    as a visual geometry of the same body, at the same pose and scale, in the same diffuse colour,
+    and the original loses its perception role (it keeps the others). Call before `Finalize`. One
+    note per mesh swapped, and one per mesh the renderer ignores that is not swapped (formats
+    other than .obj, .gltf, .stl: the cameras do not see it)."""
     inspector = scene_graph.model_inspector()
-    swaps = []
+    swaps, notes = [], []
     for index in plant.GetBodyIndices(model):
         for g in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(index), Role.kPerception):
             shape = inspector.GetShape(g)
-            if isinstance(shape, Mesh) and shape.source().is_path() and shape.extension() == ".obj":
-                drawable = drawable_obj(Path(shape.source().path()), folder)
+            if not (isinstance(shape, Mesh) and shape.source().is_path()):
+                continue
+            path, body = Path(shape.source().path()), plant.get_body(index)
+            if shape.extension() == ".obj":
+                drawable = drawable_obj(path, folder)
                 if drawable is not None:
-                    swaps.append((plant.get_body(index), g, shape, *drawable))
-    notes = []
+                    swaps.append((body, g, shape, *drawable))
+            elif shape.extension() == ".stl":
+                swaps.append((body, g, shape, stl_as_obj(path, folder), ["an STL file"]))
+            elif shape.extension() != ".gltf":
+                notes.append(f"the visual mesh {path.name} of body {body.name()!r} is a {shape.extension()} "
+                             "file, which Drake's renderer ignores: the cameras do not see it (convert it to "
+                             ".obj or .gltf)")
     for body, g, shape, copy, changed in swaps:
         name, mesh = f"{inspector.GetName(g).split('::')[-1]}_drawable", Mesh(str(copy), shape.scale3())
         if any(line.startswith("mtllib") for line in copy.read_text().splitlines()):  # its own materials
@@ -547,7 +581,7 @@ def drawable_meshes(plant: MultibodyPlant, scene_graph: SceneGraph, model: Model
                                                                                Rgba(0.9, 0.9, 0.9, 1.0))
             plant.RegisterVisualGeometry(body, inspector.GetPoseInFrame(g), mesh, name, colour.rgba)
         scene_graph.RemoveRole(plant.get_source_id(), g, Role.kPerception)
-        notes.append(f"the visual mesh {Path(shape.source().path()).name} of body {body.name()!r} has "
-                     f"{' and '.join(changed)}, which Drake's renderer cannot draw: the cameras see a "
-                     "copy that it can")
+        notes.append(f"the visual mesh {Path(shape.source().path()).name} of body {body.name()!r}: "
+                     f"{'; '.join(changed)}; Drake's renderer cannot draw that, so the cameras see a copy "
+                     "that it can")
     return notes

@@ -11,7 +11,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nfr_drake.cli import main
 from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.errors import ConfigError, NfrDrakeError
-from nfr_drake.systems.model_files import drawable_obj
+from nfr_drake.systems.model_files import drawable_obj, stl_as_obj
 from nfr_drake.systems.pipeline import canonical_part, model_file_perception_simulator, run_scenario
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -162,6 +162,56 @@ def test_a_door_with_a_jpeg_texture_is_photographed_with_it(models, tmp_path):
         green += int(((rgb[..., 1] > rgb[..., 0] + 40) & (rgb[..., 1] > rgb[..., 2] + 40)).sum())
         blue += int(((rgb[..., 2] > rgb[..., 0] + 40) & (rgb[..., 2] > rgb[..., 1] + 20)).sum())
     assert green > 200 and blue > 200, (green, blue)
+
+
+def _stl_box(size) -> bytes:
+    """A box (full `size`, m) as a binary STL, its triangles wound outward."""
+    half = np.asarray(size) / 2
+    corners = np.array([(x, y, z) for x in (-half[0], half[0]) for y in (-half[1], half[1])
+                        for z in (-half[2], half[2])])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    triangles = np.array([corners[list(t)] for q in quads for t in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))])
+    records = np.zeros(len(triangles), np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+    records["v"] = triangles
+    return b"\0" * 80 + np.uint32(len(triangles)).tobytes() + records.tobytes()
+
+
+def test_a_door_drawn_as_an_stl_is_photographed(models, tmp_path):
+    """Drake's renderer ignores an STL visual (a model exported for ROS would be photographed
+    without its door, the carcass open): the cameras see an .obj copy, so the door (grey, the
+    carcass orange) fills a good part of the photos."""
+    (tmp_path / "door.stl").write_bytes(_stl_box((0.018, 0.596, 0.721)))
+    urdf = models["base_cabinet_door_on_floor"].path.read_text().replace(
+        '<visual><origin xyz="0.009 0.3 0.3595" rpy="0 0 0"/><geometry><box size="0.018 0.596 0.721"/>',
+        '<visual><origin xyz="0.009 0.3 0.3595" rpy="0 0 0"/><geometry><mesh filename="door.stl"/>', 1)
+    assert "door.stl" in urdf
+    (tmp_path / "cabinet.urdf").write_text(urdf)
+    scenario = Scenario(object_file=str(tmp_path / "cabinet.urdf"), joint="hinge", handle_body="handle",
+                        model="models/closet", views=4)
+    simulator, _, notes = model_file_perception_simulator(scenario, scenario.model_file_object())
+    assert len(notes) == 1 and "door.stl" in notes[0] and "STL" in notes[0]
+    grey = 0
+    for i in range(4):
+        sensor = simulator.get_system().GetSubsystemByName(f"nfr_camera_{i}")
+        rgb = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(simulator.get_context()))
+        rgb = rgb.data[..., :3].astype(int)
+        background = np.abs(rgb - 255 * np.array(DEFAULT_BACKGROUND_RGB)).max(-1) <= 3
+        grey += int(((np.ptp(rgb, axis=-1) < 12) & (rgb.mean(-1) > 60) & ~background).sum())
+    assert grey > 2000, grey
+
+
+def test_an_stl_becomes_an_obj_with_its_triangles_normals(tmp_path):
+    """Binary and ASCII STL: the .obj copy has the triangles' vertices and each one's normal from
+    its winding (+z for a triangle counter-clockwise seen from above)."""
+    ascii_stl = ("solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                 "endloop\nendfacet\nendsolid t\n")
+    (tmp_path / "a.stl").write_text(ascii_stl)
+    (tmp_path / "b.stl").write_bytes(_stl_box((1.0, 1.0, 1.0)))
+    lines = stl_as_obj(tmp_path / "a.stl", tmp_path).read_text().splitlines()
+    assert lines == ["v 0 0 0", "v 1 0 0", "v 0 1 0", "vn 0.000000 0.000000 1.000000", "f 1//1 2//1 3//1"]
+    box = stl_as_obj(tmp_path / "b.stl", tmp_path).read_text().splitlines()
+    assert sum(line.startswith("v ") for line in box) == 36
+    assert sum(line.startswith("f ") for line in box) == 12
 
 
 def test_an_obj_without_normals_gets_its_faces_normals(tmp_path):
