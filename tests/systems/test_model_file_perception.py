@@ -121,18 +121,27 @@ def test_a_visual_mesh_without_normals_is_drawn_from_a_copy_with_them(models, tm
     assert grey.sum() >= 20
 
 
+BOX_FACES = (((0, 1, 3, 2), (-1, 0, 0)), ((4, 6, 7, 5), (1, 0, 0)), ((0, 4, 5, 1), (0, -1, 0)),
+             ((2, 3, 7, 6), (0, 1, 0)), ((0, 2, 6, 4), (0, 0, -1)), ((1, 5, 7, 3), (0, 0, 1)))
+"""A box's six faces: corner indices (counter-clockwise seen from outside) into `_box_corners`,
+and the outward normal."""
+
+
+def _box_corners(size) -> np.ndarray:
+    """The 8 corners (8, 3) of a box of full `size` (m) centred at the origin, corner 4x + 2y + z
+    at the +x, +y, +z sides."""
+    half = np.asarray(size) / 2
+    return np.array([(x, y, z) for x in (-half[0], half[0]) for y in (-half[1], half[1])
+                     for z in (-half[2], half[2])])
+
+
 def _textured_box_obj(folder, size, texture_name: str) -> str:
     """A box (full `size`, m) as an .obj with normals and texture coordinates, its material's
     diffuse map `texture_name`, written into `folder`; its file name."""
-    half = np.asarray(size) / 2
-    corners = [(x, y, z) for x in (-half[0], half[0]) for y in (-half[1], half[1])
-               for z in (-half[2], half[2])]
-    faces = [((0, 1, 3, 2), (-1, 0, 0)), ((4, 6, 7, 5), (1, 0, 0)), ((0, 4, 5, 1), (0, -1, 0)),
-             ((2, 3, 7, 6), (0, 1, 0)), ((0, 2, 6, 4), (0, 0, -1)), ((1, 5, 7, 3), (0, 0, 1))]
-    lines = ["mtllib box.mtl", "usemtl skin", *(f"v {x} {y} {z}" for x, y, z in corners),
-             "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", *(f"vn {n[0]} {n[1]} {n[2]}" for _, n in faces)]
+    lines = ["mtllib box.mtl", "usemtl skin", *(f"v {x} {y} {z}" for x, y, z in _box_corners(size)),
+             "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", *(f"vn {n[0]} {n[1]} {n[2]}" for _, n in BOX_FACES)]
     lines += ["f " + " ".join(f"{v + 1}/{k + 1}/{i + 1}" for k, v in enumerate(f))
-              for i, (f, _) in enumerate(faces)]
+              for i, (f, _) in enumerate(BOX_FACES)]
     (folder / "box.obj").write_text("\n".join(lines) + "\n")
     (folder / "box.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {texture_name}\n")
     return "box.obj"
@@ -166,11 +175,9 @@ def test_a_door_with_a_jpeg_texture_is_photographed_with_it(models, tmp_path):
 
 def _stl_box(size) -> bytes:
     """A box (full `size`, m) as a binary STL, its triangles wound outward."""
-    half = np.asarray(size) / 2
-    corners = np.array([(x, y, z) for x in (-half[0], half[0]) for y in (-half[1], half[1])
-                        for z in (-half[2], half[2])])
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    triangles = np.array([corners[list(t)] for q in quads for t in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))])
+    corners = _box_corners(size)
+    triangles = np.array([corners[list(t)] for q, _ in BOX_FACES
+                          for t in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))])
     records = np.zeros(len(triangles), np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
     records["v"] = triangles
     return b"\0" * 80 + np.uint32(len(triangles)).tobytes() + records.tobytes()
