@@ -40,9 +40,14 @@ import torch
 
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.eval.pipeline_eval import object_scenario
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_sides, sighting_order
+from nfr_drake.inference.furniture_fit import (
+    FurnitureFitConfig,
+    pair_sides,
+    read_door_log_odds,
+    sighting_order,
+)
 from nfr_drake.jsonio import write_rows_csv
-from nfr_drake.perception.front_reading import handle_offset, read_front
+from nfr_drake.perception.front_reading import SightedFront, handle_offset, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
@@ -108,7 +113,7 @@ def main() -> None:
     detector, _ = load_detector(args.model / DETECTOR_DIR)
     config = FurnitureFitConfig(offset_type_log_odds=tuple(args.offset_log_odds))
     gap = config.column_gap_m
-    typed: list[tuple[str, float, bool, float]] = []  # per matched sighting: kind, log-odds, paired, offset
+    typed: list[tuple[str, SightedFront, bool]] = []  # per matched sighting: kind, read front, paired
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
     unsighted_views: dict[str, list[int]] = {"door": [], "drawer": []}  # per unsighted front
@@ -140,9 +145,7 @@ def main() -> None:
                 read = "unread" if fronts[i] is None else ("door" if fronts[i].is_door else "drawer")
                 types[(obj.fronts[k].kind, read)] += 1
                 if fronts[i] is not None:
-                    p = float(np.clip(fronts[i].door_probability, 1e-6, 1.0 - 1e-6))
-                    typed.append((obj.fronts[k].kind, np.log(p / (1.0 - p)), side != 0,
-                                  handle_offset(fronts[i])))
+                    typed.append((obj.fronts[k].kind, fronts[i], side != 0))
         rows.append({"index": index, "part": scenario.part, "part_type": obj.fronts[scenario.part].kind,
                      "fronts": len(truth), "sightings": len(sighted), "outcome": outcome,
                      "sighted_fronts": len(set(owner) - {-1}), "owners": " ".join(map(str, owner))})
@@ -179,10 +182,10 @@ def main() -> None:
         write_rows_csv(args.csv_path, rows)
 
 
-def print_offset_types(typed: list[tuple[str, float, bool, float]], config: FurnitureFitConfig) -> None:
+def print_offset_types(typed: list[tuple[str, SightedFront, bool]], config: FurnitureFitConfig) -> None:
     """The tables of where the handle sits across its read face and of the read types (docstring)."""
     edges = config.offset_edges
-    lone = [(kind, offset) for kind, _, paired, offset in typed if not paired]
+    lone = [(kind, handle_offset(front)) for kind, front, paired in typed if not paired]
     bins = {kind: np.bincount([int(np.searchsorted(edges, o, side="right")) for k, o in lone if k == kind],
                               minlength=len(edges) + 1) for kind in ("door", "drawer")}
     names = [f"{lo:g}-{hi:g}" for lo, hi in zip((0.0, *edges), (*edges, np.inf), strict=True)]
@@ -198,10 +201,9 @@ def print_offset_types(typed: list[tuple[str, float, bool, float]], config: Furn
                        ("with " + " / ".join(f"{o:+.2f}" for o in config.offset_type_log_odds),
                         config.offset_type_log_odds)):
         wrong = Counter()
-        for kind, log_odds, paired, offset in typed:
-            pair = config.pair_type_log_odds[0] if paired else config.pair_type_log_odds[1]
-            extra = 0.0 if paired else odds[int(np.searchsorted(edges, offset, side="right"))]
-            wrong[kind] += int((log_odds + pair + extra > 0.0) != (kind == "door"))
+        for kind, front, paired in typed:
+            door = read_door_log_odds(front, paired, config.pair_type_log_odds, (edges, odds)) > 0.0
+            wrong[kind] += int(door != (kind == "door"))
         print(f"read types wrong ({name}): doors {wrong['door']}, drawers {wrong['drawer']} of {len(typed)}")
 
 

@@ -269,17 +269,30 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                         handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
+def read_door_log_odds(front: SightedFront, paired: bool, pair_log_odds: tuple[float, float],
+                       offset_log_odds: tuple[tuple[float, ...], tuple[float, ...]]) -> float:
+    """The log-odds that a read front is a door, by what the detector read and where its handle is:
+    the read door probability's log-odds, plus pair_log_odds[0] for one of a pair (`paired`) or
+    pair_log_odds[1] for one not, plus for one not the value of offset_log_odds[1] in the bin of
+    offset_log_odds[0] (edges) its `handle_offset` falls in (a pair's two faces can be read as one
+    wide face, whose middle lies between their handles)."""
+    p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
+    log_odds = np.log(p / (1.0 - p)) + (pair_log_odds[0] if paired else pair_log_odds[1])
+    if not paired:
+        edges, odds = offset_log_odds
+        log_odds += odds[int(np.searchsorted(edges, handle_offset(front), side="right"))]
+    return float(log_odds)
+
+
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
                  head_type_weight: float, pair_log_odds: tuple[float, float],
                  offset_log_odds: tuple[tuple[float, ...], tuple[float, ...]]
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
-    slot's front (fronts[k] for slot k; None: the field's): its type (a door where the read door
-    probability's log-odds plus `head_type_weight` times the keypoint head's door margin,
-    door_margin (S,) its door logit minus its drawer logit, plus pair_log_odds[0] for one of a
-    pair (sides[k] != 0) or pair_log_odds[1] for one not, plus for one not the value of
-    offset_log_odds[1] in the bin of offset_log_odds[0] (edges) its `handle_offset` falls in, are
+    slot's front (fronts[k] for slot k; None: the field's): its type (a door where
+    `read_door_log_odds`, one of a pair where sides[k] != 0, plus `head_type_weight` times the
+    keypoint head's door margin, door_margin (S,) its door logit minus its drawer logit, is
     positive); its goal (a door's
     compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
     its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
@@ -298,12 +311,8 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
         left, _ = shut_edges(front)
         width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
         out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
-        p = float(np.clip(front.door_probability, 1e-6, 1.0 - 1e-6))
-        pair = pair_log_odds[0] if sides[k] != 0 else pair_log_odds[1]
-        if sides[k] == 0:
-            edges, odds = offset_log_odds
-            pair += odds[int(np.searchsorted(edges, handle_offset(front), side="right"))]
-        door = np.log(p / (1.0 - p)) + head_type_weight * float(door_margin[k]) + pair > 0.0
+        door = (read_door_log_odds(front, sides[k] != 0, pair_log_odds, offset_log_odds)
+                + head_type_weight * float(door_margin[k]) > 0.0)
         if door:
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
         elif PART_TYPES[int(types[k])] == "door":

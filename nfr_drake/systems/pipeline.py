@@ -242,15 +242,17 @@ def canonical_part(plant, scene_graph, model, scene_object: SceneObject, X_WO: R
     return sorted(edges, key=edges.get).index(scene_object.joint_name)
 
 
-def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObject
+def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObject,
+                                    frame: tuple[RigidTransform, tuple[np.ndarray, np.ndarray]]
                                     ) -> tuple[Simulator, NfrPerceptionSystem, list[str]]:
     """`perception_simulator` for a user's model file (`Scenario.object_file`, loaded as
     `scene_object`): the model as its file and pose place it, the door or drawer at q_start and
     its other joints shut, the cameras framing its shut bounds (framing "bounds", as furniture's)
-    around its frame O (`SceneObject.category_frame`, or a coarse look at it when the pose is
-    estimated); the fit is given that O with `Scenario.object_pose` "given". Also the notes of
-    `drawable_meshes` (visual meshes the cameras see a copy of)."""
-    X_WO, bounds_O = scene_object.category_frame()
+    around its frame O (`frame`: X_WO and the shut bounds in O, `SceneObject.category_frame`; or a
+    coarse look at it when the pose is estimated); the fit is given that O with
+    `Scenario.object_pose` "given". Also the notes of `drawable_meshes` (visual meshes the cameras
+    see a copy of)."""
+    X_WO, bounds_O = frame
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     model = scene_object.add_to(plant)
@@ -307,11 +309,12 @@ def _rmse_cm(a: np.ndarray, b: np.ndarray) -> float:
     return float(100.0 * np.sqrt(np.mean(np.sum((a - b) ** 2, axis=-1))))
 
 
-def _run(scenario: Scenario, obj: ArticulatedObject, scene_object: SceneObject,
+def _run(scenario: Scenario, obj: ArticulatedObject | None, scene_object: SceneObject,
          keypoints: KeypointTrajectory | None, reference: KeypointTrajectory | None,
          replay: Path | None, cloud: SemanticCloud | None = None) -> TaskOutcome | PlaceTaskOutcome:
     """Phase 2: the scenario's task planned with `keypoints` (None: the object's own; `cloud`: the
-    fitted field's points they came with, which size the moving part's obstacles for the place)."""
+    fitted field's points they came with, which size the moving part's obstacles for the place).
+    `obj` (the generated object) is read by the place task only: a model file's is None."""
     simulation = replace(scenario.simulation, grasp=scenario.grasp)
     planner = grasp_planner(scenario.planner, scenario.grasp)
     if scenario.task == "open-and-place":
@@ -379,22 +382,20 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
                             "model of sliding doors; plan with its own keypoints (nfr-drake plan --object)")
     truth = scene_object.ground_truth
     replay = Path(scenario.replay) if scenario.replay else None
-    planner = grasp_planner(scenario.planner, scenario.grasp)
-    simulation = replace(scenario.simulation, grasp=scenario.grasp)
     if not scenario.perceives:
-        task = run_task(scene_object, scenario.q_target, replay=replay, planner_config=planner,
-                        simulation_config=simulation)
+        task = _run(scenario, None, scene_object, None, None, replay)
         return PipelineOutcome(q_estimate=scenario.q_start, q_true=scenario.q_start, keypoint_rmse_cm=0.0,
                                handle_path_rmse_cm=0.0, perception_seconds=0.0, predicted=truth, truth=truth,
                                task=task, perceived=False, notes=scene_object.notes)
     model = Path(scenario.model or "models/furniture")
-    if read_model_config(model).get("category") != "furniture":  # a furniture model has doors and drawers
-        check_category(model, read_model_config(model).get("category"), scene_object.category,
+    model_category = read_model_config(model).get("category")
+    if model_category != "furniture":  # a furniture model has doors and drawers
+        check_category(model, model_category, scene_object.category,
                        f"{scenario.object_file}: joint {scenario.joint!r}",
                        "door" if scene_object.category == "closet" else "drawer")
     scenario = replace(scenario, model=str(model))
-    X_WO = scene_object.category_frame()[0]
-    simulator, perception, drawn = model_file_perception_simulator(scenario, scene_object)
+    frame = scene_object.category_frame()
+    simulator, perception, drawn = model_file_perception_simulator(scenario, scene_object, frame)
     notes = (*scene_object.notes, *drawn)
     try:
         perceived = _fitted(simulator, perception)
@@ -403,13 +404,11 @@ def _run_model_file(scenario: Scenario) -> PipelineOutcome:
                                handle_path_rmse_cm=math.inf, perception_seconds=math.nan, predicted=None,
                                truth=truth, task=None, refused=f"nothing planned: {err}", notes=notes)
     predicted, confidence = scene_object.in_joint_units(perceived.trajectory), perceived.confidence
-    pose_error = _pose_error(X_WO, perceived.X_WO) if scenario.object_pose == "estimated" else None
+    pose_error = _pose_error(frame[0], perceived.X_WO) if scenario.object_pose == "estimated" else None
     handle_error = 100.0 * float(np.linalg.norm(predicted.point("handle", predicted.q_current)
                                                 - truth.point("handle", truth.q_current)))
     refused = refusal(confidence, None if scenario.min_confidence < 0 else scenario.min_confidence)
-    task = None if refused else run_task(scene_object, scenario.q_target, keypoints=predicted,
-                                         replay=replay, reference=truth, planner_config=planner,
-                                         simulation_config=simulation)
+    task = None if refused else _run(scenario, None, scene_object, predicted, truth, replay)
     return PipelineOutcome(
         q_estimate=predicted.q_current, q_true=scenario.q_start, keypoint_rmse_cm=handle_error,
         handle_path_rmse_cm=math.nan, perception_seconds=perceived.seconds, predicted=predicted, truth=truth,

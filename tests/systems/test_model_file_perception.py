@@ -110,7 +110,8 @@ def test_a_visual_mesh_without_normals_is_drawn_from_a_copy_with_them(models, tm
     in the photos."""
     model = models["wardrobe_handle_mesh_off_frame"]
     scenario = scenario_of(model, model="models/closet", views=2)
-    simulator, perception, notes = model_file_perception_simulator(scenario, scenario.model_file_object())
+    obj = scenario.model_file_object()
+    simulator, perception, notes = model_file_perception_simulator(scenario, obj, obj.category_frame())
     assert len(notes) == 1 and "u_handle.obj" in notes[0] and "normals" in notes[0]
     diagram, context = simulator.get_system(), simulator.get_context()
     sensor = diagram.GetSubsystemByName("nfr_camera_0")
@@ -161,7 +162,8 @@ def test_a_door_with_a_jpeg_texture_is_photographed_with_it(models, tmp_path):
     (tmp_path / "cabinet.urdf").write_text(urdf)
     scenario = Scenario(object_file=str(tmp_path / "cabinet.urdf"), joint="hinge", handle_body="handle",
                         model="models/closet", views=4)
-    simulator, _, notes = model_file_perception_simulator(scenario, scenario.model_file_object())
+    obj = scenario.model_file_object()
+    simulator, _, notes = model_file_perception_simulator(scenario, obj, obj.category_frame())
     assert len(notes) == 1 and "paint.jpg" in notes[0]
     green = blue = 0
     for i in range(4):
@@ -195,7 +197,8 @@ def test_a_door_drawn_as_an_stl_is_photographed(models, tmp_path):
     (tmp_path / "cabinet.urdf").write_text(urdf)
     scenario = Scenario(object_file=str(tmp_path / "cabinet.urdf"), joint="hinge", handle_body="handle",
                         model="models/closet", views=4)
-    simulator, _, notes = model_file_perception_simulator(scenario, scenario.model_file_object())
+    obj = scenario.model_file_object()
+    simulator, _, notes = model_file_perception_simulator(scenario, obj, obj.category_frame())
     assert len(notes) == 1 and "door.stl" in notes[0] and "STL" in notes[0]
     grey = 0
     for i in range(4):
