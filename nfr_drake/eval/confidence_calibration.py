@@ -66,10 +66,12 @@ FURNITURE_TERMS = [("image_loss_worst_view", "log10"), ("silhouette_iou_worst_vi
                    ("edge_contact", "identity"), ("sighting_missing", "identity"),
                    ("sighting_gap_m", "log10_cm"), ("code_distance", "identity"), ("views", "inverse"),
                    ("part_exists_logit", "negative"), ("start_spread_m", "log10_cm"),
-                   ("part_image_loss", "log10"), ("part_unsighted", "identity")]
+                   ("part_image_loss", "log10"), ("part_unsighted", "identity"),
+                   ("part_sighting_views", "negative"), ("part_sighting_rms_px", "identity")]
 """The terms of a model with several parts (furniture), per part: the fit's and the part's own
 (`inference.confidence.part_features`; the sighting terms compare the slot's handle with the
-handle detector's, constant while the model ships none)."""
+handle detector's and weigh the evidence for the slot's own sighting, constant while the model
+ships no detector)."""
 
 ROOM_TERMS = TERMS + [("silhouette_iou", "one_minus"), ("image_loss", "log10"),
                       ("start_loss_ratio", "identity")]

@@ -40,6 +40,7 @@ from nfr_drake.inference.infer import (
     object_masks,
     paint_background,
 )
+from nfr_drake.perception.handle_triangulation import TriangulatedHandle
 from nfr_drake.perception.object_pose import ObjectPoseError
 from nfr_drake.systems.pipeline import perceive_scene
 from nfr_drake.systems.scenario import Scenario
@@ -129,6 +130,7 @@ def run_furniture_case(case: Case, fitted: FittedModel, config: FurnitureFitConf
             "start_z": fit.start_z.double().tolist(), "start_losses": fit.start_losses.tolist(),
             "exists": fit.exists.tolist(), "image_loss": result.image_loss,
             "handles": np.asarray(fit.handles).tolist(), "part_errors": errors,
+            "sightings": result.extra["handles"], "handle_order": fit.handle_order.tolist(),
             "handle_error_m": min(errors.values()) if errors else None,
             "failure": "" if errors else "no part with a handle in gt.json",
             "seconds": result.seconds}
@@ -145,9 +147,14 @@ def case_part_features(line: dict, fitted: FittedModel) -> list[dict]:
                                np.array(line["start_losses"]), fitted.codes, fitted.code_scale, 0,
                                None, views=views)
     start_z = torch.tensor(line["start_z"])
+    if "handle_order" not in line:
+        raise NfrDrakeError(f"{line['key']}: a fit line written before the sightings' support was "
+                            "kept; fit it again (remove the fits file or that line)")
+    seen = line["sightings"]
+    sighted = [TriangulatedHandle(np.array(seen["p_O"][i]), tuple(seen["views"][i]), seen["rms_px"][i],
+                                  seen["sightings"][i]) for i in line["handle_order"]]
     return [{"part": int(k), "handle_error_m": error, **features,
-             **part_features(fitted.model, z, start_z, int(k), capture.frames, views,
-                             line.get("handles"))}
+             **part_features(fitted.model, z, start_z, int(k), capture.frames, views, sighted)}
             for k, error in line["part_errors"].items()]
 
 

@@ -69,7 +69,7 @@ def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     and every slot's confidence (refused below the calibration's threshold)."""
     from nfr_drake.inference.confidence import refusal
     from nfr_drake.inference.furniture_fit import slot_path
-    from nfr_drake.inference.infer import infer_parts, parts_confidence
+    from nfr_drake.inference.infer import infer_parts, parts_confidence, sighted_handles
 
     def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
         fitted.check_capture(capture)
@@ -77,7 +77,9 @@ def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
         paths = np.stack([slot_path(fitted.model, fit, k, grid) for k in range(fitted.num_slots)])
         confidence = None
         if fitted.confidence is not None:
-            confidence = parts_confidence(fitted, fit, capture, capture.load_images())[0]
+            images = capture.load_images()
+            confidence = parts_confidence(fitted, fit, capture, images,
+                                          sighted_handles(fitted, capture, images, config))[0]
         return PartsPrediction(
             fit.q, fit.exists, fit.types, fit.keypoints, paths, result.seconds,
             None if confidence is None else np.array([c["p_handle_within_2cm"] for c in confidence]),

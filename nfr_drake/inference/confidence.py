@@ -33,7 +33,7 @@ from nfr_drake.nfr.latent import split_z
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.nfr.rays import Rays
 from nfr_drake.objects import SemanticClass
-from nfr_drake.perception.handle_triangulation import project
+from nfr_drake.perception.handle_triangulation import AGREE_PX, TriangulatedHandle, project
 
 CONFIDENCE_FILE = "confidence.json"
 """The calibration in a model folder (fits of the object alone)."""
@@ -216,7 +216,7 @@ of the projection of the part's handle."""
 
 def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot: int,
                   frames: list[CaptureFrame], views: list[ViewRender],
-                  sighted_O: np.ndarray | None = None) -> dict:
+                  sighted: list[TriangulatedHandle] | None = None) -> dict:
     """Features of one part (slot `slot`) of a fit of a model with several parts (furniture):
 
     part_exists_logit: the keypoint head's existence logit of the slot (> 0: the field finds
@@ -225,12 +225,14 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
     final codes; 0 for one start); part_image_loss: the image loss (`ViewRender.error`) of the
     counted grid pixels within `PART_WINDOW` of the handle's projection, mean over the views
     where it falls in the image (the mean image loss when it falls in none); sighting_missing
-    (1: the handle detector sighted no handle, sighted_O (M, 3) in O empty or None) and
-    sighting_gap_m: the distance, m, from the slot's handle to the nearest sighted one (0 when
-    none); the identity of the part's sighting, with sighted_O in the fit's order (slot k paired
-    with sighting k, `furniture_fit.sighting_order`): part_unsighted (1: no sighted handle is this
-    slot's, k >= M, none sighted included: the part's keypoints are the head's alone). z (D,): the
-    fit.
+    (1: the handle detector sighted no handle, `sighted` (M,) empty or None) and sighting_gap_m:
+    the distance, m, from the slot's handle to the nearest sighted one (0 when none); the part's
+    own sighting, with `sighted` in the fit's order (slot k paired with sighting k,
+    `furniture_fit.sighting_order`): part_unsighted (1: no sighted handle is this slot's, k >= M,
+    none sighted included: the part's keypoints are the head's alone), part_sighting_views (how
+    many views agree on it; 0 without one) and part_sighting_rms_px (their reprojection RMS,
+    scaled to a 128 px high image; without one, the triangulation's tolerance `AGREE_PX`, as
+    loose as an agreeing sighting can be). z (D,): the fit.
     """
     with torch.no_grad():
         S = model.config.num_slots
@@ -248,11 +250,14 @@ def part_features(model: NFRModel, z: torch.Tensor, start_z: torch.Tensor, slot:
                                <= PART_WINDOW * max(cam.width, cam.height))
         if near.any():
             local.append(float(view.error[near].mean()))
-    sighted = np.zeros((0, 3)) if sighted_O is None else np.asarray(sighted_O, float).reshape(-1, 3)
-    gap = float(np.linalg.norm(sighted - handles[0], axis=-1).min()) if len(sighted) else 0.0
-    M = len(sighted)
-    return {"sighting_missing": float(not M), "sighting_gap_m": gap,
-            "part_unsighted": float(slot >= M),
+    sighted = sighted or []
+    sighted_O = np.array([h.p_O for h in sighted], float).reshape(-1, 3)
+    gap = float(np.linalg.norm(sighted_O - handles[0], axis=-1).min()) if len(sighted) else 0.0
+    own = sighted[slot] if slot < len(sighted) else None
+    return {"sighting_missing": float(not sighted), "sighting_gap_m": gap,
+            "part_unsighted": float(own is None),
+            "part_sighting_views": 0.0 if own is None else float(len(own.views)),
+            "part_sighting_rms_px": AGREE_PX if own is None else own.rms_reference_px(frames),
             "part_exists_logit": float(logits[0]),
             "part_type_margin": float(abs(logits[1] - logits[2])), "start_spread_m": spread,
             "part_image_loss": float(np.mean(local if local else [v.image_loss for v in views]))}

@@ -138,7 +138,8 @@ class FurnitureFit:
     moved by shift (S, 3) in O, m (a slot's translation onto its sighted handle; zero if none),
     a pair's doors hinged outward (`pair_hinges`); image_loss
     (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
-    in O the fit used (M = 0: none); the starts fitted together (`keep` of them): their final
+    in O the fit used (M = 0: none), handle_order (M,) their indices among the handles given to
+    `fit_furniture` (handle k of the fit is the given handle handle_order[k]); the starts fitted together (`keep` of them): their final
     codes start_z (keep, 2 S + k) and image losses on the last step's rays start_losses (keep,);
     z is the one of the lowest loss."""
 
@@ -152,6 +153,7 @@ class FurnitureFit:
     steps: int
     seconds: float
     handles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    handle_order: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     start_z: torch.Tensor | None = None
     start_losses: np.ndarray | None = None
 
@@ -213,10 +215,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     in_order = config.handle_pairing == "order"
     if fronts is None or not config.read_fronts or not in_order:
         fronts = [None] * len(handles)
-    if in_order:
-        order = sighting_order(handles, config.column_gap_m, fronts=fronts)
-        handles, fronts = handles[order], [fronts[i] for i in order]
-    handles, fronts = handles[:S], fronts[:S]
+    order = sighting_order(handles, config.column_gap_m, fronts=fronts) if in_order else np.arange(len(handles))
+    handles, fronts, order = handles[order][:S], [fronts[i] for i in order][:S], order[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings
         with torch.no_grad():
@@ -266,7 +266,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                                      (config.offset_edges, config.offset_type_log_odds))
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
-                        handles, z.detach().clone(), per_code.detach().double().cpu().numpy())
+                        handles, order, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
 def read_door_log_odds(front: SightedFront, paired: bool, pair_log_odds: tuple[float, float],

@@ -477,7 +477,7 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
     if chosen not in found:
         warnings.append(f"the field finds no part {chosen} (parts found: {found or 'none'}); its "
                         "keypoints are the slot's all the same")
-    confidence, per_view = parts_confidence(fitted, fit, capture, images)
+    confidence, per_view = parts_confidence(fitted, fit, capture, images, handles)
     parts = parts_json(fitted.model, fit, q_grid)
     for p in parts:
         p["confidence"] = confidence[p["index"]]
@@ -520,13 +520,15 @@ def sighted_fronts(fitted: FittedModel, capture: CaptureSet, images: list[np.nda
 def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,
                   handles: list[TriangulatedHandle] | None,
                   fronts: list[SightedFront | None] | None = None) -> dict:
-    """What the handle detector gave a furniture fit (the handles, and what it read of their
-    fronts: door probability, face corners in O), for the result's `extra`."""
+    """What the handle detector gave a furniture fit (the handles: p_O, the views agreeing on
+    each and their reprojection RMS, px of the photos, how many views saw a handle; and what it read of their fronts: door
+    probability, face corners in O), for the result's `extra`."""
     if handles is None:
         return {"used": False, "why": ("the model ships no handle detector"
                                        if fitted.handle_detector is None else "turned off")}
     out = {"used": bool(handles), "count": len(handles), "p_O": [h.p_O.tolist() for h in handles],
-           "views": [list(h.views) for h in handles]}
+           "views": [list(h.views) for h in handles],
+           "rms_px": [h.rms_px for h in handles], "sightings": [h.sightings for h in handles]}
     if fronts is not None:
         out["fronts"] = [None if f is None else {"door_probability": f.door_probability,
                                                  "face_corners": f.corners.tolist()} for f in fronts]
@@ -639,18 +641,21 @@ def calibrated(calibration: ConfidenceModel | None, features: dict, per_view: li
 
 
 def parts_confidence(fitted: FittedModel, fit: FurnitureFit, capture: CaptureSet,
-                     images: list[np.ndarray]) -> tuple[list[dict], list[dict]]:
+                     images: list[np.ndarray], sighted: list[TriangulatedHandle] | None
+                     ) -> tuple[list[dict], list[dict]]:
     """Per slot of a model with several parts (furniture), the `confidence` of its part
     ({p_handle_within_2cm, threshold, weakest, features}, `calibrated`): P(the part's handle
     within 2 cm) from the fit's features (`fit_features`) and the part's
-    (`confidence.part_features`, with the handles the detector sighted, `fit.handles`); and the
+    (`confidence.part_features`, with the handles the detector sighted, `sighted` as
+    `sighted_handles` gave them to the fit: `fit.handle_order` pairs them with the slots); and the
     per-view figures, shared by the parts."""
     views = render_views(fitted.model, fit.z, capture.frames, images)
     features, per_view = fit_features(
         fitted.model, fit.z, capture.frames, images, fit.start_losses, fitted.codes,
         fitted.code_scale, 0, None, views=views)
+    in_fit_order = [sighted[i] for i in fit.handle_order] if sighted else []
     parts = [calibrated(fitted.confidence, {**features, **part_features(
-        fitted.model, fit.z, fit.start_z, k, capture.frames, views, fit.handles)}, [])
+        fitted.model, fit.z, fit.start_z, k, capture.frames, views, in_fit_order)}, [])
         for k in range(fitted.num_slots)]
     return [{k: v for k, v in c.items() if k != "per_view"} for c in parts], per_view
 

@@ -37,6 +37,9 @@ from nfr_drake.data.capture import CaptureFrame
 _REFERENCE_HEIGHT_PX = 128.0
 MIN_VIEWS = 3
 """Views that must agree on a handle for a point."""
+AGREE_PX = 3.0
+"""A sighting agrees with a triangulated point within this reprojection error, px of a 128 px high
+image (scaled to the frame's height)."""
 INSIDE_MASK_PX = 3.0
 """How far inside the object's mask a handle pixel must lie, px (scaled to a 128 px high image),
 in `inside_masks`."""
@@ -92,6 +95,12 @@ class TriangulatedHandle:
     views: tuple[int, ...]
     rms_px: float
     sightings: int
+
+    def rms_reference_px(self, frames: list[CaptureFrame]) -> float:
+        """rms_px scaled to a 128 px high image (the agreeing frames' mean height): comparable
+        across photo sizes, as the agreement tolerance is."""
+        height = np.mean([frames[v].camera.height for v in self.views]) if self.views else _REFERENCE_HEIGHT_PX
+        return float(self.rms_px * _REFERENCE_HEIGHT_PX / height)
 
 
 def sighting(handle_map: HandleMap, frame: int, threshold: float = 0.5,
@@ -184,7 +193,7 @@ def _reprojection_px(frame: CaptureFrame, p_O: np.ndarray, uv: np.ndarray) -> fl
 
 
 def triangulate_handle(frames: list[CaptureFrame], sightings: list[HandleSighting],
-                       max_error_px: float = 3.0, min_views: int = MIN_VIEWS
+                       max_error_px: float = AGREE_PX, min_views: int = MIN_VIEWS
                        ) -> TriangulatedHandle | None:
     """Robust triangulation (module docstring); None when fewer than `min_views` views agree."""
     if len(sightings) < max(2, min_views):
@@ -273,7 +282,7 @@ def _side_by_side(a: np.ndarray, b: np.ndarray, apart_m: float) -> bool:
 
 
 def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
-                        max_error_px: float = 3.0, min_views: int = MIN_VIEWS,
+                        max_error_px: float = AGREE_PX, min_views: int = MIN_VIEWS,
                         min_share: float = 0.0, side_by_side_m: float = SIDE_BY_SIDE_M,
                         loose_share: float = 0.0, loose_rms_px: float = np.inf
                         ) -> list[TriangulatedHandle]:

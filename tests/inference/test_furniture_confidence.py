@@ -23,6 +23,7 @@ from nfr_drake.inference.confidence import (
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import FittedModel, infer_command
 from nfr_drake.nfr.latent import slots_q_to_z_art
+from nfr_drake.perception.handle_triangulation import AGREE_PX, TriangulatedHandle
 
 QUICK = FurnitureFitConfig(starts=2, keep=2, steps=3, rays_per_step=32, lookup_rays=32)
 S = 8
@@ -58,7 +59,7 @@ def test_part_features_measure_the_starts_spread_the_sighting_and_the_existence(
         two = part_features(fitted.model, z, torch.stack([z, other]), 1, capture.frames, views)
         handle = _slot_handle(fitted, z, 1)
         sighted = part_features(fitted.model, z, z[None], 1, capture.frames, views,
-                                np.array([handle + [0.03, 0.04, 0.0], handle + [1.0, 0.0, 0.0]]))
+                                _sightings([handle + [0.03, 0.04, 0.0], handle + [1.0, 0.0, 0.0]]))
         absent = part_features(fitted.model, z, z[None], 5, capture.frames, views)
     assert one["start_spread_m"] == 0.0
     assert two["start_spread_m"] == pytest.approx(np.linalg.norm(handle - _slot_handle(fitted, other, 1)))
@@ -72,19 +73,28 @@ def test_part_features_measure_the_starts_spread_the_sighting_and_the_existence(
     assert errors.min() <= one["part_image_loss"] <= errors.max()
 
 
+def _sightings(points, views=(0, 1, 2), rms_px=0.5):
+    """Triangulated handles at `points` (M, 3) in O, each agreed on by `views`, RMS `rms_px`."""
+    return [TriangulatedHandle(np.asarray(p, float), tuple(views), rms_px, len(views)) for p in points]
+
+
 def test_part_features_say_whether_the_part_has_a_sighting_of_its_own(furniture_model_folder, capture_dir):
     """Slot k is paired with sighting k: with 2 sightings slot 1 has one and slot 5 not; without
-    sightings no slot has one."""
+    sightings no slot has one. The own sighting's agreeing views and their RMS (scaled from the
+    24 px photos to 128 px) are the part's; without one, 0 views and the agreement tolerance."""
     fitted = FittedModel(furniture_model_folder)
     capture = read_capture_set(capture_dir)
     z = _code(fitted, 0)
     views = render_views(fitted.model, z, capture.frames, capture.load_images())
-    two = np.array([[0.3, 0.0, 0.5], [0.3, 0.3, 0.5]])
+    two = _sightings([[0.3, 0.0, 0.5], [0.3, 0.3, 0.5]][:1]) + _sightings([[0.3, 0.3, 0.5]], (0, 2), 0.3)
     with torch.no_grad():
         paired, unpaired, none = (part_features(fitted.model, z, z[None], k, capture.frames, views, h)
                                   for k, h in ((1, two), (5, two), (5, None)))
     assert (paired["part_unsighted"], unpaired["part_unsighted"], none["part_unsighted"]) == (0.0, 1.0, 1.0)
     assert none["sighting_missing"] == 1.0
+    assert paired["part_sighting_views"] == 2.0
+    assert paired["part_sighting_rms_px"] == pytest.approx(0.3 * 128 / 24)
+    assert (unpaired["part_sighting_views"], unpaired["part_sighting_rms_px"]) == (0.0, AGREE_PX)
 
 
 def test_the_code_distance_of_a_furniture_fit_is_that_of_its_z_obj(furniture_model_folder, capture_dir):
