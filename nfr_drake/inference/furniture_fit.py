@@ -139,9 +139,9 @@ class FurnitureFit:
     a pair's doors hinged outward (`pair_hinges`); image_loss
     (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
     in O the fit used (M = 0: none), handle_order (M,) their indices among the handles given to
-    `fit_furniture` (handle k of the fit is the given handle handle_order[k]); the starts fitted together (`keep` of them): their final
-    codes start_z (keep, 2 S + k) and image losses on the last step's rays start_losses (keep,);
-    z is the one of the lowest loss."""
+    `fit_furniture` (handle k of the fit is the given handle handle_order[k]); the starts fitted
+    together (`keep` of them): their final codes start_z (keep, 2 S + k) and image losses on the
+    last step's rays start_losses (keep,); z is the one of the lowest loss."""
 
     z: torch.Tensor
     q: np.ndarray
@@ -215,7 +215,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     in_order = config.handle_pairing == "order"
     if fronts is None or not config.read_fronts or not in_order:
         fronts = [None] * len(handles)
-    order = sighting_order(handles, config.column_gap_m, fronts=fronts) if in_order else np.arange(len(handles))
+    order = (sighting_order(handles, config.column_gap_m, fronts=fronts) if in_order
+             else np.arange(len(handles)))
     handles, fronts, order = handles[order][:S], [fronts[i] for i in order][:S], order[:S]
     term = HandleTerm(model, handles, config.handle_weight, config.handle_scale_m, in_order)
     if len(handles) and config.handle_weight > 0:  # the training codes laid out as the sightings

@@ -521,8 +521,8 @@ def _handles_json(fitted: FittedModel, config: FurnitureFitConfig,
                   handles: list[TriangulatedHandle] | None,
                   fronts: list[SightedFront | None] | None = None) -> dict:
     """What the handle detector gave a furniture fit (the handles: p_O, the views agreeing on
-    each and their reprojection RMS, px of the photos, how many views saw a handle; and what it read of their fronts: door
-    probability, face corners in O), for the result's `extra`."""
+    each and their reprojection RMS, px of the photos, how many views saw a handle; and what it
+    read of their fronts: door probability, face corners in O), for the result's `extra`."""
     if handles is None:
         return {"used": False, "why": ("the model ships no handle detector"
                                        if fitted.handle_detector is None else "turned off")}

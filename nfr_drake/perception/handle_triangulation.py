@@ -99,7 +99,9 @@ class TriangulatedHandle:
     def rms_reference_px(self, frames: list[CaptureFrame]) -> float:
         """rms_px scaled to a 128 px high image (the agreeing frames' mean height): comparable
         across photo sizes, as the agreement tolerance is."""
-        height = np.mean([frames[v].camera.height for v in self.views]) if self.views else _REFERENCE_HEIGHT_PX
+        if not self.views:
+            return self.rms_px
+        height = np.mean([frames[v].camera.height for v in self.views])
         return float(self.rms_px * _REFERENCE_HEIGHT_PX / height)
 
 
