@@ -146,6 +146,7 @@ def test_sighted_handles_give_the_part_count(capture):
     fit = fit_furniture(model, observed_rays(capture), codes, config, handles)
     assert fit.exists.tolist() == [True] * 3 + [False] * (S - 3)
     np.testing.assert_allclose(fit.handles, handles[[0, 2, 1]])  # in the fronts' order: by y
+    assert fit.handle_order.tolist() == [0, 2, 1]  # which given handle each slot took
     plain = fit_furniture(model, observed_rays(capture), codes, config)
     off = fit_furniture(model, observed_rays(capture), codes, replace(config, count_from_handles=False),
                         handles)
