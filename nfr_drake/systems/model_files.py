@@ -24,6 +24,7 @@ what to change (`SceneObject.from_model_file` composes these).
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -449,9 +450,19 @@ def mesh_problems(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_c
 
 
 def _tagged(path: Path, folder: Path, suffix: str) -> Path:
-    """A file in `folder` named after `path` and a hash of its absolute path (one copy per file)."""
+    """A file in `folder` (made if missing) named after `path` and a hash of its absolute path
+    (one copy per file)."""
+    Path(folder).mkdir(parents=True, exist_ok=True)
     tag = hashlib.sha1(str(Path(path).resolve()).encode()).hexdigest()[:10]
     return Path(folder) / f"{Path(path).stem}_{tag}{suffix}"
+
+
+def _write_whole(path: Path, data: str | bytes) -> None:
+    """Write `data` (text or bytes) to `path` at once (a file beside it, then renamed): another
+    process drawing the same model never reads a half-written copy."""
+    part = path.with_name(f"{path.name}.{os.getpid()}.part")
+    part.write_bytes(data.encode() if isinstance(data, str) else data)
+    os.replace(part, path)
 
 
 def _png_materials(mtl: Path, folder: Path) -> tuple[Path, list[str]]:
@@ -473,11 +484,11 @@ def _png_materials(mtl: Path, folder: Path) -> tuple[Path, list[str]]:
             image = cv2.imread(str(texture), cv2.IMREAD_UNCHANGED)
             if image is not None:
                 png = _tagged(texture, folder, ".png")
-                cv2.imwrite(str(png), image)
+                _write_whole(png, cv2.imencode(".png", image)[1].tobytes())
                 line = " ".join([*tokens[:-1], png.name])
         out.append(line)
     copy = _tagged(mtl, folder, "_png.mtl")
-    copy.write_text("\n".join(out) + "\n")
+    _write_whole(copy, "\n".join(out) + "\n")
     return copy, copied
 
 
@@ -514,7 +525,7 @@ def drawable_obj(path: Path, folder: Path) -> tuple[Path, list[str]] | None:
     if not changed:
         return None
     copy = _tagged(path, folder, "_drawable.obj")
-    copy.write_text("\n".join([f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in normals] + out) + "\n")
+    _write_whole(copy, "\n".join([f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in normals] + out) + "\n")
     return copy, changed
 
 
@@ -538,7 +549,7 @@ def stl_as_obj(path: Path, folder: Path) -> Path:
     lines += [f"f {3 * t + 1}//{t + 1} {3 * t + 2}//{t + 1} {3 * t + 3}//{t + 1}"
               for t in range(len(triangles))]
     copy = _tagged(path, folder, "_stl.obj")
-    copy.write_text("\n".join(lines) + "\n")
+    _write_whole(copy, "\n".join(lines) + "\n")
     return copy
 
 

@@ -235,6 +235,9 @@ def test_an_obj_without_normals_gets_its_faces_normals(tmp_path):
     assert [line for line in lines if line.startswith("vn")] == ["vn 0.000000 0.000000 1.000000"] * 2
     assert [line for line in lines if line.startswith("f")] == ["f 1/1/1 2/1/1 3/1/1", "f 1//2 3//2 4//2"]
     assert drawable_obj(copy, tmp_path) is None
+    # The copies' folder is made when missing (a fresh machine's temporary folder).
+    fresh, _ = drawable_obj(path, tmp_path / "not" / "yet")
+    assert fresh.read_text() == copy.read_text()
 
 
 def test_an_obj_with_a_jpeg_texture_is_drawn_from_png_copies(tmp_path):
