@@ -359,6 +359,9 @@ ADVICE = {
     "edge_contact": "the object is cut by the image edge: step back so it is whole in every view",
     "image_loss": ("the fitted field does not match the photos: check for occlusion, or use a "
                    "model of this kind of object"),
+    "image_loss_worst_view": ("the fitted field does not match the photos in one view at least: "
+                              "check that view for occlusion or glare, or use a model of this kind "
+                              "of object"),
     "silhouette_iou": ("the fitted shape covers the object poorly: check for occlusion, or use a "
                        "model of this kind of object"),
     "start_loss_ratio": "the fit's starts explain the photos about equally well: take more views, closer",
@@ -374,6 +377,10 @@ ADVICE = {
     "start_spread_m": "the fit's starts disagree on this part's handle: take more views, closer",
     "part_unsighted": ("the handle detector sighted no handle of this part: photograph it closer, "
                        "from in front"),
+    "part_sighting_views": ("few views agree on this part's handle, or none sighted it: photograph "
+                            "it from more sides, closer, from in front"),
+    "part_sighting_rms_px": ("the views agree on this part's handle only loosely: photograph it "
+                             "closer, from in front"),
     "part_image_loss": ("the fitted part does not match the photos around its handle: photograph "
                         "this part closer, or use a model of this kind of object"),
     "room": ("in a room this model's fit confidence is not calibrated (no confidence_room.json in "

@@ -12,7 +12,9 @@ from nfr_drake.data.capture import read_capture_set
 from nfr_drake.data.captures import captures_command
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.capture_variants import FEW_VIEWS, apply_variant, load_labels
+from nfr_drake.eval.confidence_calibration import FURNITURE_TERMS, ROOM_TERMS, TERMS
 from nfr_drake.inference.confidence import (
+    ADVICE,
     CONFIDENCE_FILE,
     ConfidenceModel,
     edge_band,
@@ -111,6 +113,13 @@ def test_refusal_says_why_and_what_to_do():
     assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
     room = refusal({**confidence, "features": features | {"room": 1.0}})
     assert "not calibrated" in room and "--min-confidence 0" in room and "\n" not in room
+
+
+def test_every_calibration_term_has_its_own_advice():
+    """A refusal names what to do after its weakest term: each term a calibration can keep has a
+    line of its own, not the generic one."""
+    for name, _ in {*TERMS, *ROOM_TERMS, *FURNITURE_TERMS}:
+        assert name in ADVICE and ADVICE[name] != ADVICE[None], name
 
 
 def test_background_mask_finds_an_object_on_a_uniform_background():
