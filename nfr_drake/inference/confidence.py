@@ -405,10 +405,11 @@ def refusal(confidence: dict | None, threshold: float | None = None) -> str | No
         return None
     f = confidence["features"]
     # In a room the object-alone calibration does not hold at all; below 3 views the detector
-    # cannot triangulate a handle: those come before the weakest feature.
+    # cannot triangulate a handle; a furniture part without a sighting of its own has none to
+    # weigh: those come before the weakest feature.
     uncalibrated_room = f.get("room") and confidence.get("calibration") != ROOM_CONFIDENCE_FILE
     weakest = ("room" if uncalibrated_room else "views" if f["views"] < 3
-               else confidence.get("weakest"))
+               else "part_unsighted" if f.get("part_unsighted") else confidence.get("weakest"))
     advice = ADVICE.get(weakest, ADVICE[None])
     if weakest == "silhouette_iou_worst_view":
         advice = advice.format(f["silhouette_iou_worst_view"])

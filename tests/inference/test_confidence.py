@@ -113,6 +113,12 @@ def test_refusal_says_why_and_what_to_do():
     assert refusal({**confidence, "p_handle_within_2cm": None}) is None  # no calibration
     room = refusal({**confidence, "features": features | {"room": 1.0}})
     assert "not calibrated" in room and "--min-confidence 0" in room and "\n" not in room
+    # A furniture part without a sighting of its own: that is what the line says, whichever
+    # sighting term weighed most.
+    unsighted = {**confidence, "features": features | {"part_unsighted": 1.0},
+                 "weakest": "part_sighting_rms_px"}
+    assert "sighted no handle of this part" in refusal(unsighted)
+    assert "only loosely" in refusal({**unsighted, "features": features | {"part_unsighted": 0.0}})
 
 
 def test_every_calibration_term_has_its_own_advice():
