@@ -51,7 +51,9 @@ class PartMetrics:
     count_right (per piece, repeated on its parts): slots found, and whether that is the true part
     count. articulation_error in degrees (doors) or cm (drawers); keypoint RMSE over the part's
     keypoints in gt.json (handle, goal and a door's hinge points); handle error at the observed
-    state; handle trajectory RMSE over the q grid; seconds: the piece's fit; confidence: the
+    state; handle trajectory RMSE over the q grid; seconds: the piece's fit; goal_error_cm and
+    hinge_error_cm: the goal's error and a door's two hinge points' RMSE (NaN for a drawer) at the
+    observed state, the parts of the keypoint RMSE besides the handle; confidence: the
     fit's P(the part's handle within 2 cm) and refused: 1 when it is below the calibration's
     threshold, 0 when not (both NaN without a calibration).
     """
@@ -70,6 +72,8 @@ class PartMetrics:
     handle_error_cm: float
     handle_trajectory_rmse_cm: float
     seconds: float
+    goal_error_cm: float = math.nan
+    hinge_error_cm: float = math.nan
     confidence: float = math.nan
     refused: float = math.nan
 
@@ -85,6 +89,8 @@ def score_parts(capture: CaptureSet, prediction: PartsPrediction, set_name: str,
         slots = [SLOT_KEYPOINTS.index(n) for n in names]
         true = np.array([part["keypoints"][names[n]] for n in names])
         pred = prediction.keypoints[k, slots]
+        goal = [list(names).index("goal")]
+        hinge = [i for i, n in enumerate(names) if n.startswith("axis_")]
         rows.append(PartMetrics(
             capture=capture.root.name, set_name=set_name, method=method, part=k,
             part_type=part["type"], found=bool(prediction.exists[k]),
@@ -98,6 +104,8 @@ def score_parts(capture: CaptureSet, prediction: PartsPrediction, set_name: str,
             handle_trajectory_rmse_cm=trajectory_rmse_cm(
                 prediction.trajectories[k, :, HANDLE], np.asarray(part["trajectory"]["keypoints"]["handle"])),
             seconds=prediction.seconds,
+            goal_error_cm=keypoint_rmse_cm(pred[goal], true[goal]),
+            hinge_error_cm=keypoint_rmse_cm(pred[hinge], true[hinge]) if hinge else math.nan,
             confidence=math.nan if prediction.confidence is None else float(prediction.confidence[k]),
             refused=math.nan if prediction.refused is None else float(prediction.refused[k])))
     return rows
@@ -113,13 +121,15 @@ def _median(values: list[float], p90: bool = True) -> str:
 def parts_summary_table(results: Iterable[PartMetrics]) -> str:
     """Markdown table per set and method: pieces, parts, part count right (share of pieces),
     parts found and type right (share of parts), medians (and 90th percentiles) of the door and
-    drawer articulation errors, keypoint RMSE, handle error and handle trajectory RMSE, the median
+    drawer articulation errors, keypoint RMSE, handle, goal and door hinge errors and handle
+    trajectory RMSE, the median
     fit time, the parts refused by the fit confidence (`evaluate.refusal_cells`)."""
     results = list(results)
     lines = ["| set | method | pieces | parts | part count right | parts found | type right | "
              "door error (deg) | drawer error (cm) | keypoint RMSE (cm) | handle error (cm) | "
-             "handle trajectory RMSE (cm) | time (s) | " + " | ".join(REFUSAL_COLUMNS) + " |",
-             "|" + "---|" * (13 + len(REFUSAL_COLUMNS))]
+             "goal error (cm) | door hinge error (cm) | handle trajectory RMSE (cm) | time (s) | "
+             + " | ".join(REFUSAL_COLUMNS) + " |",
+             "|" + "---|" * (15 + len(REFUSAL_COLUMNS))]
     for set_name in sorted({r.set_name for r in results}):
         for method in sorted({r.method for r in results if r.set_name == set_name}):
             rows = [r for r in results if (r.set_name, r.method) == (set_name, method)]
@@ -131,6 +141,8 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
                      _median([r.articulation_error for r in rows if r.part_type == "drawer"]),
                      _median([r.keypoint_rmse_cm for r in rows]),
                      _median([r.handle_error_cm for r in rows]),
+                     _median([r.goal_error_cm for r in rows]),
+                     _median([r.hinge_error_cm for r in rows if r.part_type == "door"]),
                      _median([r.handle_trajectory_rmse_cm for r in rows]),
                      _median([r.seconds for r in pieces], p90=False)] + refusal_cells(rows)
             lines.append(f"| {set_name} | {method} | " + " | ".join(cells) + " |")

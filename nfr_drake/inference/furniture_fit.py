@@ -285,6 +285,14 @@ def read_door_log_odds(front: SightedFront, paired: bool, pair_log_odds: tuple[f
     return float(log_odds)
 
 
+COMPARTMENT_MIDDLE_X = 0.0
+"""A door's goal x in O, m: the middle of its compartment's depth. A compartment spans the
+carcass's depth, and O lies under the middle of the carcass's footprint (docs/CONVENTIONS.md), so
+its middle is x = 0 (the back panel moves it 4 mm in the generator). The head's goal, moved with
+the slot onto its sighted handle, carries the handle's error in x (an open door's handle is far
+in front of the carcass; docs/FURNITURE.md, "Where the goal lies")."""
+
+
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
                  head_type_weight: float, pair_log_odds: tuple[float, float],
@@ -294,10 +302,13 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     slot's front (fronts[k] for slot k; None: the field's): its type (a door where
     `read_door_log_odds`, one of a pair where sides[k] != 0, plus `head_type_weight` times the
     keypoint head's door margin, door_margin (S,) its door logit minus its drawer logit, is
-    positive); its goal (a door's
-    compartment floor behind it, a drawer's box floor) moved to the shut face's middle in y and
-    its bottom edge in z (the floor lies 1-4 cm above that edge, a panel or the box's wall: not
-    read), x stays the head's (the depth is not on the face); a door's hinge points on its face's
+    positive); a door's goal (the compartment floor behind it) at the shut face's middle in y,
+    its bottom edge in z (the floor lies 1-4 cm above that edge, a panel: not read) and
+    `COMPARTMENT_MIDDLE_X` in x (the depth is not on the face); a drawer's goal (its box floor,
+    which moves with it) under its handle in y (a drawer's pull sits at its middle), in z halfway
+    between its face's bottom edge and its handle (the floor lies between them; a read drawer face
+    is often a stack's, its bottom edge too low), x the head's moved with the handle; a door's
+    hinge points on its face's
     edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair can be
     read as one wide face) on the edge away from its neighbour (`hinge_points`); a drawer
     the head took for a door gets a pull line through its handle along O's +x, `travel[k]` long
@@ -309,17 +320,21 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     for k, front in enumerate(fronts[:len(out)]):
         if front is None:
             continue
-        left, _ = shut_edges(front)
-        width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
-        out[k, g, 1:] = left + width / 2, front.corners[2:, 2].mean()
         door = (read_door_log_odds(front, sides[k] != 0, pair_log_odds, offset_log_odds)
                 + head_type_weight * float(door_margin[k]) > 0.0)
         if door:
+            left, _ = shut_edges(front)
+            width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
+            out[k, g] = COMPARTMENT_MIDDLE_X, left + width / 2, front.corners[2:, 2].mean()
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
-        elif PART_TYPES[int(types[k])] == "door":
+            types[k] = PART_TYPES.index("door")
+            continue
+        bottom = min(float(front.corners[2:, 2].mean()), float(out[k, h, 2]))
+        out[k, g, 1:] = out[k, h, 1], (bottom + out[k, h, 2]) / 2
+        if PART_TYPES[int(types[k])] == "door":
             out[k, a0] = out[k, h] - [q[k] * travel[k], 0.0, 0.0]
             out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
-        types[k] = PART_TYPES.index("door" if door else "drawer")
+        types[k] = PART_TYPES.index("drawer")
     return out, types
 
 

@@ -52,11 +52,13 @@ def test_perfect_prediction_scores_zero_and_a_shift_scores_the_shift(captures):
     assert [r.part for r in rows] == [p["index"] for p in capture.gt["parts"]]
     for r in rows:
         assert r.articulation_error == 0 and r.keypoint_rmse_cm == 0 and r.handle_trajectory_rmse_cm == 0
+        assert r.goal_error_cm == 0
         assert r.found and r.type_right and r.count_right
     shifted = score_parts(capture, _oracle((0.03, 0.0, 0.04), extra_slot=True)(capture, grid), "s", "x")
     for r in shifted:
         assert r.keypoint_rmse_cm == pytest.approx(5.0) and r.handle_error_cm == pytest.approx(5.0)
-        assert r.handle_trajectory_rmse_cm == pytest.approx(5.0)
+        assert r.handle_trajectory_rmse_cm == pytest.approx(5.0) and r.goal_error_cm == pytest.approx(5.0)
+        assert r.hinge_error_cm == pytest.approx(5.0) if r.part_type == "door" else np.isnan(r.hinge_error_cm)
         assert not r.count_right and r.parts_found == len(capture.gt["parts"]) + 1
 
 

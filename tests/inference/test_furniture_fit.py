@@ -14,6 +14,7 @@ from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_traject
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import observed_rays
 from nfr_drake.inference.furniture_fit import (
+    COMPARTMENT_MIDDLE_X,
     FurnitureFitConfig,
     HandleTerm,
     fit_furniture,
@@ -205,14 +206,17 @@ def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
 
 def test_read_fronts_give_the_types_hinges_and_goals():
     """A read door gets its hinge on its face's edge away from the handle, a read drawer the head
-    took for a door a pull line along +x through its handle; the goals move to the faces' middles
-    and bottom edges; a slot without a read front keeps the head's."""
+    took for a door a pull line along +x through its handle; a door's goal moves to its face's
+    middle and bottom edge at the compartment's middle depth, a drawer's under its handle halfway
+    down to its face's bottom edge (the head's depth kept); a slot without a read front keeps the
+    head's."""
     drawer = SightedFront(np.array([0.33, 0.0, 0.9]), 0.1, _face(-0.4, 0.4, 0.8, 1.0), 5)
     left_door = SightedFront(np.array([0.33, -0.05, 0.6]), 0.9, _face(-0.4, 0.0, 0.2, 0.78), 5)
     right_door = SightedFront(np.array([0.33, 0.05, 0.6]), 0.9, _face(0.0, 0.4, 0.2, 0.78), 5)
     side = SightedFront(np.array([0.33, 0.6, 0.5]), 0.2, _face(0.45, 0.75, 0.2, 1.0), 5)
     head = np.zeros((4, 4, 3))
     head[:, 0] = [f.p_O for f in (drawer, left_door, right_door, side)]
+    head[:, 1] = [0.3, 0.1, 0.7]  # the head's goals, off in every coordinate
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
@@ -222,7 +226,8 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
     np.testing.assert_allclose(placed[2, 2:], _face(0.0, 0.4, 0.2, 0.78)[[1, 3]])  # hinged right
-    np.testing.assert_allclose(placed[:3, 1, 1:], [[0.0, 0.8], [-0.2, 0.2], [0.2, 0.2]])  # goals
+    np.testing.assert_allclose(placed[:3, 1], [[0.3, 0.0, 0.85], [COMPARTMENT_MIDDLE_X, -0.2, 0.2],
+                                               [COMPARTMENT_MIDDLE_X, 0.2, 0.2]])  # goals
     np.testing.assert_array_equal(placed[3], head[3])
     # a pair read as one wide face: each door hinges on the edge away from its neighbour
     wide = _face(-0.4, 0.4, 0.2, 0.78)
