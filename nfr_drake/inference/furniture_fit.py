@@ -96,11 +96,6 @@ class FurnitureFitConfig:
     """`place_fronts`: the weight of the keypoint head's door margin (door logit minus drawer
     logit, about -12 to 12) added to the read door probability's log-odds (0: the read type
     alone)."""
-    drawer_out_m: float = 0.06
-    """`drawers_out`: a sighted drawer whose handle stands more than this in front of the
-    rearmost sighted handle is open by at least as much, m (inf: the field's q alone). Above the
-    spread of a shut piece's sighted handles (p90 2.9 cm, at most 4.8 cm over 74 pieces of the
-    pipeline's development seed 901)."""
     pair_type_log_odds: tuple[float, float] = (3.4, -0.4)
     """`place_fronts`: what being one of a pair (`pair_sides`) or not adds to a read front's door
     log-odds: the generator's log-likelihood ratios, door against drawer (`python
@@ -264,14 +259,12 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     sides = np.zeros(S)
     sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
     q = q.double().cpu().numpy()
-    travel = [drawer_travel(model, z_best, k) for k in range(S)]
     if any(f is not None for f in fronts):
+        travel = [drawer_travel(model, z_best, k) for k in range(S)]
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
         placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight,
                                      config.pair_type_log_odds,
                                      (config.offset_edges, config.offset_type_log_odds))
-    q = drawers_out(q, types, placed[:, SLOT_KEYPOINTS.index("handle")], np.any(shift != 0.0, axis=1),
-                    travel, config.drawer_out_m)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
                         handles, order, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -343,28 +336,6 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
             out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
         types[k] = PART_TYPES.index("drawer")
     return out, types
-
-
-def drawers_out(q: np.ndarray, types: np.ndarray, handles: np.ndarray, sighted: np.ndarray,
-                travel: list[float], out_m: float) -> np.ndarray:
-    """q (S,) with each sighted drawer's raised to how far its handle stands in front of the
-    rearmost sighted handle (handles (S, 3) in O, m; sighted (S,) bool: the slot is on a
-    sighting), over its travel (m), where that is more than `out_m`. A shut piece's fronts share
-    one plane and one handle style, and an open front only stands further out, so the rearmost
-    handle is at most as far out as a shut one's and the drawer is open by at least the
-    difference: where the field's q says less (an open drawer fitted shut), the difference is
-    the better bound. Handles behind O's middle (x <= 0: no front is there, O lies under the
-    middle of the carcass) are sightings of no front and not counted."""
-    front = sighted & (handles[:, 0] > 0.0)
-    if front.sum() < 2:
-        return q
-    out = q.copy()
-    rearmost = float(handles[front, 0].min())
-    for k in np.flatnonzero(front & (types == PART_TYPES.index("drawer"))):
-        ahead = float(handles[k, 0]) - rearmost
-        if ahead > out_m and travel[k] > 0.0:
-            out[k] = max(out[k], min(1.0, ahead / travel[k]))
-    return out
 
 
 def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool = False) -> np.ndarray:

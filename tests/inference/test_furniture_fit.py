@@ -17,7 +17,6 @@ from nfr_drake.inference.furniture_fit import (
     COMPARTMENT_MIDDLE_X,
     FurnitureFitConfig,
     HandleTerm,
-    drawers_out,
     fit_furniture,
     handle_shift,
     pair_hinges,
@@ -400,22 +399,3 @@ def test_furniture_handles_are_sighted_only_inside_the_kept_pixels(capture, monk
 def test_the_handle_options_are_checked(bad):
     with pytest.raises(ConfigError, match="handle_pairing"):
         FurnitureFitConfig(**bad)
-
-
-def test_a_drawer_standing_out_of_the_shut_plane_is_open_by_as_much():
-    """Slots: a shut drawer and door (x 0.40 m), a drawer 0.20 m further out fitted shut, a door
-    as far out (its q kept), a drawer 3 cm out (within the spread of shut handles: kept), an
-    unsighted drawer, and a sighting behind O's middle (no front: not the rearmost)."""
-    handles = np.array([[0.40, 0.0, 0.5], [0.40, 0.5, 0.5], [0.60, 0.0, 0.8], [0.60, 0.5, 0.8],
-                        [0.43, 0.0, 0.2], [0.90, 0.0, 0.1], [-0.8, 0.0, 0.5]])
-    types = np.array([PART_TYPES.index(t) for t in
-                      ("drawer", "door", "drawer", "door", "drawer", "drawer", "drawer")])
-    sighted = np.array([True, True, True, True, True, False, True])
-    q = np.array([0.0, 0.0, 0.05, 0.1, 0.0, 0.0, 0.0])
-    out = drawers_out(q, types, handles, sighted, [0.4] * 7, 0.06)
-    np.testing.assert_allclose(out, [0.0, 0.0, 0.5, 0.1, 0.0, 0.0, 0.0])
-    travel = [0.4] * 7
-    assert drawers_out(np.full(7, 0.9), types, handles, sighted, travel, 0.06)[2] == 0.9  # never lowered
-    np.testing.assert_array_equal(drawers_out(q, types, handles, sighted, travel, np.inf), q)
-    alone = sighted & (np.arange(7) == 2)  # no other sighted handle to compare with
-    np.testing.assert_array_equal(drawers_out(q, types, handles, alone, travel, 0.06), q)
