@@ -123,7 +123,7 @@ def run_furniture_case(case: Case, fitted: FittedModel, config: FurnitureFitConf
     (z, the starts' final codes start_z and losses start_losses), each true part's handle error
     (`part_errors`) and, as handle_error_m, the smallest of them."""
     capture, images = load_case(case)
-    result, fit = infer_parts(fitted, capture, config, np.linspace(0.0, 1.0, 2), images=images)
+    result, fit, _ = infer_parts(fitted, capture, config, np.linspace(0.0, 1.0, 2), images=images)
     errors = part_errors(capture.gt, fit.keypoints[:, SLOT_KEYPOINTS.index("handle")])
     return {**asdict(case), "key": case.key, "category": capture.gt.get("category"),
             "model_category": fitted.category, "z": result.z.tolist(),

@@ -66,20 +66,16 @@ def neural_field_methods(model_dir: Path, config: FitConfig,
 def furniture_method(fitted, config: FurnitureFitConfig) -> Method:
     """The furniture fit of a model with several parts (`inference.infer.infer_parts`, a
     `FittedModel`): a `PartsPrediction` with every slot swept over the q grid, the others held,
-    and every slot's confidence (refused below the calibration's threshold)."""
+    and every slot's confidence (refused below the calibration's threshold; None without one)."""
     from nfr_drake.inference.confidence import refusal
     from nfr_drake.inference.furniture_fit import slot_path
-    from nfr_drake.inference.infer import infer_parts, parts_confidence, sighted_handles
+    from nfr_drake.inference.infer import infer_parts
 
     def method(capture: CaptureSet, grid: np.ndarray) -> PartsPrediction:
         fitted.check_capture(capture)
-        result, fit = infer_parts(fitted, capture, config, grid)
+        result, fit, slots = infer_parts(fitted, capture, config, grid)
         paths = np.stack([slot_path(fitted.model, fit, k, grid) for k in range(fitted.num_slots)])
-        confidence = None
-        if fitted.confidence is not None:
-            images = capture.load_images()
-            confidence = parts_confidence(fitted, fit, capture, images,
-                                          sighted_handles(fitted, capture, images, config))[0]
+        confidence = slots if fitted.confidence is not None else None
         return PartsPrediction(
             fit.q, fit.exists, fit.types, fit.keypoints, paths, result.seconds,
             None if confidence is None else np.array([c["p_handle_within_2cm"] for c in confidence]),

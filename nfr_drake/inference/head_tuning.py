@@ -87,7 +87,7 @@ def _fit_one(job: tuple[Path, Path]) -> str:
     capture = read_capture_set(capture_dir)
     _worker_model.check_capture(capture)
     if _worker_model.num_slots > 1:
-        result, _ = infer_parts(_worker_model, capture, FurnitureFitConfig(), np.array([0.0]))
+        result, _, _ = infer_parts(_worker_model, capture, FurnitureFitConfig(), np.array([0.0]))
     else:
         result, _ = infer(_worker_model, capture, _worker_fit, np.array([0.0]))
     tmp = out_file.with_suffix(".tmp")

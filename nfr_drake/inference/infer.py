@@ -449,13 +449,14 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
 def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitConfig,
                 q_grid: np.ndarray, images: list[np.ndarray] | None = None, part: int | None = None,
                 masks: list[np.ndarray] | None = None, kept: list[np.ndarray] | None = None
-                ) -> tuple[FitResult, FurnitureFit]:
+                ) -> tuple[FitResult, FurnitureFit, list[dict]]:
     """`infer` for a model with several parts (furniture): the furniture fit (`fit_furniture`, with
     the handles the model's detector sights, `sighted_handles`, reported in `extra["handles"]`);
     the result lists the parts the field finds (`parts`, each swept over q_grid (N,) with the
     others held, each with its `confidence`, `parts_confidence`) and its single-part fields and
     `confidence` are those of `part` (default: the first part found, slot 0 when none is; a part
-    the field does not find adds a warning). `images`, `masks` and `kept` as in `infer` (the
+    the field does not find adds a warning); then the fit, and every slot's confidence (S,), the
+    slots the field does not find included. `images`, `masks` and `kept` as in `infer` (the
     handle detector counts only well inside `kept`, else inside `masks` when given). NfrDrakeError
     for a part outside the model's slots."""
     started = time.perf_counter()
@@ -491,7 +492,7 @@ def infer_parts(fitted: FittedModel, capture: CaptureSet, config: FurnitureFitCo
     result = result.with_part(chosen_part or {**part_json(fitted.model, fit, chosen, q_grid),
                                               "confidence": confidence[chosen]})
     result.seconds = time.perf_counter() - started
-    return result, fit
+    return result, fit, confidence
 
 
 def sighted_handles(fitted: FittedModel, capture: CaptureSet, images: list[np.ndarray],
@@ -860,7 +861,7 @@ def infer_command(
         if asked:
             raise NfrDrakeError(f"{', '.join(asked)}: not available for a model with several parts "
                                 f"({fitted.folder}) yet")
-        result, _ = infer_parts(fitted, cap, furniture_fit, q_grid, part=part)
+        result, _, _ = infer_parts(fitted, cap, furniture_fit, q_grid, part=part)
         found = "; ".join(f"{p['index']} {p['type']} q = {p['q']:.3f}" for p in result.parts) or "none"
         _write_result(result, out, f"parts found: {found}; part {result.part['index']} in the single-part "
                       f"fields; image loss {result.image_loss:.5f}, {result.seconds:.1f} s -> {out}")

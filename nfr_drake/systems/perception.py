@@ -343,7 +343,7 @@ class NfrPerceptionSystem(LeafSystem):
             if painting:
                 images, kept = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
                                                 pose.get("size"), self._background_rgb, self._paintings[0])
-            result, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
+            result, _, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
                                     self._part(context), masks if masked else None, kept)
         else:
             if painting:

@@ -362,12 +362,12 @@ def test_a_furniture_model_folder_loads_and_uses_its_handle_detector(furniture_m
     assert fitted.handle_detector is not None
     config = FurnitureFitConfig(starts=2, keep=1, steps=2, rays_per_step=32, lookup_rays=32)
     grid = np.linspace(0, 1, 3)
-    result, fit = infer_parts(fitted, capture, config, grid)
+    result, fit, _ = infer_parts(fitted, capture, config, grid)
     handles = result.extra["handles"]
     assert handles["count"] == len(fit.handles) == len(handles["p_O"])  # 2 views: none agree
-    off, _ = infer_parts(fitted, capture, replace(config, handle_detector=False), grid)
+    off, _, _ = infer_parts(fitted, capture, replace(config, handle_detector=False), grid)
     assert off.extra["handles"] == {"used": False, "why": "turned off"}
-    none, _ = infer_parts(FittedModel(furniture_model_folder), capture, config, grid)
+    none, _, _ = infer_parts(FittedModel(furniture_model_folder), capture, config, grid)
     assert none.extra["handles"]["why"] == "the model ships no handle detector"
 
 

@@ -54,8 +54,10 @@ def test_infer_writes_every_part_found_and_one_part_in_the_single_part_fields(
 def test_a_furniture_result_gives_the_planner_its_part(furniture_model_folder, capture_dir):
     fitted = FittedModel(furniture_model_folder)
     grid = np.linspace(0, 1, 4)
-    result, fit = infer_parts(fitted, read_capture_set(capture_dir), QUICK, grid)
+    result, fit, slots = infer_parts(fitted, read_capture_set(capture_dir), QUICK, grid)
     assert result.part["index"] == 0
+    assert len(slots) == fitted.num_slots  # every slot's confidence, those not found included
+    assert [slots[p["index"]] for p in result.parts] == [p["confidence"] for p in result.parts]
     # The tiny model has no calibration: the features of each part, no probability.
     assert result.confidence["p_handle_within_2cm"] is None
     assert len(result.confidence["per_view"]) == 3
@@ -76,7 +78,7 @@ def test_a_furniture_result_gives_the_planner_its_part(furniture_model_folder, c
 
 def test_a_part_the_field_does_not_find_is_given_with_a_warning(furniture_model_folder, capture_dir):
     fitted = FittedModel(furniture_model_folder)
-    result, _ = infer_parts(fitted, read_capture_set(capture_dir), QUICK, np.linspace(0, 1, 3), part=6)
+    result, _, _ = infer_parts(fitted, read_capture_set(capture_dir), QUICK, np.linspace(0, 1, 3), part=6)
     assert result.part == {"index": 6, "type": "door", "found": False}
     assert any("finds no part 6" in w for w in result.extra["warnings"])
     with pytest.raises(NfrDrakeError, match="out of range"):
