@@ -29,7 +29,7 @@ from nfr_drake.data.slot_dataset import SLOT_KEYPOINTS
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.eval.capture_variants import apply_variant
 from nfr_drake.eval.pipeline_eval import object_scenario
-from nfr_drake.inference.confidence import fit_features, part_features, render_views
+from nfr_drake.inference.confidence import fit_features
 from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig
 from nfr_drake.inference.infer import (
@@ -39,6 +39,7 @@ from nfr_drake.inference.infer import (
     infer_parts,
     object_masks,
     paint_background,
+    slot_features,
 )
 from nfr_drake.perception.handle_triangulation import TriangulatedHandle
 from nfr_drake.perception.object_pose import ObjectPoseError
@@ -138,24 +139,20 @@ def run_furniture_case(case: Case, fitted: FittedModel, config: FurnitureFitConf
 
 def case_part_features(line: dict, fitted: FittedModel) -> list[dict]:
     """Per true part of a furniture line's fit (`run_furniture_case`), as `infer_parts` computes
-    them: the fit's features (`fit_features`) and those of the part's slot (`part_features`),
+    them (`slot_features`): the fit's features and those of the part's slot,
     with `part` its index and `handle_error_m` its handle's error."""
-    capture, images = load_case(line)
-    z = torch.tensor(line["z"])
-    views = render_views(fitted.model, z, capture.frames, images)
-    features, _ = fit_features(fitted.model, z, capture.frames, images,
-                               np.array(line["start_losses"]), fitted.codes, fitted.code_scale, 0,
-                               None, views=views)
-    start_z = torch.tensor(line["start_z"])
     if "handle_order" not in line:
         raise NfrDrakeError(f"{line['key']}: a fit line written before the sightings' support was "
                             "kept; fit it again (remove the fits file or that line)")
+    capture, images = load_case(line)
     seen = line["sightings"]
     sighted = [TriangulatedHandle(np.array(seen["p_O"][i]), tuple(seen["views"][i]), seen["rms_px"][i],
                                   seen["sightings"][i]) for i in line["handle_order"]]
-    return [{"part": int(k), "handle_error_m": error, **features,
-             **part_features(fitted.model, z, start_z, int(k), capture.frames, views, sighted)}
-            for k, error in line["part_errors"].items()]
+    parts = [int(k) for k in line["part_errors"]]
+    features, _ = slot_features(fitted, torch.tensor(line["z"]), torch.tensor(line["start_z"]),
+                                np.array(line["start_losses"]), capture.frames, images, sighted, parts)
+    return [{"part": k, "handle_error_m": line["part_errors"][str(k)], **f}
+            for k, f in zip(parts, features, strict=True)]
 
 
 def room_scenario(category: str, seed: int, index: int, fit: FitConfig) -> Scenario:

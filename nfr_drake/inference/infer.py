@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal, get_args
@@ -650,15 +651,25 @@ def parts_confidence(fitted: FittedModel, fit: FurnitureFit, capture: CaptureSet
     (`confidence.part_features`, with the handles the detector sighted, `sighted` as
     `sighted_handles` gave them to the fit: `fit.handle_order` pairs them with the slots); and the
     per-view figures, shared by the parts."""
-    views = render_views(fitted.model, fit.z, capture.frames, images)
-    features, per_view = fit_features(
-        fitted.model, fit.z, capture.frames, images, fit.start_losses, fitted.codes,
-        fitted.code_scale, 0, None, views=views)
     in_fit_order = [sighted[i] for i in fit.handle_order] if sighted else []
-    parts = [calibrated(fitted.confidence, {**features, **part_features(
-        fitted.model, fit.z, fit.start_z, k, capture.frames, views, in_fit_order)}, [])
-        for k in range(fitted.num_slots)]
+    features, per_view = slot_features(fitted, fit.z, fit.start_z, fit.start_losses, capture.frames,
+                                       images, in_fit_order, range(fitted.num_slots))
+    parts = [calibrated(fitted.confidence, f, []) for f in features]
     return [{k: v for k, v in c.items() if k != "per_view"} for c in parts], per_view
+
+
+def slot_features(fitted: FittedModel, z: torch.Tensor, start_z: torch.Tensor, start_losses: np.ndarray,
+                  frames: list[CaptureFrame], images: list[np.ndarray],
+                  sighted: list[TriangulatedHandle], slots: Iterable[int]) -> tuple[list[dict], list[dict]]:
+    """The confidence features of each slot in `slots` of a furniture fit (code z, its starts'
+    final codes start_z and losses start_losses): the fit's (`fit_features`) and the slot's
+    (`part_features`, `sighted` the sighted handles in the fit's order, `FurnitureFit.handle_order`);
+    and the per-view figures, shared by the slots."""
+    views = render_views(fitted.model, z, frames, images)
+    features, per_view = fit_features(fitted.model, z, frames, images, start_losses, fitted.codes,
+                                      fitted.code_scale, 0, None, views=views)
+    return [{**features, **part_features(fitted.model, z, start_z, k, frames, views, sighted)}
+            for k in slots], per_view
 
 
 def _sighting_json(fitted: FittedModel, config: FitConfig, handle: TriangulatedHandle | None
