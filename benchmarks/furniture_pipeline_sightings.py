@@ -17,7 +17,9 @@ agree with the sightings of fronts and of no front, and how closely (RMS, px at 
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
 0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
 views one of the views' own sightings lies within 2 px (at 128 px) of its handle's projection:
-in 3 or more, the detector saw it and the triangulation lost it. Then, for the matched sightings
+in 3 or more, the detector saw it and the triangulation lost it; and what its grip is
+(`lost_grip`: a knob, one of a pair or not; a long bar, with a triangulated point on it or not;
+a shorter bar). Then, for the matched sightings
 of fronts that are not one of a pair (`pair_sides`), where the handle sits across its read face
 (`handle_offset`, in the bins of `FurnitureFitConfig.offset_edges`): doors and drawers per bin
 and the log-likelihood ratio, door against drawer (`FurnitureFitConfig.offset_type_log_odds`
@@ -82,6 +84,29 @@ def piece_outcome(true_handles: np.ndarray, sighted: np.ndarray, part: int, cm: 
     return "order", owner
 
 
+LOST_GRIPS = ("knob, one of a pair", "knob", "long bar, a point on it", "long bar", "shorter bar")
+"""`lost_grip`'s classes."""
+LONG_BAR_M = 0.3
+"""A bar at least this long is a long one, m."""
+PAIR_M = 0.12
+"""A knob with another front's handle within this is one of a pair, m."""
+
+
+def lost_grip(grip_half_length: float, true_handles: np.ndarray, k: int, handles: np.ndarray) -> str:
+    """The grip of front k (true handles (N, 3) in O) that no triangulated handle (handles (M, 3)
+    in O) is within `--cm` of, as one of `LOST_GRIPS`: a knob (no length), one of a pair when
+    another front's handle is within `PAIR_M`; a long bar (`LONG_BAR_M`), with a triangulated
+    point on it when one lies within its half length of its middle; a shorter bar."""
+    if grip_half_length == 0.0:
+        others = np.delete(true_handles, k, axis=0)
+        paired = len(others) and np.linalg.norm(others - true_handles[k], axis=1).min() < PAIR_M
+        return LOST_GRIPS[0] if paired else LOST_GRIPS[1]
+    if 2 * grip_half_length >= LONG_BAR_M:
+        on_it = len(handles) and np.linalg.norm(handles - true_handles[k], axis=1).min() <= grip_half_length
+        return LOST_GRIPS[2] if on_it else LOST_GRIPS[3]
+    return LOST_GRIPS[4]
+
+
 def views_seeing(frames: list[CaptureFrame], found: list, p_O: np.ndarray, px: float = 2.0) -> int:
     """In how many of the frames one of the sightings `found` (`HandleSighting`s) lies within `px`
     (at 128 px) of the projection of p_O (3,) in O."""
@@ -117,6 +142,7 @@ def main() -> None:
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
     unsighted_views: dict[str, list[int]] = {"door": [], "drawer": []}  # per unsighted front
+    lost_grips: list[str] = []  # per unsighted front, `lost_grip`
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -137,6 +163,8 @@ def main() -> None:
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         for k in set(range(len(truth))) - set(owner):
             unsighted_views[obj.fronts[k].kind].append(views_seeing(frames, found, truth[k]))
+            lost_grips.append(lost_grip(obj.fronts[k].grip_half_length, truth, k,
+                                        np.array([h.p_O for h in handles]).reshape(-1, 3)))
         sides = pair_sides(sighted, config.pair_gap_m)
         for i, k, side in zip(order, owner, sides, strict=True):
             rms_128 = handles[i].rms_px * 128.0 / frames[0].camera.height
@@ -177,6 +205,9 @@ def main() -> None:
         seen_in = np.array(seen, int)
         few = np.sum((seen_in >= 1) & (seen_in <= 2))
         print(f"| {kind}s | {len(seen_in)} | {np.sum(seen_in >= 3)} | {few} | {np.sum(seen_in == 0)} |")
+    print("\n| fronts without a triangulated handle, by grip | " + " | ".join(LOST_GRIPS) + " |\n|---|"
+          + "---|" * len(LOST_GRIPS))
+    print("| fronts | " + " | ".join(str(lost_grips.count(g)) for g in LOST_GRIPS) + " |")
     print_offset_types(typed, config)
     if args.csv_path is not None:
         write_rows_csv(args.csv_path, rows)
