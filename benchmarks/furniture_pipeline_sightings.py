@@ -2,7 +2,7 @@
 shut furniture, in the order the fit pairs them with slots, against the true fronts.
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
-       [--csv-path F] [--loose-share 0.6] [--loose-rms-px 1.2]
+       [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
@@ -128,6 +128,8 @@ def main() -> None:
     parser.add_argument("--cm", type=float, default=5.0,
                         help="a sighting within this of a true handle is that front's")
     parser.add_argument("--csv-path", type=Path)
+    parser.add_argument("--min-share", type=float, default=FURNITURE_MIN_SHARE,
+                        help="the share of the views a point projects into that must agree on it")
     parser.add_argument("--loose-share", type=float, default=FURNITURE_LOOSE[0])
     parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
     parser.add_argument("--offset-log-odds", type=float, nargs="+",
@@ -151,7 +153,7 @@ def main() -> None:
         frames = [CaptureFrame(Path(f"camera_{i}"), X_OW @ X_WC, camera)
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
         found = [s for i, m in enumerate(detector.detect(images)) for s in sightings(m, i)]
-        handles = triangulate_handles(frames, found, min_share=FURNITURE_MIN_SHARE,
+        handles = triangulate_handles(frames, found, min_share=args.min_share,
                                       loose_share=args.loose_share, loose_rms_px=args.loose_rms_px)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
