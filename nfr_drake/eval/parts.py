@@ -122,8 +122,8 @@ def parts_summary_table(results: Iterable[PartMetrics]) -> str:
     """Markdown table per set and method: pieces, parts, part count right (share of pieces),
     parts found and type right (share of parts), medians (and 90th percentiles) of the door and
     drawer articulation errors, keypoint RMSE, handle, goal and door hinge errors and handle
-    trajectory RMSE, the median
-    fit time, the parts refused by the fit confidence (`evaluate.refusal_cells`)."""
+    trajectory RMSE, the median fit time, the parts refused by the fit confidence
+    (`evaluate.refusal_cells`)."""
     results = list(results)
     lines = ["| set | method | pieces | parts | part count right | parts found | type right | "
              "door error (deg) | drawer error (cm) | keypoint RMSE (cm) | handle error (cm) | "

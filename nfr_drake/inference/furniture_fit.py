@@ -308,11 +308,10 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     which moves with it) under its handle in y (a drawer's pull sits at its middle), in z halfway
     between its face's bottom edge and its handle (the floor lies between them; a read drawer face
     is often a stack's, its bottom edge too low), x the head's moved with the handle; a door's
-    hinge points on its face's
-    edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair can be
-    read as one wide face) on the edge away from its neighbour (`hinge_points`); a drawer
-    the head took for a door gets a pull line through its handle along O's +x, `travel[k]` long
-    (m), shut at q[k] (the field's q, (S,)).
+    hinge points on its face's edge away from the handle, or for one of a pair (sides[k] != 0,
+    `pair_sides`: a pair can be read as one wide face) on the edge away from its neighbour
+    (`hinge_points`); a drawer the head took for a door gets a pull line through its handle
+    along O's +x, `travel[k]` long (m), shut at q[k] (the field's q, (S,)).
     A door's q stays the field's: the face's turn (`benchmarks/front_reading.py`) is 4-6 degrees
     off (median), and a shut door read as ajar would be opened short by as much."""
     out, types = keypoints.copy(), types.copy()
