@@ -98,11 +98,10 @@ def lost_grip(grip_half_length: float, true_handles: np.ndarray, k: int, handles
     another front's handle is within `PAIR_M`; a long bar (`LONG_BAR_M`), with a triangulated
     point on it when one lies within its half length of its middle; a shorter bar."""
     if grip_half_length == 0.0:
-        others = np.delete(true_handles, k, axis=0)
-        paired = len(others) and np.linalg.norm(others - true_handles[k], axis=1).min() < PAIR_M
-        return LOST_GRIPS[0] if paired else LOST_GRIPS[1]
+        others = np.linalg.norm(np.delete(true_handles, k, axis=0) - true_handles[k], axis=1)
+        return LOST_GRIPS[0] if np.any(others < PAIR_M) else LOST_GRIPS[1]
     if 2 * grip_half_length >= LONG_BAR_M:
-        on_it = len(handles) and np.linalg.norm(handles - true_handles[k], axis=1).min() <= grip_half_length
+        on_it = np.any(np.linalg.norm(handles - true_handles[k], axis=1) <= grip_half_length)
         return LOST_GRIPS[2] if on_it else LOST_GRIPS[3]
     return LOST_GRIPS[4]
 

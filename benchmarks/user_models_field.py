@@ -13,7 +13,8 @@ confidence's threshold is not applied, `min_confidence` 0), so that the table sh
 would have prevented. One row per model and field: what the fit read the part as (door or
 drawer), the handle's error at the observed state, for a door read as one how far its hinge line
 lies from the joint's axis (horizontally; both are upright), P(handle within 2 cm), whether the
-calibrated threshold refuses it, the simulated outcome, the fit's time.
+calibrated threshold refuses it, the simulated outcome (a failure with how far the joint ended
+from its target), the fit's time.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from fixtures.user_models import OPENS, random_models, write_models  # noqa: E40
 from nfr_drake.cpu import set_torch_threads  # noqa: E402
 from nfr_drake.errors import NfrDrakeError  # noqa: E402
 from nfr_drake.inference.confidence import refusal  # noqa: E402
+from nfr_drake.systems.articulation import joint_error_text  # noqa: E402
 from nfr_drake.systems.pipeline import run_scenario  # noqa: E402
 from nfr_drake.systems.scenario import Scenario  # noqa: E402
 from nfr_drake.systems.task import OPEN_TARGET  # noqa: E402
@@ -82,6 +84,9 @@ def run(model, field: str, image_size: int) -> list[str]:
     refused = "refused" if refusal(outcome.confidence) else "kept"
     task = outcome.task
     result = ("no plan" if task.plan is None else "opened" if task.success else "failed") if task else "-"
+    if result == "failed" and task.simulation is not None:
+        sim = task.simulation
+        result += f" ({joint_error_text(sim.joint_type, sim.joint_error)} off the target)"
     predicted = outcome.predicted
     read = {"closet": "door", "drawer": "drawer"}[predicted.category] if predicted else "-"
     hinge = "-"
