@@ -2,7 +2,7 @@
 shut furniture, in the order the fit pairs them with slots, against the true fronts.
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
-       [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2]
+       [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2] [--merged-px 4]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
@@ -53,6 +53,7 @@ from nfr_drake.perception.front_reading import SightedFront, handle_offset, read
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
+    FURNITURE_MERGED_PX,
     FURNITURE_MIN_SHARE,
     project,
     sightings,
@@ -131,6 +132,8 @@ def main() -> None:
                         help="the share of the views a point projects into that must agree on it")
     parser.add_argument("--loose-share", type=float, default=FURNITURE_LOOSE[0])
     parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
+    parser.add_argument("--merged-px", type=float, default=FURNITURE_MERGED_PX,
+                        help="triangulate_handles' merged_px (0: every view counts in a point's share)")
     parser.add_argument("--offset-log-odds", type=float, nargs="+",
                         default=list(FurnitureFitConfig.offset_type_log_odds))
     args = parser.parse_args()
@@ -153,7 +156,8 @@ def main() -> None:
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
         found = [s for i, m in enumerate(detector.detect(images)) for s in sightings(m, i)]
         handles = triangulate_handles(frames, found, min_share=args.min_share,
-                                      loose_share=args.loose_share, loose_rms_px=args.loose_rms_px)
+                                      loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
+                                      merged_px=args.merged_px)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         order = sighting_order(np.array([h.p_O for h in handles]).reshape(-1, 3), gap, fronts=fronts)
