@@ -383,11 +383,11 @@ the fronts' with 8-10 views in 294 of 339, at 0.72 px; the rule drops 10 of the 
 FURNITURE_MERGED_PX = 4.0
 """`merged_px` of `locate_handles`: a pair of doors' knobs 9-10 cm apart project 2-5 px apart in
 the oblique views, where the detector gives one sighting between them, and the second knob was
-lost for agreeing with fewer than half its views. Chosen on the pipeline's photos of the
-development seed 901 among 0, 3, 4 and 6 px (100 pieces, 376 handles; a handle found when a point
-lies within 5 cm): 349, 352, 353, 353 handles found, 9, 10, 10, 19 points of no front; on the
-evaluation seed 200, 4 px finds 258 against 253 of 290 handles, 14 against 12 points of no front
-(docs/FURNITURE.md, "Handle detector: several handles")."""
+lost for agreeing with fewer than half its views. Chosen among 0, 3, 4 and 6 px on the
+pipeline's photos of the development seed 901 (`python benchmarks/furniture_pipeline_sightings.py
+--seed 901 [--merged-px 0]`): 4 px sights 349 against 345 of 376 fronts, with 10 against 9
+points of no front (6 px: as many fronts, twice the points of no front); docs/FURNITURE.md,
+"Handle detector: several handles"."""
 
 
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
