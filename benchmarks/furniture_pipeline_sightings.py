@@ -16,8 +16,11 @@ the read type (door or drawer) of every matched sighting against its front's, an
 agree with the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
 0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
-views one of the views' own sightings lies within 2 px (at 128 px) of its handle's projection:
-in 3 or more, the detector saw it and the triangulation lost it; and what its grip is
+views the detector's handle probability exceeds 0.5 on its handle's pixels (the piece rendered
+with its labels from the same cameras: the detector found it there) and in how many one of the
+views' own sightings lies within 2 px (at 128 px) of its handle's projection (its votes point
+at its grip centre): in 3 or more, the detector saw it and the triangulation lost it; and what
+its grip is
 (`lost_grip`: a knob, one of a pair or not; a long bar, with a triangulated point on it or not;
 a shorter bar). Then, for the matched sightings
 of fronts that are not one of a pair (`pair_sides`), where the handle sits across its read face
@@ -41,6 +44,7 @@ import numpy as np
 import torch
 
 from nfr_drake.data.capture import CaptureFrame
+from nfr_drake.data.render import ObjectRenderer
 from nfr_drake.eval.pipeline_eval import object_scenario
 from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
@@ -49,6 +53,7 @@ from nfr_drake.inference.furniture_fit import (
     sighting_order,
 )
 from nfr_drake.jsonio import write_rows_csv
+from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.front_reading import SightedFront, handle_offset, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
@@ -120,6 +125,14 @@ def views_seeing(frames: list[CaptureFrame], found: list, p_O: np.ndarray, px: f
     return seen
 
 
+def views_detecting(maps: list, views: list, front: int) -> int:
+    """In how many of the views (`RenderedView`s of the photos' cameras) the detector's handle
+    probability (`HandleMap`s, one per view) exceeds 0.5 on a pixel of the front's handle label:
+    the detector found the handle there, whatever its votes say of where the grip centre is."""
+    return sum(bool((m.probability[(v.label == int(SemanticClass.HANDLE)) & (v.part == front)] > 0.5).any())
+               for m, v in zip(maps, views, strict=True))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=Path("models/furniture"))
@@ -145,7 +158,8 @@ def main() -> None:
     typed: list[tuple[str, SightedFront, bool]] = []  # per matched sighting: kind, read front, paired
     rows, types, sighted_kinds, kinds = [], Counter(), Counter(), Counter()
     agreement: dict[bool, list[tuple[int, float]]] = {True: [], False: []}  # a front's: (views, RMS px)
-    unsighted_views: dict[str, list[int]] = {"door": [], "drawer": []}  # per unsighted front
+    # per unsighted front: (views detecting its pixels, views with a sighting on its grip centre)
+    unsighted_views: dict[str, list[tuple[int, int]]] = {"door": [], "drawer": []}
     lost_grips: list[str] = []  # per unsighted front, `lost_grip`
     for index in args.objects:
         scenario = object_scenario(base, index)
@@ -154,7 +168,8 @@ def main() -> None:
         X_OW = np.linalg.inv(scenario.X_WO.GetAsMatrix4())
         frames = [CaptureFrame(Path(f"camera_{i}"), X_OW @ X_WC, camera)
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
-        found = [s for i, m in enumerate(detector.detect(images)) for s in sightings(m, i)]
+        handle_maps = detector.detect(images)
+        found = [s for i, m in enumerate(handle_maps) for s in sightings(m, i)]
         handles = triangulate_handles(frames, found, min_share=args.min_share,
                                       loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
                                       merged_px=args.merged_px)
@@ -166,8 +181,12 @@ def main() -> None:
         outcome, owner = piece_outcome(truth, sighted, scenario.part, args.cm)
         kinds.update(f.kind for f in obj.fronts)
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
-        for k in set(range(len(truth))) - set(owner):
-            unsighted_views[obj.fronts[k].kind].append(views_seeing(frames, found, truth[k]))
+        lost = sorted(set(range(len(truth))) - set(owner))
+        renderer = ObjectRenderer(obj, cameras[0]) if lost else None
+        labelled = [renderer.render(0.0, f.X_OC) for f in frames] if lost else []
+        for k in lost:
+            unsighted_views[obj.fronts[k].kind].append(
+                (views_detecting(handle_maps, labelled, k), views_seeing(frames, found, truth[k])))
             lost_grips.append(lost_grip(obj.fronts[k].grip_half_length, truth, k,
                                         np.array([h.p_O for h in handles]).reshape(-1, 3)))
         sides = pair_sides(sighted, config.pair_gap_m)
@@ -204,12 +223,14 @@ def main() -> None:
         rms = [r for _, r in agreement[own]]
         print(f"| {name} | {len(views)} | {np.sum(views <= 5)} | {np.sum((views >= 6) & (views <= 7))} | "
               f"{np.sum(views >= 8)} | {np.median(rms) if rms else float('nan'):.2f} |")
-    print("\n| fronts without a triangulated handle | how many | seen (a view's sighting within 2 px) "
-          "in 3+ views | in 1-2 | in none |\n|---|---|---|---|---|")
-    for kind, seen in unsighted_views.items():
-        seen_in = np.array(seen, int)
+    print("\n| fronts without a triangulated handle | how many | its pixels detected in 3+ views "
+          "| seen (a view's sighting within 2 px) in 3+ views | in 1-2 | in none |"
+          "\n|---|---|---|---|---|---|")
+    for kind, counts in unsighted_views.items():
+        detected, seen_in = np.array(counts, int).reshape(-1, 2).T
         few = np.sum((seen_in >= 1) & (seen_in <= 2))
-        print(f"| {kind}s | {len(seen_in)} | {np.sum(seen_in >= 3)} | {few} | {np.sum(seen_in == 0)} |")
+        print(f"| {kind}s | {len(seen_in)} | {np.sum(detected >= 3)} | {np.sum(seen_in >= 3)} | {few} "
+              f"| {np.sum(seen_in == 0)} |")
     print("\n| fronts without a triangulated handle, by grip | " + " | ".join(LOST_GRIPS) + " |\n|---|"
           + "---|" * len(LOST_GRIPS))
     print("| fronts | " + " | ".join(str(lost_grips.count(g)) for g in LOST_GRIPS) + " |")
