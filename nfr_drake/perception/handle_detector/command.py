@@ -14,6 +14,7 @@ def train_detector_command(data: list[Path], out: Path,
                            batch: int = DetectorTrainConfig.images_per_batch,
                            crop: int = DetectorTrainConfig.crop,
                            lr: float = DetectorTrainConfig.lr,
+                           offset_weight: float = DetectorTrainConfig.offset_weight,
                            channels: int = HandleDetectorConfig.channels,
                            fronts: bool = False, init: Path | None = None, tune: str = "fronts",
                            threads: int | None = None,
@@ -27,6 +28,7 @@ def train_detector_command(data: list[Path], out: Path,
         batch: crops per dataset per step.
         crop: crop size, px.
         lr: learning rate (cosine decay to 0).
+        offset_weight: weight of the offsets' Huber loss (px) beside the handle mask's loss.
         channels: channels of every convolution (the network's width).
         fronts: also learn the front outputs (furniture: door or drawer, face corners;
             `nfr_drake.perception.front_reading`).
@@ -39,7 +41,7 @@ def train_detector_command(data: list[Path], out: Path,
         allow_incomplete: train on the objects on disk when a dataset misses some.
     """
     config = DetectorTrainConfig(steps=steps, images_per_batch=batch, crop=crop, lr=lr,
-                                 threads=threads)
+                                 offset_weight=offset_weight, threads=threads)
     command = "nfr-drake train-handle-detector " + " ".join(sys.argv[2:])
     record = train_detector(list(data), out, config, HandleDetectorConfig(channels=channels, fronts=fronts),
                             resume=resume, command=command,
