@@ -385,9 +385,8 @@ FURNITURE_MERGED_PX = 4.0
 the oblique views, where the detector gives one sighting between them, and the second knob was
 lost for agreeing with fewer than half its views. Chosen among 0, 3, 4 and 6 px on the
 pipeline's photos of the development seed 901 (`python benchmarks/furniture_pipeline_sightings.py
---seed 901 [--merged-px 0]`): 4 px sights 349 against 345 of 376 fronts, with 10 against 9
-points of no front (6 px: as many fronts, twice the points of no front); docs/FURNITURE.md,
-"Handle detector: several handles"."""
+--seed 901 --merged-px M`): 0, 3, 4, 6 px sight 345, 348, 349, 349 of 376 fronts, with 9, 10,
+10, 19 points of no front; docs/FURNITURE.md, "Handle detector: several handles"."""
 
 
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
