@@ -45,6 +45,7 @@ from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
+from nfr_drake.objects.fronts import MAX_BOX_DEPTH, TRAVEL_FRACTION
 from nfr_drake.perception.front_reading import SightedFront, handle_offset, hinge_points, shut_edges
 
 
@@ -101,6 +102,13 @@ class FurnitureFitConfig:
     log-odds: the generator's log-likelihood ratios, door against drawer (`python
     benchmarks/handle_layout.py`: in a pair 163 of 538 doors and 7 of 728 drawers, +3.45 and -0.35;
     on 2000 pieces of seed 7 +3.43 and -0.39); (0, 0): not weighed."""
+    travel_from_depth: bool = True
+    """A drawer slot paired with a sighting travels as far as the carcass depth its handle implies
+    (`depth_travel`), not as far as the keypoint head says (`drawer_travel`)."""
+    travel_depth_share: float = 0.75
+    """`depth_travel`: a drawer's travel as a share of the carcass depth."""
+    handle_standoff_m: float = 0.04
+    """`depth_travel`: how far a shut drawer's handle stands in front of the carcass, m."""
     offset_edges: tuple[float, ...] = (0.1, 0.5)
     """`place_fronts`: bins of where a handle sits across its read face (`handle_offset`: 0 in the
     middle, 1 at a vertical edge), between these edges."""
@@ -120,6 +128,8 @@ class FurnitureFitConfig:
         if not 0.0 <= self.detail_fraction <= 1.0 or self.lr <= 0 or self.latent_weight < 0:
             raise ConfigError("FurnitureFitConfig: detail_fraction in [0, 1], lr > 0, "
                               "latent_weight >= 0")
+        if not 0.0 < self.travel_depth_share <= 1.0 or self.handle_standoff_m < 0:
+            raise ConfigError("FurnitureFitConfig: travel_depth_share in (0, 1], handle_standoff_m >= 0")
         if self.handle_weight < 0 or self.handle_scale_m <= 0:
             raise ConfigError("FurnitureFitConfig: handle_weight >= 0, handle_scale_m > 0")
         if self.handle_pairing not in ("order", "nearest") or min(self.column_gap_m, self.pair_gap_m) < 0:
@@ -137,7 +147,9 @@ class FurnitureFit:
     types (S,) index into PART_TYPES, keypoints (S, 4, 3) in O (`SLOT_KEYPOINTS`): the head's
     moved by shift (S, 3) in O, m (a slot's translation onto its sighted handle; zero if none),
     a pair's doors hinged outward (`pair_hinges`); image_loss
-    (MSE on the last step's rays), steps, seconds of wall time; handles (M, 3) the sighted handles
+    (MSE on the last step's rays), steps, seconds of wall time; travel (S,) how far each slot
+    slides as a drawer over q in [0, 1], m (`drawer_travel`, or `depth_travel` for a paired slot
+    with `FurnitureFitConfig.travel_from_depth`); handles (M, 3) the sighted handles
     in O the fit used (M = 0: none), handle_order (M,) their indices among the handles given to
     `fit_furniture` (handle k of the fit is the given handle handle_order[k]); the starts fitted
     together (`keep` of them): their final codes start_z (keep, 2 S + k) and image losses on the
@@ -152,6 +164,7 @@ class FurnitureFit:
     image_loss: float
     steps: int
     seconds: float
+    travel: np.ndarray
     handles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     handle_order: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     start_z: torch.Tensor | None = None
@@ -259,14 +272,18 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     sides = np.zeros(S)
     sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
     q = q.double().cpu().numpy()
+    travel = np.array([drawer_travel(model, z_best, k) for k in range(S)])
+    if config.travel_from_depth:
+        for k in range(len(handles)):
+            travel[k] = depth_travel(placed[k, SLOT_KEYPOINTS.index("handle"), 0], q[k],
+                                     config.travel_depth_share, config.handle_standoff_m)
     if any(f is not None for f in fronts):
-        travel = [drawer_travel(model, z_best, k) for k in range(S)]
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
         placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight,
                                      config.pair_type_log_odds,
                                      (config.offset_edges, config.offset_type_log_odds))
     return FurnitureFit(z_best, q, exists, types, placed, shift,
-                        float(per_code[best].detach()), config.steps, time.perf_counter() - t0,
+                        float(per_code[best].detach()), config.steps, time.perf_counter() - t0, travel,
                         handles, order, z.detach().clone(), per_code.detach().double().cpu().numpy())
 
 
@@ -454,11 +471,27 @@ def drawer_travel(model: NFRModel, z: torch.Tensor, slot: int) -> float:
     return travel if travel > 0.0 else float(np.linalg.norm(ends[1] - ends[0]))
 
 
+MAX_TRAVEL_M = TRAVEL_FRACTION * MAX_BOX_DEPTH
+"""The longest drawer travel of the training world, m (`depth_travel`'s cap)."""
+
+
+def depth_travel(handle_x: float, q: float, share: float, standoff_m: float) -> float:
+    """A drawer's travel over q in [0, 1], m, from the carcass depth its handle implies: O lies
+    under the middle of the carcass's footprint (docs/CONVENTIONS.md), so a carcass whose front
+    is at x_f is 2 x_f deep; the shut handle stands `standoff_m` in front of it and the drawer,
+    at q, `q` times the travel T further, T being `share` of the depth: T = 2 share (x - s - q T),
+    x the handle's x in O (m) at q; capped to 5 cm .. `MAX_TRAVEL_M`. The keypoint head's travel
+    (`drawer_travel`) is 7.7 cm off on the development fits, this 1.7 cm (docs/FURNITURE.md,
+    "How far a drawer slides")."""
+    travel = 2.0 * share * (handle_x - standoff_m) / (1.0 + 2.0 * share * q)
+    return float(np.clip(travel, 0.05, MAX_TRAVEL_M))
+
+
 def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray) -> np.ndarray:
     """Slot `slot`'s keypoints (N, 4, 3) in O along q_grid (N,) as the fit gives them, from where
     the fit put them at its q (`FurnitureFit.keypoints`), moved as a rigid front on the joint its
     type names: a drawer slides straight along O's +x (the front's normal, docs/CONVENTIONS.md),
-    its handle and goal by the head's travel (`drawer_travel`); a door's
+    its handle and goal by the fit's travel (`FurnitureFit.travel`); a door's
     handle turns about the line through its hinge points, 90 degrees over q in [0, 1], outward
     (`slot_trajectory`). The head's own sweep (`part_trajectory`) bends a drawer sideways and
     stops it short near the end of its travel, which jams a drawer pulled along it, and turns a
@@ -466,8 +499,7 @@ def slot_path(model: NFRModel, fit: FurnitureFit, slot: int, q_grid: np.ndarray)
     if PART_TYPES[int(fit.types[slot])] == "drawer":
         path = np.repeat(fit.keypoints[slot][None], len(q_grid), axis=0)
         handle, goal = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
-        travel = drawer_travel(model, fit.z, slot)
-        path[:, [handle, goal], 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * travel)[:, None]
+        path[:, [handle, goal], 0] += ((np.asarray(q_grid, float) - fit.q[slot]) * fit.travel[slot])[:, None]
     else:
         path = slot_trajectory("door", fit.keypoints[slot], fit.q[slot], q_grid)
     return path

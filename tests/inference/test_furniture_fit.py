@@ -15,8 +15,10 @@ from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import observed_rays
 from nfr_drake.inference.furniture_fit import (
     COMPARTMENT_MIDDLE_X,
+    MAX_TRAVEL_M,
     FurnitureFitConfig,
     HandleTerm,
+    depth_travel,
     fit_furniture,
     handle_shift,
     pair_hinges,
@@ -78,7 +80,8 @@ def test_fitted_keypoints_lie_on_each_slots_swept_path(capture):
 
 def test_a_drawer_slot_slides_straight_along_x_by_the_heads_travel(capture):
     """A slot typed drawer: handle and goal move along +x of O only, through where the fit put
-    them at its q, by the head's x travel over [0, 1]; a door slot turns about its hinge points
+    them at its q, by the fit's travel (a paired slot's from the depth its handle implies, an
+    unpaired one's the head's x travel over [0, 1]); a door slot turns about its hinge points
     (`slot_trajectory`) from there."""
     torch.manual_seed(0)
     model = NFRModel(TINY).eval().requires_grad_(False)
@@ -88,8 +91,12 @@ def test_a_drawer_slot_slides_straight_along_x_by_the_heads_travel(capture):
     grid = np.linspace(0, 1, 5)
     h, g = SLOT_KEYPOINTS.index("handle"), SLOT_KEYPOINTS.index("goal")
     fit.types[:2] = [PART_TYPES.index("drawer"), PART_TYPES.index("door")]
-    ends = part_trajectory(model, fit.z, 0, np.array([0.0, 1.0]))[:, h]
-    travel = ends[1, 0] - ends[0, 0] if ends[1, 0] > ends[0, 0] else np.linalg.norm(ends[1] - ends[0])
+    travel = depth_travel(0.6, fit.q[0], config.travel_depth_share, config.handle_standoff_m)
+    assert fit.travel[0] == pytest.approx(travel)
+    for k in range(1, len(fit.travel)):
+        ends = part_trajectory(model, fit.z, k, np.array([0.0, 1.0]))[:, h]
+        head = ends[1, 0] - ends[0, 0] if ends[1, 0] > ends[0, 0] else np.linalg.norm(ends[1] - ends[0])
+        assert fit.travel[k] == pytest.approx(head)
     path = slot_path(model, fit, 0, grid)
     for i in (h, g):
         np.testing.assert_allclose(path[:, i, 1:], np.repeat(fit.keypoints[0, i, 1:][None], 5, 0))
@@ -399,3 +406,15 @@ def test_furniture_handles_are_sighted_only_inside_the_kept_pixels(capture, monk
 def test_the_handle_options_are_checked(bad):
     with pytest.raises(ConfigError, match="handle_pairing"):
         FurnitureFitConfig(**bad)
+
+
+@pytest.mark.parametrize("q", [0.0, 0.3, 1.0])
+def test_depth_travel_inverts_the_drawer_it_assumes(q):
+    """A carcass 0.5 m deep (front at x = 0.25 in O) whose drawer travels 0.75 of it, the handle
+    4 cm in front: at any q the handle's x gives back the travel 0.375 m; a carcass deeper than
+    the training world's drawers gets `MAX_TRAVEL_M`, a handle behind the carcass front 5 cm."""
+    share, standoff = 0.75, 0.04
+    travel = share * 0.5
+    assert depth_travel(0.25 + standoff + q * travel, q, share, standoff) == pytest.approx(travel)
+    assert depth_travel(0.6 + standoff + q * 0.6, q, share, standoff) == pytest.approx(MAX_TRAVEL_M)
+    assert depth_travel(0.0, q, share, standoff) == pytest.approx(0.05)
