@@ -106,7 +106,9 @@ class FurnitureFitConfig:
     """A drawer slot paired with a sighting travels as far as the carcass depth its handle implies
     (`depth_travel`), not as far as the keypoint head says (`drawer_travel`)."""
     travel_depth_share: float = 0.75
-    """`depth_travel`: a drawer's travel as a share of the carcass depth."""
+    """`depth_travel`: a drawer's travel as a share of the carcass depth (with `handle_standoff_m`
+    chosen among 0.7, 0.75, 0.8 and 3, 4, 5 cm on the clean calibration captures' drawers;
+    docs/FURNITURE.md, "How far a drawer slides")."""
     handle_standoff_m: float = 0.04
     """`depth_travel`: how far a shut drawer's handle stands in front of the carcass, m."""
     offset_edges: tuple[float, ...] = (0.1, 0.5)
@@ -480,9 +482,8 @@ def depth_travel(handle_x: float, q: float, share: float, standoff_m: float) -> 
     under the middle of the carcass's footprint (docs/CONVENTIONS.md), so a carcass whose front
     is at x_f is 2 x_f deep; the shut handle stands `standoff_m` in front of it and the drawer,
     at q, `q` times the travel T further, T being `share` of the depth: T = 2 share (x - s - q T),
-    x the handle's x in O (m) at q; capped to 5 cm .. `MAX_TRAVEL_M`. The keypoint head's travel
-    (`drawer_travel`) is 7.7 cm off on the development fits, this 1.7 cm (docs/FURNITURE.md,
-    "How far a drawer slides")."""
+    x the handle's x in O (m) at q; capped to 5 cm .. `MAX_TRAVEL_M` (docs/FURNITURE.md, "How
+    far a drawer slides")."""
     travel = 2.0 * share * (handle_x - standoff_m) / (1.0 + 2.0 * share * q)
     return float(np.clip(travel, 0.05, MAX_TRAVEL_M))
 
