@@ -182,8 +182,10 @@ def main() -> None:
         kinds.update(f.kind for f in obj.fronts)
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         lost = sorted(set(range(len(truth))) - set(owner))
-        renderer = ObjectRenderer(obj, cameras[0]) if lost else None
-        labelled = [renderer.render(0.0, f.X_OC) for f in frames] if lost else []
+        labelled = []
+        if lost:
+            renderer = ObjectRenderer(obj, cameras[0])
+            labelled = [renderer.render(0.0, f.X_OC) for f in frames]
         for k in lost:
             unsighted_views[obj.fronts[k].kind].append(
                 (views_detecting(handle_maps, labelled, k), views_seeing(frames, found, truth[k])))

@@ -274,11 +274,11 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     sides = np.zeros(S)
     sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
     q = q.double().cpu().numpy()
-    travel = np.array([drawer_travel(model, z_best, k) for k in range(S)])
-    if config.travel_from_depth:
-        for k in range(len(handles)):
-            travel[k] = depth_travel(placed[k, SLOT_KEYPOINTS.index("handle"), 0], q[k],
-                                     config.travel_depth_share, config.handle_standoff_m)
+    handle = SLOT_KEYPOINTS.index("handle")
+    travel = np.array([depth_travel(placed[k, handle, 0], q[k], config.travel_depth_share,
+                                    config.handle_standoff_m)
+                       if config.travel_from_depth and k < len(handles) else drawer_travel(model, z_best, k)
+                       for k in range(S)])
     if any(f is not None for f in fronts):
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
         placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config.head_type_weight,
