@@ -406,7 +406,7 @@ def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap
 
 def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03,
                    fronts: list[SightedFront | None] | None = None,
-                   left_edge_m: float = 0.04) -> np.ndarray:
+                   left_edge_m: float = 0.04, centred_m: float = 0.03) -> np.ndarray:
     """Indices (M,) that put handles (M, 3) in O, m, in the order of their fronts as far as the
     handles tell it (the fronts' canonical order, `nfr_drake.objects.furniture.canonical_order`:
     by panel left edge, then top edge): columns left to right (by their leftmost handle's y;
@@ -414,8 +414,10 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
     fronts (M,) where given (None: not read), have their shut left edges (`shut_edges`) within
     `left_edge_m`: stacked doors with their handles on opposite sides), in a column top to
     bottom, handles within `level_m` in height left to right (a pair's doors, side by side
-    drawers). A door's handle lies near its free edge, not its left one, so without read fronts
-    some layouts come out in another order than the fronts'."""
+    drawers); a cell's right half goes after the column's other fronts, a right half being the
+    right one of two handles of one cell with a third handle of the column within `centred_m` in
+    y of their middle (`right_halves_last`). A door's handle lies near its free edge, not its
+    left one, so without read fronts some layouts come out in another order than the fronts'."""
     M = len(handles_O)
     column = np.arange(M)  # a union-find forest: each handle's parent
 
@@ -445,8 +447,29 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
                    and handles_O[members[b], 1] < handles_O[members[b - 1], 1]):
                 members[b - 1], members[b] = members[b], members[b - 1]
                 b -= 1
-        order += members
+        order += right_halves_last(handles_O, members, centred_m)
     return np.array(order, int)
+
+
+def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float,
+                      half_level_m: float = 0.2, half_gap_m: float = 0.05) -> list[int]:
+    """One column's handle indices (into handles_O (M, 3) in O, m) top to bottom, with each right
+    half moved after the others (in their order): a handle with another one at least
+    `half_gap_m` to its left in y and within `half_level_m` in height (one cell: side by side
+    drawers' pulls are level, a pair's doors put their handles at their own heights, 0.9-1.1 m
+    in the generator), and a third handle of the column within `centred_m` in y of the two's
+    middle (a full-width drawer's pull centred under or over the split). The right half's left
+    edge, the column's middle, puts it after every front of the column that starts at the
+    column's left edge (`nfr_drake.objects.furniture.canonical_order`)."""
+    y, z = handles_O[:, 1], handles_O[:, 2]
+
+    def right_half(j: int) -> bool:
+        return any(abs(z[k] - z[j]) < half_level_m and y[k] < y[j] - half_gap_m
+                   and any(abs(y[m] - (y[j] + y[k]) / 2) < centred_m for m in column if m not in (j, k))
+                   for k in column if k != j)
+
+    halves = [j for j in column if right_half(j)]
+    return [j for j in column if j not in halves] + halves
 
 
 @torch.no_grad()

@@ -190,6 +190,21 @@ def test_sighting_order_follows_the_fronts_canonical_order():
     assert sighting_order(np.zeros((0, 3)), 0.2).tolist() == []
 
 
+def test_a_split_cells_right_half_comes_after_its_columns_full_width_fronts():
+    """Two drawers side by side over two full-width drawers (a dresser): the right half's left
+    edge is the column's middle, so the canonical order is left half, the two full-width drawers,
+    right half; level handles without a pull centred between them keep their order (two
+    columns' fronts at one height by chance)."""
+    handles = np.array([[0.3, 0.16, 0.9],    # 3: right half
+                        [0.3, 0.0, 0.45],    # 2: lower full-width drawer
+                        [0.3, -0.16, 0.9],   # 0: left half
+                        [0.3, 0.0, 0.7]])    # 1: upper full-width drawer
+    assert sighting_order(handles, 0.2).tolist() == [2, 3, 1, 0]
+    assert sighting_order(handles, 0.2, centred_m=0.0).tolist() == [2, 0, 3, 1]  # the rule off
+    off_centre = handles + [[0, 0, 0], [0, 0.1, 0], [0, 0, 0], [0, 0.1, 0]]  # doors' handles
+    assert sighting_order(off_centre, 0.2).tolist() == [2, 0, 3, 1]
+
+
 NO_OFFSET_ODDS = ((), (0.0,))
 """`place_fronts`'s offset odds that weigh nothing."""
 
