@@ -46,7 +46,13 @@ from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.objects.fronts import MAX_BOX_DEPTH, TRAVEL_FRACTION
-from nfr_drake.perception.front_reading import SightedFront, handle_offset, hinge_points, shut_edges
+from nfr_drake.perception.front_reading import (
+    SightedFront,
+    face_width,
+    handle_offset,
+    hinge_points,
+    shut_edges,
+)
 
 
 @dataclass(frozen=True)
@@ -342,8 +348,7 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
                 + head_type_weight * float(door_margin[k]) > 0.0)
         if door:
             left, _ = shut_edges(front)
-            width = np.linalg.norm(front.corners[0, :2] - front.corners[1, :2])
-            out[k, g] = COMPARTMENT_MIDDLE_X, left + width / 2, front.corners[2:, 2].mean()
+            out[k, g] = COMPARTMENT_MIDDLE_X, left + face_width(front) / 2, front.corners[2:, 2].mean()
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
             types[k] = PART_TYPES.index("door")
             continue
@@ -406,13 +411,14 @@ def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap
 
 def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03,
                    fronts: list[SightedFront | None] | None = None,
-                   left_edge_m: float = 0.04, centred_m: float = 0.03) -> np.ndarray:
+                   edge_m: float = 0.04, centred_m: float = 0.03) -> np.ndarray:
     """Indices (M,) that put handles (M, 3) in O, m, in the order of their fronts as far as the
     handles tell it (the fronts' canonical order, `nfr_drake.objects.furniture.canonical_order`:
     by panel left edge, then top edge): columns left to right (by their leftmost handle's y;
     handles less than `column_gap_m` apart in y share one, and so do handles whose read fronts,
-    fronts (M,) where given (None: not read), have their shut left edges (`shut_edges`) within
-    `left_edge_m`: stacked doors with their handles on opposite sides), in a column top to
+    fronts (M,) where given (None: not read), have their shut left edges (`shut_edges`) and
+    right edges (one `face_width` further) within `edge_m`: stacked doors with their handles on
+    opposite sides; a face read as wide as two fronts shares one edge only), in a column top to
     bottom, handles within `level_m` in height left to right (a pair's doors, side by side
     drawers); a cell's right half goes after the column's other fronts, a right half being the
     right one of two handles of one cell with a third handle of the column within `centred_m` in
@@ -430,10 +436,11 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
     for a, b in zip(by_y[:-1], by_y[1:], strict=True):
         if handles_O[b, 1] - handles_O[a, 1] < column_gap_m:
             column[root(b)] = root(a)
-    lefts = [None if f is None else shut_edges(f)[0] for f in (fronts or [None] * M)]
+    spans = [None if f is None else shut_edges(f)[0] + np.array([0.0, face_width(f)])
+             for f in (fronts or [None] * M)]
     for a in range(M):
         for b in range(a + 1, M):
-            if lefts[a] is not None and lefts[b] is not None and abs(lefts[a] - lefts[b]) < left_edge_m:
+            if spans[a] is not None and spans[b] is not None and np.all(np.abs(spans[a] - spans[b]) < edge_m):
                 column[root(b)] = root(a)
     columns: dict[int, list[int]] = {}
     for i in by_y:

@@ -157,15 +157,18 @@ def handle_offset(front: SightedFront) -> float:
     return float(abs((front.p_O - front.corners.mean(0))[:2] @ across) / width / (width / 2))
 
 
+def face_width(front: SightedFront) -> float:
+    """The read face's width, m: its vertical edges' horizontal distance (the same at any
+    opening)."""
+    return float(np.linalg.norm(front.corners[[0, 2], :2].mean(0) - front.corners[[1, 3], :2].mean(0)))
+
+
 def shut_edges(front: SightedFront) -> tuple[float, float]:
     """The front's left edge y and top edge z in O, m, when shut: a drawer's face keeps its y and
-    z when pulled; a door hinged on its right edge has its left edge one face width (the corners'
-    horizontal distance, the same at any opening) to the left of its hinge."""
+    z when pulled; a door hinged on its right edge has its left edge one face width
+    (`face_width`) to the left of its hinge."""
     top = float(front.corners[:2, 2].mean())
     left_y = float(front.corners[[0, 2], 1].mean())
-    if not front.is_door:
+    if not front.is_door or _hinged_left(front):
         return left_y, top
-    if _hinged_left(front):
-        return left_y, top
-    width = np.linalg.norm(front.corners[[0, 2], :2].mean(0) - front.corners[[1, 3], :2].mean(0))
-    return float(front.corners[[1, 3], 1].mean() - width), top
+    return float(front.corners[[1, 3], 1].mean()) - face_width(front), top

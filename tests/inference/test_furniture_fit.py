@@ -216,7 +216,8 @@ def _face(y0, y1, z0, z1, x=0.3):
 def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
     """Two doors one above the other, the upper one's handle on the right and the lower one's on
     the left: by the handles alone they are two columns (the lower door first); their read fronts
-    share the left edge, so they are one column, top to bottom, as the fronts' canonical order."""
+    share both side edges, so they are one column, top to bottom, as the fronts' canonical order
+    (a face read as wide as two fronts shares its left edge only, and merges nothing)."""
     handles = np.array([[0.42, -0.33, 0.96],   # lower door, handle on its left
                         [0.42, 0.33, 1.13]])   # upper door, handle on its right
     lower = SightedFront(handles[0], 0.9, _face(-0.4, 0.4, 0.1, 0.9), 5)
@@ -224,6 +225,8 @@ def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
     assert sighting_order(handles, 0.2).tolist() == [0, 1]
     assert sighting_order(handles, 0.2, fronts=[lower, upper]).tolist() == [1, 0]
     assert sighting_order(handles, 0.2, fronts=[lower, None]).tolist() == [0, 1]  # one not read
+    too_wide = SightedFront(handles[1], 0.9, _face(-0.4, 1.2, 0.92, 1.7), 5)  # read with its neighbour
+    assert sighting_order(handles, 0.2, fronts=[lower, too_wide]).tolist() == [0, 1]
 
 
 def test_read_fronts_give_the_types_hinges_and_goals():
