@@ -5,7 +5,8 @@ docs/FURNITURE.md), and the fit pairs sighted handles with slots by putting them
 their fronts most likely have (`nfr_drake.inference.furniture_fit.sighting_order`). This runs it
 on the true shut handles of generated pieces, shuffled, and counts the fronts that get their own
 index and the pieces whose fronts all do, for several column gaps (0: every handle its own
-column). Then the doors of a pair (`pair_hinges`: a door's handle with another level one within
+column), with and without a split cell's right half put after its column's other fronts
+(`right_halves_last`). Then the doors of a pair (`pair_hinges`: a door's handle with another level one within
 the pair gap): how many doors are such, and for how many the hinge lies on the side away from
 that handle, as the fit then puts it; and how much being one of a pair says of a front's type:
 the log-likelihood ratio of door against drawer for a front in a pair and for one not
@@ -18,6 +19,7 @@ the log-likelihood ratio of door against drawer for a front in a pair and for on
 from __future__ import annotations
 
 import argparse
+import inspect
 import platform
 from datetime import date
 
@@ -35,21 +37,25 @@ def main() -> None:
     parser.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.3])
     parser.add_argument("--pair-gap", type=float, default=FurnitureFitConfig.pair_gap_m)
     args = parser.parse_args()
+    CENTRED_M = inspect.signature(sighting_order).parameters["centred_m"].default
     rng = np.random.default_rng(args.seed)
     objects = [sample_object("furniture", rng) for _ in range(args.pieces)]
     pieces = [obj.front_keypoints(0.0) for obj in objects]
     handles = [np.array([k["handle"] for k in kps]) for kps in pieces]
     print(f"{date.today()}, {platform.machine()}, {args.pieces} pieces of seed {args.seed}, "
           f"{sum(map(len, handles))} fronts")
-    print("| column gap (m) | fronts given their index | pieces with every front right |")
-    print("|---|---|---|")
+    print("| column gap (m) | split cells' right halves last | fronts given their index | "
+          "pieces with every front right |")
+    print("|---|---|---|---|")
     for gap in args.gaps:
-        right = []
-        for h in handles:
-            shuffled = rng.permutation(len(h))
-            right.append(shuffled[sighting_order(h[shuffled], gap)] == np.arange(len(h)))
-        fronts, whole = np.mean(np.concatenate(right)), np.mean([r.all() for r in right])
-        print(f"| {gap:.2f} | {fronts:.1%} | {whole:.1%} |")
+        for centred_m in (0.0, CENTRED_M):  # 0: no right half is moved (`right_halves_last`)
+            right = []
+            for h in handles:
+                shuffled = rng.permutation(len(h))
+                order = sighting_order(h[shuffled], gap, centred_m=centred_m)
+                right.append(shuffled[order] == np.arange(len(h)))
+            fronts, whole = np.mean(np.concatenate(right)), np.mean([r.all() for r in right])
+            print(f"| {gap:.2f} | {'yes' if centred_m else 'no'} | {fronts:.1%} | {whole:.1%} |")
     # pair_hinges on every piece's true slot keypoints, and with every door's hinge mirrored
     moved = fixed = doors = 0
     for kps in pieces:

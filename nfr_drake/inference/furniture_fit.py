@@ -459,7 +459,7 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
 
 
 def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float,
-                      half_level_m: float = 0.2, half_gap_m: float = 0.05) -> list[int]:
+                      half_level_m: float = 0.15, half_gap_m: float = 0.05) -> list[int]:
     """One column's handle indices (into handles_O (M, 3) in O, m) top to bottom, with each right
     half moved after the others (in their order): a handle with another one at least
     `half_gap_m` to its left in y and within `half_level_m` in height (one cell: side by side
@@ -467,7 +467,9 @@ def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float
     in the generator), and a third handle of the column within `centred_m` in y of the two's
     middle (a full-width drawer's pull centred under or over the split). The right half's left
     edge, the column's middle, puts it after every front of the column that starts at the
-    column's left edge (`nfr_drake.objects.furniture.canonical_order`)."""
+    column's left edge (`nfr_drake.objects.furniture.canonical_order`). `half_level_m` chosen
+    among 0.03, 0.1, 0.15 and 0.2 m on the development pipeline's photos (docs/FURNITURE.md,
+    "Sightings in the fronts' order")."""
     y, z = handles_O[:, 1], handles_O[:, 2]
 
     def right_half(j: int) -> bool:
