@@ -3,6 +3,7 @@ shut furniture, in the order the fit pairs them with slots, against the true fro
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
        [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2] [--merged-px 4]
+       [--half-levels 0 0.03 0.1 0.15 0.2]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
@@ -11,8 +12,10 @@ sighting is a front's when within `--cm` of its true handle; how many doors and 
 sighted. Each piece's part to open is then:
 "right" (slot k has front k's handle), or why not, first that applies: "part unsighted" (no
 sighting is the part's), "extra sighting" (a sighting is no front's), "other unsighted" (another
-front has none: later slots shift), "order" (every front sighted once, in another order). Also
-the read type (door or drawer) of every matched sighting against its front's, and how many views
+front has none: later slots shift), "order" (every front sighted once, in another order); the
+same for the orders of other `--half-levels` (`sighting_order`'s half_level_m, side by side:
+how far in height two handles may be one split cell's). Also the read type (door or drawer)
+of every matched sighting against its front's, and how many views
 agree with the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
 0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
@@ -90,6 +93,21 @@ def piece_outcome(true_handles: np.ndarray, sighted: np.ndarray, part: int, cm: 
     return "order", owner
 
 
+def print_order_variants(variants: dict[float, list[tuple[str, list[int]]]], fronts: list[int]) -> None:
+    """Per `sighting_order` half_level_m (variants: per piece its `piece_outcome`; fronts: per
+    piece its number of fronts): the part to open paired with its own handle, and of the pieces
+    whose fronts were each sighted once, those in the fronts' order."""
+    if not variants:
+        return
+    print("\n| half_level_m (m) | the part to open right | fronts each sighted once | in the fronts' order |"
+          "\n|---|---|---|---|")
+    for level, outcomes in variants.items():
+        once = [owner for (_, owner), n in zip(outcomes, fronts, strict=True)
+                if sorted(owner) == list(range(n))]
+        print(f"| {level:.2f} | {sum(o == 'right' for o, _ in outcomes)} | {len(once)} | "
+              f"{sum(owner == sorted(owner) for owner in once)} |")
+
+
 LOST_GRIPS = ("knob, one of a pair", "knob", "long bar, a point on it", "long bar", "shorter bar")
 """`lost_grip`'s classes."""
 LONG_BAR_M = 0.3
@@ -141,6 +159,9 @@ def main() -> None:
     parser.add_argument("--cm", type=float, default=5.0,
                         help="a sighting within this of a true handle is that front's")
     parser.add_argument("--csv-path", type=Path)
+    parser.add_argument("--half-levels", type=float, nargs="*", default=[0.0, 0.03, 0.1, 0.15, 0.2],
+                        help="sighting_order's half_level_m values compared side by side (0: no "
+                             "split cell's right half moved), m")
     parser.add_argument("--min-share", type=float, default=FURNITURE_MIN_SHARE,
                         help="the share of the views a point projects into that must agree on it")
     parser.add_argument("--loose-share", type=float, default=FURNITURE_LOOSE[0])
@@ -161,6 +182,7 @@ def main() -> None:
     # per unsighted front: (views detecting its pixels, views with a sighting on its grip centre)
     unsighted_views: dict[str, list[tuple[int, int]]] = {"door": [], "drawer": []}
     lost_grips: list[str] = []  # per unsighted front, `lost_grip`
+    variants: dict[float, list[tuple[str, list[int]]]] = {level: [] for level in args.half_levels}
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -175,10 +197,14 @@ def main() -> None:
                                       merged_px=args.merged_px)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
-        order = sighting_order(np.array([h.p_O for h in handles]).reshape(-1, 3), gap, fronts=fronts)
+        points = np.array([h.p_O for h in handles]).reshape(-1, 3)
+        order = sighting_order(points, gap, fronts=fronts)
         sighted = np.array([handles[i].p_O for i in order]).reshape(-1, 3)
         truth = np.array([f.keypoints(0.0)["handle"] for f in obj.fronts])
         outcome, owner = piece_outcome(truth, sighted, scenario.part, args.cm)
+        for level in args.half_levels:  # the same sightings in the order each variant gives
+            variant = points[sighting_order(points, gap, fronts=fronts, half_level_m=level)]
+            variants[level].append(piece_outcome(truth, variant, scenario.part, args.cm))
         kinds.update(f.kind for f in obj.fronts)
         sighted_kinds.update(obj.fronts[k].kind for k in set(owner) - {-1})
         lost = sorted(set(range(len(truth))) - set(owner))
@@ -212,6 +238,7 @@ def main() -> None:
         these = [r for r in rows if r["outcome"] == outcome]
         print(f"| {outcome} | {len(these)} | {sum(r['part_type'] == 'door' for r in these)} "
               f"| {sum(r['part_type'] == 'drawer' for r in these)} |")
+    print_order_variants(variants, [r["fronts"] for r in rows])
     owners = [int(k) for r in rows for k in r["owners"].split()]
     print(f"\nfronts sighted {sum(r['sighted_fronts'] for r in rows)} of {sum(r['fronts'] for r in rows)} "
           f"(doors {sighted_kinds['door']} of {kinds['door']}, drawers {sighted_kinds['drawer']} of "

@@ -411,7 +411,7 @@ def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap
 
 def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 0.03,
                    fronts: list[SightedFront | None] | None = None,
-                   edge_m: float = 0.04, centred_m: float = 0.03) -> np.ndarray:
+                   edge_m: float = 0.04, centred_m: float = 0.03, half_level_m: float = 0.15) -> np.ndarray:
     """Indices (M,) that put handles (M, 3) in O, m, in the order of their fronts as far as the
     handles tell it (the fronts' canonical order, `nfr_drake.objects.furniture.canonical_order`:
     by panel left edge, then top edge): columns left to right (by their leftmost handle's y;
@@ -421,9 +421,10 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
     opposite sides; a face read as wide as two fronts shares one edge only), in a column top to
     bottom, handles within `level_m` in height left to right (a pair's doors, side by side
     drawers); a cell's right half goes after the column's other fronts, a right half being the
-    right one of two handles of one cell with a third handle of the column within `centred_m` in
-    y of their middle (`right_halves_last`). A door's handle lies near its free edge, not its
-    left one, so without read fronts some layouts come out in another order than the fronts'."""
+    right one of two handles of one cell (within `half_level_m` in height) with a third handle of
+    the column within `centred_m` in y of their middle (`right_halves_last`; either 0: none). A
+    door's handle lies near its free edge, not its left one, so without read fronts some layouts
+    come out in another order than the fronts'."""
     M = len(handles_O)
     column = np.arange(M)  # a union-find forest: each handle's parent
 
@@ -454,12 +455,12 @@ def sighting_order(handles_O: np.ndarray, column_gap_m: float, level_m: float = 
                    and handles_O[members[b], 1] < handles_O[members[b - 1], 1]):
                 members[b - 1], members[b] = members[b], members[b - 1]
                 b -= 1
-        order += right_halves_last(handles_O, members, centred_m)
+        order += right_halves_last(handles_O, members, centred_m, half_level_m)
     return np.array(order, int)
 
 
-def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float,
-                      half_level_m: float = 0.15, half_gap_m: float = 0.05) -> list[int]:
+def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float, half_level_m: float,
+                      half_gap_m: float = 0.05) -> list[int]:
     """One column's handle indices (into handles_O (M, 3) in O, m) top to bottom, with each right
     half moved after the others (in their order): a handle with another one at least
     `half_gap_m` to its left in y and within `half_level_m` in height (one cell: side by side
@@ -467,9 +468,9 @@ def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float
     in the generator), and a third handle of the column within `centred_m` in y of the two's
     middle (a full-width drawer's pull centred under or over the split). The right half's left
     edge, the column's middle, puts it after every front of the column that starts at the
-    column's left edge (`nfr_drake.objects.furniture.canonical_order`). `half_level_m` chosen
-    among 0.03, 0.1, 0.15 and 0.2 m on the development pipeline's photos (docs/FURNITURE.md,
-    "Sightings in the fronts' order")."""
+    column's left edge (`nfr_drake.objects.furniture.canonical_order`). `sighting_order`'s
+    `half_level_m` was chosen among 0.03, 0.1, 0.15 and 0.2 m on the development pipeline's
+    photos (docs/FURNITURE.md, "Sightings in the fronts' order")."""
     y, z = handles_O[:, 1], handles_O[:, 2]
 
     def right_half(j: int) -> bool:
