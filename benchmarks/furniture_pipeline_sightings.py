@@ -3,7 +3,7 @@ shut furniture, in the order the fit pairs them with slots, against the true fro
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
        [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2] [--merged-px 4]
-       [--half-levels 0 0.03 0.1 0.15 0.2]
+       [--behind-m 0.05] [--half-levels 0 0.03 0.1 0.15 0.2]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
@@ -60,9 +60,11 @@ from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.front_reading import SightedFront, handle_offset, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_BEHIND_M,
     FURNITURE_LOOSE,
     FURNITURE_MERGED_PX,
     FURNITURE_MIN_SHARE,
+    in_front,
     project,
     sightings,
     triangulate_handles,
@@ -159,6 +161,9 @@ def main() -> None:
     parser.add_argument("--cm", type=float, default=5.0,
                         help="a sighting within this of a true handle is that front's")
     parser.add_argument("--csv-path", type=Path)
+    parser.add_argument("--behind-m", type=float, default=FURNITURE_BEHIND_M,
+                        help="points this far behind every other one are left out (`in_front`; "
+                             "inf: none), m")
     parser.add_argument("--half-levels", type=float, nargs="*", default=[0.0, 0.03, 0.1, 0.15, 0.2],
                         help="sighting_order's half_level_m values compared side by side (0: no "
                              "split cell's right half moved), m")
@@ -192,9 +197,9 @@ def main() -> None:
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
         handle_maps = detector.detect(images)
         found = [s for i, m in enumerate(handle_maps) for s in sightings(m, i)]
-        handles = triangulate_handles(frames, found, min_share=args.min_share,
-                                      loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
-                                      merged_px=args.merged_px)
+        handles = in_front(triangulate_handles(frames, found, min_share=args.min_share,
+                                               loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
+                                               merged_px=args.merged_px), args.behind_m)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         points = np.array([h.p_O for h in handles]).reshape(-1, 3)

@@ -389,13 +389,33 @@ pipeline's photos of the development seed 901 (`python benchmarks/furniture_pipe
 10, 19 points of no front; docs/FURNITURE.md, "Handle detector: several handles"."""
 
 
+FURNITURE_BEHIND_M = 0.05
+"""`in_front`'s margin in `locate_handles`, m: on the development pipeline's photos (seed 901,
+shut pieces) no point of a front lies more than 2.9 cm behind every other point (the
+triangulated depth's error), and no point of no front more than 2.2 cm (docs/FURNITURE.md,
+"Handle detector: several handles")."""
+
+
+def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[TriangulatedHandle]:
+    """The handles (p_O in O, whose +x is the fronts' outward normal) but those more than
+    `behind_m` behind every other one, where there are at least two others: a handle stands in
+    front of its front, and a front, shut or open, on or in front of the carcass's front plane,
+    so a point behind all the others (an edge inside the carcass that lines up across views) is
+    no handle."""
+    x = np.array([h.p_O[0] for h in handles])
+    return [h for i, h in enumerate(handles)
+            if len(handles) < 3 or x[i] >= np.delete(x, i).min() - behind_m]
+
+
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
                    min_share: float = FURNITURE_MIN_SHARE) -> list[TriangulatedHandle]:
-    """Every handle triangulated from per-frame handle maps, one per frame (furniture)."""
+    """Every handle triangulated from per-frame handle maps, one per frame (furniture), those
+    behind all the others left out (`in_front`)."""
     loose_share, loose_rms_px = FURNITURE_LOOSE
-    return triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
-                               min_share=min_share, loose_share=loose_share, loose_rms_px=loose_rms_px,
-                               merged_px=FURNITURE_MERGED_PX)
+    handles = triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
+                                  min_share=min_share, loose_share=loose_share, loose_rms_px=loose_rms_px,
+                                  merged_px=FURNITURE_MERGED_PX)
+    return in_front(handles, FURNITURE_BEHIND_M)
 
 
 def locate_handle(maps: list[HandleMap], frames: list[CaptureFrame]) -> TriangulatedHandle | None:

@@ -12,6 +12,8 @@ from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
     HandleMap,
     HandleSighting,
+    TriangulatedHandle,
+    in_front,
     inside_masks,
     sighting,
     sightings,
@@ -303,3 +305,16 @@ def test_views_where_an_earlier_handle_merges_with_a_point_leave_its_share():
     assert len(points) == 2
     assert min(np.linalg.norm(h.p_O - second) for h in points) < 0.005
     assert max(len(h.views) for h in points) == 10
+
+
+def test_a_point_behind_every_other_one_is_no_handle():
+    """A point 8 cm behind three handles on the fronts' plane is left out; one 2 cm behind stays,
+    and so do handles in front (open fronts); with fewer than two others nothing is left out."""
+    def handle(x):
+        return TriangulatedHandle(np.array([x, 0.0, 0.5]), (0, 1, 2), 0.5, 10)
+
+    shut = [handle(0.30), handle(0.31), handle(0.60)]  # the last one on an open front
+    kept = in_front(shut + [handle(0.22), handle(0.28)], behind_m=0.05)
+    assert [h.p_O[0] for h in kept] == [0.30, 0.31, 0.60, 0.28]
+    assert len(in_front([handle(0.30), handle(0.10)], behind_m=0.05)) == 2
+    assert in_front([], behind_m=0.05) == []
