@@ -6,12 +6,12 @@ their fronts most likely have (`nfr_drake.inference.furniture_fit.sighting_order
 on the true shut handles of generated pieces, shuffled, and counts the fronts that get their own
 index and the pieces whose fronts all do, for several column gaps (0: every handle its own
 column), with and without a split cell's right half put after its column's other fronts
-(`right_halves_last`). Then the doors of a pair (`pair_hinges`: a door's handle with another level one within
-the pair gap): how many doors are such, and for how many the hinge lies on the side away from
-that handle, as the fit then puts it; and how much being one of a pair says of a front's type:
-the log-likelihood ratio of door against drawer for a front in a pair and for one not
-(`FurnitureFitConfig.pair_type_log_odds`); and where each front's handle sits across its face
-(`FurnitureFitConfig.offset_type_log_odds`). No rendering: a few seconds.
+(`right_halves_last`). Then the doors of a pair (`pair_hinges`: a door's handle with another
+level one within the pair gap): how many doors are such, and for how many the hinge lies on the
+side away from that handle, as the fit then puts it; and how much being one of a pair says of a
+front's type: the log-likelihood ratio of door against drawer for a front in a pair and for one
+not (`FurnitureFitConfig.pair_type_log_odds`); and where each front's handle sits across its
+face (`FurnitureFitConfig.offset_type_log_odds`). No rendering: a few seconds.
 
     python benchmarks/handle_layout.py [--pieces 400] [--seed 123] [--gaps 0 0.1 0.2 0.3]
 """
@@ -37,7 +37,7 @@ def main() -> None:
     parser.add_argument("--gaps", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.3])
     parser.add_argument("--pair-gap", type=float, default=FurnitureFitConfig.pair_gap_m)
     args = parser.parse_args()
-    CENTRED_M = inspect.signature(sighting_order).parameters["centred_m"].default
+    centred = inspect.signature(sighting_order).parameters["centred_m"].default
     rng = np.random.default_rng(args.seed)
     objects = [sample_object("furniture", rng) for _ in range(args.pieces)]
     pieces = [obj.front_keypoints(0.0) for obj in objects]
@@ -48,7 +48,7 @@ def main() -> None:
           "pieces with every front right |")
     print("|---|---|---|---|")
     for gap in args.gaps:
-        for centred_m in (0.0, CENTRED_M):  # 0: no right half is moved (`right_halves_last`)
+        for centred_m in (0.0, centred):  # 0: no right half is moved (`right_halves_last`)
             right = []
             for h in handles:
                 shuffled = rng.permutation(len(h))
