@@ -14,9 +14,10 @@ sighted. Each piece's part to open is then:
 sighting is the part's), "extra sighting" (a sighting is no front's), "other unsighted" (another
 front has none: later slots shift), "order" (every front sighted once, in another order); the
 same for the orders of other `--half-levels` (`sighting_order`'s half_level_m, side by side:
-how far in height two handles may be one split cell's). Also the read type (door or drawer)
-of every matched sighting against its front's, and how many views
-agree with the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
+how far in height two handles may be one split cell's), and how far behind all the other
+points a front's point and a point of no front lie at most (`in_front`). Also the read type
+(door or drawer) of every matched sighting against its front's, and how many views agree with
+the sightings of fronts and of no front, and how closely (RMS, px at 128 px; the
 triangulation's loose-point rule, `FURNITURE_LOOSE`, is set by --loose-share and --loose-rms-px,
 0 and inf: off); and, for each front no triangulated handle is within `--cm` of, in how many
 views the detector's handle probability exceeds 0.5 on its handle's pixels (the piece rendered
@@ -188,6 +189,7 @@ def main() -> None:
     unsighted_views: dict[str, list[tuple[int, int]]] = {"door": [], "drawer": []}
     lost_grips: list[str] = []  # per unsighted front, `lost_grip`
     variants: dict[float, list[tuple[str, list[int]]]] = {level: [] for level in args.half_levels}
+    behind: dict[bool, list[float]] = {True: [], False: []}  # of a front's point / of no front's, m
     for index in args.objects:
         scenario = object_scenario(base, index)
         obj = scenario.sample_object()
@@ -222,6 +224,9 @@ def main() -> None:
                 (views_detecting(handle_maps, labelled, k), views_seeing(frames, found, truth[k])))
             lost_grips.append(lost_grip(obj.fronts[k].grip_half_length, truth, k,
                                         np.array([h.p_O for h in handles]).reshape(-1, 3)))
+        if len(sighted) >= 3:  # how far each point lies behind all the others (`in_front`)
+            for i, k in enumerate(owner):
+                behind[k >= 0].append(float(np.delete(sighted[:, 0], i).min() - sighted[i, 0]))
         sides = pair_sides(sighted, config.pair_gap_m)
         for i, k, side in zip(order, owner, sides, strict=True):
             rms_128 = handles[i].rms_px * 128.0 / frames[0].camera.height
@@ -244,6 +249,9 @@ def main() -> None:
         print(f"| {outcome} | {len(these)} | {sum(r['part_type'] == 'door' for r in these)} "
               f"| {sum(r['part_type'] == 'drawer' for r in these)} |")
     print_order_variants(variants, [r["fronts"] for r in rows])
+    print("\nthe furthest a point lies behind all the others (pieces with 3+ points): "
+          + ", ".join(f"of {name} {100 * max(behind[own], default=float('nan')):.1f} cm"
+                      for own, name in ((True, "a front"), (False, "no front"))))
     owners = [int(k) for r in rows for k in r["owners"].split()]
     print(f"\nfronts sighted {sum(r['sighted_fronts'] for r in rows)} of {sum(r['fronts'] for r in rows)} "
           f"(doors {sighted_kinds['door']} of {kinds['door']}, drawers {sighted_kinds['drawer']} of "

@@ -391,9 +391,10 @@ pipeline's photos of the development seed 901 (`python benchmarks/furniture_pipe
 
 FURNITURE_BEHIND_M = 0.05
 """`in_front`'s margin in `locate_handles`, m: on the development pipeline's photos (seed 901,
-shut pieces) no point of a front lies more than 2.9 cm behind every other point (the
-triangulated depth's error), and no point of no front more than 2.2 cm (docs/FURNITURE.md,
-"Handle detector: several handles")."""
+shut pieces; `python benchmarks/furniture_pipeline_sightings.py --seed 901`) no point of a
+front lies more than 2.3 cm behind all the other points (the triangulated depth's error), and
+no point of no front more than 2.2 cm (docs/FURNITURE.md, "Handle detector: several
+handles")."""
 
 
 def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[TriangulatedHandle]:
