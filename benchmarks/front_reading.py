@@ -11,7 +11,9 @@ takes: a door of a pair away from its neighbour, `pair_sides`; mean of hinge_top
 hinge_bottom, cm), whether the hinge is on the right side (the read hinge nearer the true hinge
 edge than the true free edge) and the door's angle read from its face (the top and bottom
 edges' turn, `opening_angle`; the fit keeps the field's q) against the true angle (deg); and the
-error of the shut left and top edges (`shut_edges`, cm).
+error of the shut left and top edges (`shut_edges`, cm); for true drawers, the read face's bottom
+edge less the true one (signed median, cm: the fit places a drawer's goal from its handle,
+`drawer_goal`, not from that edge).
 `--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five
 views: each read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its
 handle a white cross, the true faces thin green.
@@ -108,11 +110,12 @@ def main() -> None:
         cv2.imwrite(str(args.figure), cv2.cvtColor(np.concatenate(rows, 0), cv2.COLOR_RGB2BGR))
     print(f"{date.today()}, {platform.processor() or platform.machine()}, {args.detector}")
     print("| set | handles matched | type right | corner error (cm) | hinge error (cm) | hinge side "
-          "right | door angle error (deg) | left edge error (cm) | top edge error (cm) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "right | door angle error (deg) | left edge error (cm) | top edge error (cm) | "
+          "drawers' bottom edge, read less true (cm) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for root in args.sets:
         matched = type_right = side_right = doors = 0
-        corner_err, hinge_err, angle_err, left_err, top_err = [], [], [], [], []
+        corner_err, hinge_err, angle_err, left_err, top_err, drawer_bottom = [], [], [], [], [], []
         for d in capture_dirs(root):
             capture = read_capture_set(d)
             parts = capture.gt["parts"]
@@ -137,6 +140,9 @@ def main() -> None:
                 true_left, true_top = true_shut_edges(part)
                 left_err.append(100 * abs(left - true_left))
                 top_err.append(100 * abs(top - true_top))
+                if part["type"] == "drawer":
+                    bottom = front.corners[2:, 2].mean() - true_corners[2:, 2].mean()
+                    drawer_bottom.append(100 * float(bottom))
                 if part["type"] == "door" and front.is_door:
                     doors += 1
                     true_hinge = np.array([part["keypoints"]["hinge_top"], part["keypoints"]["hinge_bottom"]])
@@ -149,7 +155,7 @@ def main() -> None:
         med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
         print(f"| {root.name} | {matched} | {type_right / max(matched, 1):.3f} | {med(corner_err):.2f} | "
               f"{med(hinge_err):.2f} | {side_right} of {doors} | {med(angle_err):.1f} | "
-              f"{med(left_err):.2f} | {med(top_err):.2f} |")
+              f"{med(left_err):.2f} | {med(top_err):.2f} | {med(drawer_bottom):+.2f} |")
 
 
 if __name__ == "__main__":

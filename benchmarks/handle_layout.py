@@ -26,7 +26,13 @@ from datetime import date
 import numpy as np
 
 from nfr_drake.data.slot_dataset import PART_TYPES
-from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_hinges, pair_sides, sighting_order
+from nfr_drake.inference.furniture_fit import (
+    FurnitureFitConfig,
+    drawer_goal,
+    pair_hinges,
+    pair_sides,
+    sighting_order,
+)
 from nfr_drake.objects import sample_object
 
 
@@ -94,6 +100,18 @@ def main() -> None:
     print(f"in a pair: doors {d_pair} of {d_all}, drawers {w_pair} of {w_all}; log-likelihood ratio, "
           f"door against drawer: in a pair {np.log((d_pair / d_all) / (w_pair / w_all)):+.2f}, not "
           f"{np.log((1 - d_pair / d_all) / (1 - w_pair / w_all)):+.2f}")
+    below, depth_error = [], []  # a shut drawer's goal under its handle; drawer_goal's x error
+    for obj in objects:
+        for front in obj.fronts:
+            if front.kind == "drawer":
+                kp = front.keypoints(0.0)
+                below.append(kp["handle"][2] - kp["goal"][2])
+                depth_error.append(drawer_goal(np.asarray(kp["handle"]), front.joint_upper,
+                                               FurnitureFitConfig.handle_standoff_m, 0.0)[0] - kp["goal"][0])
+    print(f"drawers {len(below)}: the goal under the handle {np.median(below):.3f} m (median; p10-p90 "
+          f"{np.percentile(below, 10):.3f}-{np.percentile(below, 90):.3f}); drawer_goal's x with the true "
+          f"travel less the true x {np.median(depth_error):+.3f} m (median; |.| "
+          f"{np.median(np.abs(depth_error)):.3f})")
 
 
 def slot_keypoints(kps: list[dict]) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,7 @@ from nfr_drake.inference.furniture_fit import (
     FurnitureFitConfig,
     HandleTerm,
     depth_travel,
+    drawer_goal,
     fit_furniture,
     handle_shift,
     pair_hinges,
@@ -30,6 +31,8 @@ from nfr_drake.inference.furniture_fit import (
 )
 from nfr_drake.nfr.config import NFRModelConfig
 from nfr_drake.nfr.model import NFRModel
+from nfr_drake.objects import sample_object
+from nfr_drake.objects.fronts import TRAVEL_FRACTION
 from nfr_drake.perception.front_reading import SightedFront, handle_offset
 
 S = 8
@@ -209,6 +212,12 @@ NO_OFFSET_ODDS = ((), (0.0,))
 """`place_fronts`'s offset odds that weigh nothing."""
 
 
+def _reading(head_weight: float, pair_odds: tuple[float, float], offset_odds) -> FurnitureFitConfig:
+    """A fit config that weighs the head's door margin, a pair and the handle's offset so."""
+    return FurnitureFitConfig(head_type_weight=head_weight, pair_type_log_odds=pair_odds,
+                              offset_edges=offset_odds[0], offset_type_log_odds=offset_odds[1])
+
+
 def _face(y0, y1, z0, z1, x=0.3):
     return np.array([[x, y0, z1], [x, y1, z1], [x, y0, z0], [x, y1, z0]], float)
 
@@ -232,9 +241,9 @@ def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
 def test_read_fronts_give_the_types_hinges_and_goals():
     """A read door gets its hinge on its face's edge away from the handle, a read drawer the head
     took for a door a pull line along +x through its handle; a door's goal moves to its face's
-    middle and bottom edge at the compartment's middle depth, a drawer's under its handle halfway
-    down to its face's bottom edge (the head's depth kept); a slot without a read front keeps the
-    head's."""
+    middle and bottom edge at the compartment's middle depth, a drawer's from its handle
+    (`drawer_goal`: half its box's depth behind its front, under its handle); a slot without a
+    read front keeps the head's."""
     drawer = SightedFront(np.array([0.33, 0.0, 0.9]), 0.1, _face(-0.4, 0.4, 0.8, 1.0), 5)
     left_door = SightedFront(np.array([0.33, -0.05, 0.6]), 0.9, _face(-0.4, 0.0, 0.2, 0.78), 5)
     right_door = SightedFront(np.array([0.33, 0.05, 0.6]), 0.9, _face(0.0, 0.4, 0.2, 0.78), 5)
@@ -245,24 +254,46 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
-    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4), 0.1,
-                                      (0.0, 0.0), NO_OFFSET_ODDS)
+    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4),
+                                      _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
     np.testing.assert_allclose(placed[1, 2:], _face(-0.4, 0.0, 0.2, 0.78)[[0, 2]])  # hinged left
     np.testing.assert_allclose(placed[2, 2:], _face(0.0, 0.4, 0.2, 0.78)[[1, 3]])  # hinged right
-    np.testing.assert_allclose(placed[:3, 1], [[0.3, 0.0, 0.85], [COMPARTMENT_MIDDLE_X, -0.2, 0.2],
+    below = FurnitureFitConfig.drawer_goal_below_handle_m
+    box_half = 0.3 / (2 * TRAVEL_FRACTION)  # the travel is the box's TRAVEL_FRACTION
+    np.testing.assert_allclose(placed[:3, 1], [[0.33 - 0.04 - box_half, 0.0, 0.9 - below],
+                                               [COMPARTMENT_MIDDLE_X, -0.2, 0.2],
                                                [COMPARTMENT_MIDDLE_X, 0.2, 0.2]])  # goals
     np.testing.assert_array_equal(placed[3], head[3])
     # a pair read as one wide face: each door hinges on the edge away from its neighbour
     wide = _face(-0.4, 0.4, 0.2, 0.78)
     pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
     placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
-                             np.zeros(2), 0.1, (0.0, 0.0), NO_OFFSET_ODDS)
+                             np.zeros(2), _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
-    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2), 0.1,
-                               (0.0, 0.0), NO_OFFSET_ODDS)
+    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2),
+                               _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
+
+
+def test_a_drawers_goal_from_its_handle_matches_the_generators_drawers():
+    """`drawer_goal` from a generated drawer's true handle and travel lands on its true goal: in x
+    within 3 cm (the handle's standoff varies with the handle), in y under the handle, in z within
+    the spread of how far the box floor lies under the pull; at any opening, as the drawer moves
+    its goal with it."""
+    rng = np.random.default_rng(3)
+    drawers = [f for _ in range(30) for f in sample_object("furniture", rng).fronts if f.kind == "drawer"]
+    assert len(drawers) > 20
+    config = FurnitureFitConfig()
+    for front in drawers:
+        for q in (0.0, 0.6):
+            kp = front.keypoints(q)
+            goal = drawer_goal(np.asarray(kp["handle"]), front.joint_upper, config.handle_standoff_m,
+                               config.drawer_goal_below_handle_m)
+            assert abs(goal[0] - kp["goal"][0]) < 0.03
+            assert goal[1] == pytest.approx(kp["goal"][1], abs=0.01)
+            assert abs(goal[2] - kp["goal"][2]) < 0.1
 
 
 def test_a_read_type_weighs_the_heads_door_margin():
@@ -278,7 +309,7 @@ def test_a_read_type_weighs_the_heads_door_margin():
 
     def read(margin, weight, sides=(0.0, 0.0), pair_log_odds=(0.0, 0.0)):
         read_types = place_fronts(head, types, q, [0.3] * 2, [unsure, sure], np.array(sides),
-                                  np.array(margin, float), weight, pair_log_odds, NO_OFFSET_ODDS)[1]
+                                  np.array(margin, float), _reading(weight, pair_log_odds, NO_OFFSET_ODDS))[1]
         return [PART_TYPES[t] for t in read_types]
 
     assert read([5.0, 5.0], 0.1) == ["door", "drawer"]
@@ -311,7 +342,7 @@ def test_a_lone_front_whose_handle_sits_by_an_edge_is_more_likely_a_door():
 
     def read(sides, offset_odds):
         read_types = place_fronts(head, np.zeros(2, int), np.zeros(2), [0.3] * 2, [by_edge, centred],
-                                  np.array(sides), np.zeros(2), 0.0, (0.0, 0.0), offset_odds)[1]
+                                  np.array(sides), np.zeros(2), _reading(0.0, (0.0, 0.0), offset_odds))[1]
         return [PART_TYPES[t] for t in read_types]
 
     assert read([0.0, 0.0], NO_OFFSET_ODDS) == ["drawer", "drawer"]
