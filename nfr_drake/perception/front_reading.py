@@ -8,9 +8,10 @@ projections of its face's corners (`nfr_drake.objects.articulated.FACE_CORNERS`:
 top right, bottom left, bottom right as seen from the front). For a handle triangulated in 3D
 (`nfr_drake.perception.handle_triangulation`), each view that agreed on it is read around the
 handle's projection and its front's corners refined from the votes of the pixels that agree
-(`FrontMap.read`); the door probability is the views' mean and each corner is the point
-nearest the rays through the views' corners, the four then squared up into an upright
-rectangle (`read_front`, `upright`).
+(`FrontMap.read`); the door probability is the views' mean and each corner the median of the
+points nearest each two views' rays through it (`median_of_pairs`: a view that misreads a
+corner moves it little), the four then squared up into an upright rectangle (`read_front`,
+`upright`).
 
 A door's hinge is the vertical edge of its face away from the handle (`hinge_points`), and the
 front's place in the canonical order (left edge, then top edge, shut) follows from its corners
@@ -116,8 +117,19 @@ def read_front(handle: TriangulatedHandle, maps: list[FrontMap], frames: list[Ca
     corners = np.empty((4, 3))
     for c in range(4):
         rays = [ray(frames[f], uv[c]) for f, uv in votes]
-        corners[c] = nearest_point(np.array([o for o, _ in rays]), np.array([d for _, d in rays]))
+        corners[c] = median_of_pairs(np.array([o for o, _ in rays]), np.array([d for _, d in rays]))
     return SightedFront(np.asarray(handle.p_O, float), float(np.mean(doors)), upright(corners), len(votes))
+
+
+def median_of_pairs(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The coordinate-wise median (3,) of the points nearest each two of the rays (n, 3), n >= 2
+    (`nearest_point`): the views' corner readings are a few pixels off in most views and far off
+    in a few (a neighbour's edge, a stack's bottom), and the points nearest all rays at once
+    follow the far ones (`python benchmarks/front_reading.py`, docs/FURNITURE.md "Fronts read by
+    the detector")."""
+    pairs = [nearest_point(origins[[i, j]], directions[[i, j]])
+             for i in range(len(origins)) for j in range(i + 1, len(origins))]
+    return np.median(np.array(pairs), axis=0)
 
 
 def upright(corners: np.ndarray) -> np.ndarray:
