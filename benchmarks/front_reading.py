@@ -10,10 +10,10 @@ for true doors read as doors, the hinge points' error (`hinge_points`, on the si
 takes: a door of a pair away from its neighbour, `pair_sides`; mean of hinge_top and
 hinge_bottom, cm), whether the hinge is on the right side (the read hinge nearer the true hinge
 edge than the true free edge) and the door's angle read from its face (the top and bottom
-edges' turn, `opening_angle`; the fit keeps the field's q) against the true angle (deg); and the
-error of the shut left and top edges (`shut_edges`, cm); for true drawers, the read face's bottom
-edge less the true one (signed median, cm: the fit places a drawer's goal from its handle,
-`drawer_goal`, not from that edge).
+edges' turn, `face_turn`; the fit takes it where it exceeds `read_turn_min_deg`) against the
+true angle (deg); and the error of the shut left and top edges (`shut_edges`, cm); for true
+drawers, the read face's bottom edge less the true one (signed median, cm: the fit places a
+drawer's goal from its handle, `drawer_goal`, not from that edge).
 `--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five
 views: each read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its
 handle a white cross, the true faces thin green.
@@ -32,7 +32,7 @@ import torch
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_sides
-from nfr_drake.perception.front_reading import SightedFront, hinge_points, read_front, shut_edges
+from nfr_drake.perception.front_reading import face_turn, hinge_points, read_front, shut_edges
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handles, project
 
@@ -73,14 +73,6 @@ def figure_row(detector, capture_dir: Path) -> np.ndarray:
                                cv2.MARKER_CROSS, 12, 2)
         tiles.append(tile)
     return np.concatenate(tiles, 1)
-
-
-def opening_angle(front: SightedFront) -> float:
-    """How far the face has turned from shut about a vertical axis, rad in [0, pi/2]: the mean
-    turn of its top and bottom edges in the horizontal plane (shut, they run along y; doors
-    open outward, so the sign needs no hinge)."""
-    edges = front.corners[[1, 3], :2] - front.corners[[0, 2], :2]
-    return float(np.mean(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1]))))
 
 
 def true_shut_edges(part: dict) -> tuple[float, float]:
@@ -151,7 +143,7 @@ def main() -> None:
                     free = true_corners[[1, 3]] if np.allclose(true_corners[[0, 2]], true_hinge, atol=1e-6) \
                         else true_corners[[0, 2]]
                     side_right += np.linalg.norm(read - true_hinge) < np.linalg.norm(read - free)
-                    angle_err.append(abs(np.degrees(opening_angle(front)) - 90.0 * part["q"]))
+                    angle_err.append(abs(np.degrees(face_turn(front)) - 90.0 * part["q"]))
         med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
         print(f"| {root.name} | {matched} | {type_right / max(matched, 1):.3f} | {med(corner_err):.2f} | "
               f"{med(hinge_err):.2f} | {side_right} of {doors} | {med(angle_err):.1f} | "

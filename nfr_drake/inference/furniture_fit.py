@@ -45,9 +45,10 @@ from nfr_drake.inference.fit import ObservedRays
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
-from nfr_drake.objects.fronts import MAX_BOX_DEPTH, TRAVEL_FRACTION
+from nfr_drake.objects.fronts import DOOR_OPENING, MAX_BOX_DEPTH, TRAVEL_FRACTION
 from nfr_drake.perception.front_reading import (
     SightedFront,
+    face_turn,
     face_width,
     handle_offset,
     hinge_points,
@@ -122,6 +123,10 @@ class FurnitureFitConfig:
     generator's median (`python benchmarks/handle_layout.py`: over the 728 drawers of 400 pieces of
     seed 123, p10-p90 0.026-0.131; with `handle_standoff_m` and the true travel, `drawer_goal`'s
     x is 1.2 cm in front of the true goal's, median)."""
+    read_turn_min_deg: float = 15.0
+    """`place_fronts`: a read door whose face has turned more than this from shut (`face_turn`),
+    degrees, takes that turn as its q (inf: the field's q always). Chosen among 5-25 on the doors
+    of the calibration captures (docs/FURNITURE.md, "A door's opening from its read face")."""
     offset_edges: tuple[float, ...] = (0.1, 0.5)
     """`place_fronts`: bins of where a handle sits across its read face (`handle_offset`: 0 in the
     middle, 1 at a vertical edge), between these edges."""
@@ -292,7 +297,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                        for k in range(S)])
     if any(f is not None for f in fronts):
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
-        placed, types = place_fronts(placed, types, q, travel, fronts, sides, margin, config)
+        placed, types, q = place_fronts(placed, types, q, travel, fronts, sides, margin, config)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0, travel,
                         handles, order, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -323,8 +328,8 @@ in front of the carcass; docs/FURNITURE.md, "Where the goal lies")."""
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
-                 config: FurnitureFitConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Slot keypoints (S, 4, 3) in O and types (S,) with what the detector read of each paired
+                 config: FurnitureFitConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slot keypoints (S, 4, 3) in O, types (S,) and q (S,) with what the detector read of each paired
     slot's front (fronts[k] for slot k; None: the field's): its type (a door where
     `read_door_log_odds` with the config's pair and offset odds, one of a pair where sides[k] != 0,
     plus `head_type_weight` times the keypoint head's door margin, door_margin (S,) its door logit
@@ -337,9 +342,10 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     from the read face's bottom edge, which is read 4 cm too low, median); a drawer the head took
     for a door gets a pull line through its handle along O's +x, `travel[k]` long (m), shut at
     q[k] (the field's q, (S,)).
-    A door's q stays the field's: the face's turn (`benchmarks/front_reading.py`) is 4-6 degrees
-    off (median), and a shut door read as ajar would be opened short by as much."""
-    out, types = keypoints.copy(), types.copy()
+    A door's q is the field's unless its face is read turned more than `read_turn_min_deg`
+    (`face_turn`): the field's q is right on shut doors and often far off on open ones, the read
+    turn a few degrees off either way, and a shut door read ajar would be opened short by as much."""
+    out, types, q = keypoints.copy(), types.copy(), np.array(q, float)
     h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
     offset_log_odds = (config.offset_edges, config.offset_type_log_odds)
     for k, front in enumerate(fronts[:len(out)]):
@@ -352,6 +358,8 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
             out[k, g] = COMPARTMENT_MIDDLE_X, left + face_width(front) / 2, front.corners[2:, 2].mean()
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
             types[k] = PART_TYPES.index("door")
+            if (turn := face_turn(front)) > np.radians(config.read_turn_min_deg):
+                q[k] = turn / DOOR_OPENING
             continue
         out[k, g] = drawer_goal(out[k, h], travel[k], config.handle_standoff_m,
                                 config.drawer_goal_below_handle_m)
@@ -359,7 +367,7 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
             out[k, a0] = out[k, h] - [q[k] * travel[k], 0.0, 0.0]
             out[k, a1] = out[k, a0] + [travel[k], 0.0, 0.0]
         types[k] = PART_TYPES.index("drawer")
-    return out, types
+    return out, types, q
 
 
 def drawer_goal(handle: np.ndarray, travel: float, standoff_m: float, below_m: float) -> np.ndarray:

@@ -169,6 +169,14 @@ def handle_offset(front: SightedFront) -> float:
     return float(abs((front.p_O - front.corners.mean(0))[:2] @ across) / width / (width / 2))
 
 
+def face_turn(front: SightedFront) -> float:
+    """How far the read face has turned from shut about a vertical axis, rad in [0, pi/2]: the
+    mean turn of its top and bottom edges in the horizontal plane (shut, they run along y; doors
+    open outward, so the sign needs no hinge)."""
+    edges = front.corners[[1, 3], :2] - front.corners[[0, 2], :2]
+    return float(np.mean(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1]))))
+
+
 def face_width(front: SightedFront) -> float:
     """The read face's width, m: its vertical edges' horizontal distance (the same at any
     opening)."""

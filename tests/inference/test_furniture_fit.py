@@ -254,7 +254,7 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     types = np.array([PART_TYPES.index(t) for t in ("door", "door", "drawer", "drawer")])
     q = np.array([0.5, 0.3, 0.3, 0.2])
     read = [drawer, left_door, right_door, None]
-    placed, read_types = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4),
+    placed, read_types, _ = place_fronts(head, types, q, [0.3] * 4, read, np.zeros(4), np.zeros(4),
                                       _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     assert [PART_TYPES[t] for t in read_types] == ["drawer", "door", "door", "drawer"]
     np.testing.assert_allclose(placed[0, 2:], [[0.18, 0.0, 0.9], [0.48, 0.0, 0.9]])  # pull line
@@ -269,10 +269,10 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     # a pair read as one wide face: each door hinges on the edge away from its neighbour
     wide = _face(-0.4, 0.4, 0.2, 0.78)
     pair = [SightedFront(left_door.p_O, 0.9, wide, 5), SightedFront(right_door.p_O, 0.9, wide, 5)]
-    placed, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
+    placed, _, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
                              np.zeros(2), _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
-    unpaired, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2),
+    unpaired, _, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2),
                                _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
 
@@ -294,6 +294,27 @@ def test_a_drawers_goal_from_its_handle_matches_the_generators_drawers():
             assert abs(goal[0] - kp["goal"][0]) < 0.03
             assert goal[1] == pytest.approx(kp["goal"][1], abs=0.01)
             assert abs(goal[2] - kp["goal"][2]) < 0.1
+
+
+def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
+    """A door (hinged left at y = -0.2) whose face is read turned 40 degrees takes q = 40 / 90
+    whatever the field's q; one read turned 10 degrees (below `read_turn_min_deg`) keeps the
+    field's; a drawer keeps the field's q."""
+    def turned(angle_deg):
+        a = np.radians(angle_deg)
+        hinge = np.array([0.3, -0.2])
+        free = hinge + 0.4 * np.array([np.sin(a), np.cos(a)])
+        corners = np.array([[*hinge, 0.8], [*free, 0.8], [*hinge, 0.2], [*free, 0.2]])
+        return SightedFront(np.array([*(hinge + 0.35 * (free - hinge) / 0.4), 0.5]), 0.95, corners, 5)
+    drawer = SightedFront(np.array([0.33, 0.0, 1.0]), 0.05, _face(-0.2, 0.2, 0.9, 1.1), 5)
+    fronts = [turned(40.0), turned(10.0), drawer]
+    head = np.zeros((3, 4, 3))
+    head[:, 0] = [f.p_O for f in fronts]
+    field_q = np.array([0.05, 0.3, 0.2])
+    _, types, q = place_fronts(head, np.zeros(3, int), field_q, [0.3] * 3, fronts, np.zeros(3), np.zeros(3),
+                               _reading(0.0, (0.0, 0.0), NO_OFFSET_ODDS))
+    assert [PART_TYPES[t] for t in types] == ["door", "door", "drawer"]
+    np.testing.assert_allclose(q, [40.0 / 90.0, 0.3, 0.2])
 
 
 def test_a_read_type_weighs_the_heads_door_margin():
