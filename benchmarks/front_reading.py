@@ -13,7 +13,8 @@ edge than the true free edge) and the door's angle read from its face (the top a
 edges' turn, `face_turn`; the fit takes it where it exceeds `read_turn_min_deg`) against the
 true angle (deg); and the error of the shut left and top edges (`shut_edges`, cm); for true
 drawers, the read face's bottom edge less the true one (signed median, cm: the fit places a
-drawer's goal from its handle, `drawer_goal`, not from that edge).
+drawer's goal from its handle, `drawer_goal`, not from that edge); of the shut doors read as doors,
+how many are read turned more than `read_turn_min_deg` (which the fit would open short).
 `--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five
 views: each read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its
 handle a white cross, the true faces thin green.
@@ -103,11 +104,13 @@ def main() -> None:
     print(f"{date.today()}, {platform.processor() or platform.machine()}, {args.detector}")
     print("| set | handles matched | type right | corner error (cm) | hinge error (cm) | hinge side "
           "right | door angle error (deg) | left edge error (cm) | top edge error (cm) | "
-          "drawers' bottom edge, read less true (cm) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "drawers' bottom edge, read less true (cm) | shut doors read turned more than "
+          f"{FurnitureFitConfig.read_turn_min_deg:g} deg (the largest read turn) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for root in args.sets:
         matched = type_right = side_right = doors = 0
         corner_err, hinge_err, angle_err, left_err, top_err, drawer_bottom = [], [], [], [], [], []
+        shut_turns = []  # deg, shut doors read as doors
         for d in capture_dirs(root):
             capture = read_capture_set(d)
             parts = capture.gt["parts"]
@@ -144,10 +147,14 @@ def main() -> None:
                         else true_corners[[0, 2]]
                     side_right += np.linalg.norm(read - true_hinge) < np.linalg.norm(read - free)
                     angle_err.append(abs(np.degrees(face_turn(front)) - 90.0 * part["q"]))
+                    if part["q"] < 0.01:
+                        shut_turns.append(np.degrees(face_turn(front)))
         med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
         print(f"| {root.name} | {matched} | {type_right / max(matched, 1):.3f} | {med(corner_err):.2f} | "
               f"{med(hinge_err):.2f} | {side_right} of {doors} | {med(angle_err):.1f} | "
-              f"{med(left_err):.2f} | {med(top_err):.2f} | {med(drawer_bottom):+.2f} |")
+              f"{med(left_err):.2f} | {med(top_err):.2f} | {med(drawer_bottom):+.2f} | "
+              f"{sum(t > FurnitureFitConfig.read_turn_min_deg for t in shut_turns)} of {len(shut_turns)} "
+              f"({max(shut_turns, default=float('nan')):.1f}) |")
 
 
 if __name__ == "__main__":

@@ -287,8 +287,9 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
         shift = handle_shift(keypoints[:, SLOT_KEYPOINTS.index("handle")], handles, in_order)
     types = logits[:, 1:].argmax(-1).cpu().numpy()
     placed = pair_hinges(keypoints + shift[:, None], types, len(handles), config.pair_gap_m)
-    sides = np.zeros(S)
+    sides, middles = np.zeros(S), np.full(S, np.nan)
     sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
+    middles[:len(handles)] = pair_middles(handles, config.pair_gap_m)
     q = q.double().cpu().numpy()
     handle = SLOT_KEYPOINTS.index("handle")
     travel = np.array([depth_travel(placed[k, handle, 0], q[k], config.travel_depth_share,
@@ -297,7 +298,7 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
                        for k in range(S)])
     if any(f is not None for f in fronts):
         margin = (logits[:, 1] - logits[:, 2]).cpu().numpy()  # door minus drawer (PART_TYPES)
-        placed, types, q = place_fronts(placed, types, q, travel, fronts, sides, margin, config)
+        placed, types, q = place_fronts(placed, types, q, travel, fronts, sides, margin, config, middles)
     return FurnitureFit(z_best, q, exists, types, placed, shift,
                         float(per_code[best].detach()), config.steps, time.perf_counter() - t0, travel,
                         handles, order, z.detach().clone(), per_code.detach().double().cpu().numpy())
@@ -328,20 +329,23 @@ in front of the carcass; docs/FURNITURE.md, "Where the goal lies")."""
 
 def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel: list[float],
                  fronts: list[SightedFront | None], sides: np.ndarray, door_margin: np.ndarray,
-                 config: FurnitureFitConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Slot keypoints (S, 4, 3) in O, types (S,) and q (S,) with what the detector read of each paired
-    slot's front (fronts[k] for slot k; None: the field's): its type (a door where
-    `read_door_log_odds` with the config's pair and offset odds, one of a pair where sides[k] != 0,
-    plus `head_type_weight` times the keypoint head's door margin, door_margin (S,) its door logit
-    minus its drawer logit, is positive); a door's goal (the compartment floor behind it) at the
-    shut face's middle in y, its bottom edge in z (the floor lies 1-4 cm above that edge, a panel:
-    not read) and `COMPARTMENT_MIDDLE_X` in x (the depth is not on the face); a door's hinge points
-    on its face's edge away from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a
-    pair can be read as one wide face) on the edge away from its neighbour (`hinge_points`); a
-    drawer's goal at `drawer_goal` (its box floor, which moves with it: placed from the handle, not
-    from the read face's bottom edge, which is read 4 cm too low, median); a drawer the head took
-    for a door gets a pull line through its handle along O's +x, `travel[k]` long (m), shut at
-    q[k] (the field's q, (S,)).
+                 config: FurnitureFitConfig, pair_middle_y: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slot keypoints (S, 4, 3) in O, types (S,) and q (S,) with what the detector read of each
+    paired slot's front (fronts[k] for slot k; None: the field's): its type (a door where
+    `read_door_log_odds` with the config's pair and offset odds, one of a pair where sides[k] !=
+    0, plus `head_type_weight` times the keypoint head's door margin, door_margin (S,) its door
+    logit minus its drawer logit, is positive); a door's hinge points on its face's edge away
+    from the handle, or for one of a pair (sides[k] != 0, `pair_sides`: a pair can be read as one
+    wide face) on the edge away from its neighbour (`hinge_points`); a door's goal (the
+    compartment floor behind it) at `COMPARTMENT_MIDDLE_X` in x (the depth is not on the face),
+    its face's bottom edge in z (the floor lies 1-4 cm above that edge, a panel: not read) and its
+    shut face's middle in y, or for a shut door of a pair halfway between its hinge edge and
+    pair_middle_y[k] ((S,), where the pair meets, NaN: not one of a pair; a wide face's middle is
+    where the pair meets); a drawer's goal at `drawer_goal` (its box floor, which moves with it:
+    placed from the handle, not from the read face's bottom edge, which is read 4 cm too low,
+    median); a drawer the head took for a door gets a pull line through its handle along O's +x,
+    `travel[k]` long (m), shut at q[k] (the field's q, (S,)).
     A door's q is the field's unless its face is read turned more than `read_turn_min_deg`
     (`face_turn`): the field's q is right on shut doors and often far off on open ones, the read
     turn a few degrees off either way, and a shut door read ajar would be opened short by as much."""
@@ -355,11 +359,14 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
                 + config.head_type_weight * float(door_margin[k]) > 0.0)
         if door:
             left, _ = shut_edges(front)
-            out[k, g] = COMPARTMENT_MIDDLE_X, left + face_width(front) / 2, front.corners[2:, 2].mean()
+            middle = left + face_width(front) / 2
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
             types[k] = PART_TYPES.index("door")
             if (turn := face_turn(front)) > np.radians(config.read_turn_min_deg):
                 q[k] = turn / DOOR_OPENING
+            elif pair_middle_y is not None and np.isfinite(pair_middle_y[k]):
+                middle = (out[k, a0, 1] + pair_middle_y[k]) / 2
+            out[k, g] = COMPARTMENT_MIDDLE_X, middle, front.corners[2:, 2].mean()
             continue
         out[k, g] = drawer_goal(out[k, h], travel[k], config.handle_standoff_m,
                                 config.drawer_goal_below_handle_m)
@@ -394,19 +401,39 @@ def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool =
     return shift
 
 
-def pair_sides(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
-    """Per sighted handle (M, 3) in O, m, the side (+1: +y, -1: -y) of the nearest other handle
-    within `level_m` in height and `pair_gap_m` in y, 0 where there is none: a door with such a
+def pair_neighbours(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the index (M,) of the nearest other handle within
+    `level_m` in height and `pair_gap_m` in y, -1 where there is none: a door with such a
     neighbour is one of a pair, whose doors hinge on the edges away from each other (their
     handles near where they meet; `benchmarks/handle_layout.py` measures the rule)."""
-    sides = np.zeros(len(handles))
+    out = np.full(len(handles), -1)
     for k in range(len(handles)):
         dy, dz = handles[:, 1] - handles[k, 1], handles[:, 2] - handles[k, 2]
         near = np.flatnonzero((np.abs(dz) < level_m) & (np.abs(dy) < pair_gap_m)
                               & (np.arange(len(handles)) != k))
         if near.size:
-            sides[k] = np.sign(dy[near[np.argmin(np.abs(dy[near]))]])
+            out[k] = near[np.argmin(np.abs(dy[near]))]
+    return out
+
+
+def pair_sides(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the side (+1: +y, -1: -y) of its pair's other handle
+    (`pair_neighbours`), 0 where it is not one of a pair."""
+    neighbours = pair_neighbours(handles, pair_gap_m, level_m)
+    paired = neighbours >= 0
+    sides = np.zeros(len(handles))
+    sides[paired] = np.sign(handles[neighbours[paired], 1] - handles[paired, 1])
     return sides
+
+
+def pair_middles(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the y (M,) halfway between it and its pair's other
+    handle (`pair_neighbours`; where the pair's doors meet), NaN where it is not one of a pair."""
+    neighbours = pair_neighbours(handles, pair_gap_m, level_m)
+    paired = neighbours >= 0
+    middles = np.full(len(handles), np.nan)
+    middles[paired] = (handles[neighbours[paired], 1] + handles[paired, 1]) / 2.0
+    return middles
 
 
 def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap_m: float) -> np.ndarray:

@@ -241,7 +241,8 @@ def test_sighting_order_puts_stacked_doors_in_one_column_by_their_read_fronts():
 def test_read_fronts_give_the_types_hinges_and_goals():
     """A read door gets its hinge on its face's edge away from the handle, a read drawer the head
     took for a door a pull line along +x through its handle; a door's goal moves to its face's
-    middle and bottom edge at the compartment's middle depth, a drawer's from its handle
+    middle (a door of a pair: halfway from its hinge to where the pair meets) and bottom edge at
+    the compartment's middle depth, a drawer's from its handle
     (`drawer_goal`: half its box's depth behind its front, under its handle); a slot without a
     read front keeps the head's."""
     drawer = SightedFront(np.array([0.33, 0.0, 0.9]), 0.1, _face(-0.4, 0.4, 0.8, 1.0), 5)
@@ -272,6 +273,11 @@ def test_read_fronts_give_the_types_hinges_and_goals():
     placed, _, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
                              np.zeros(2), _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(placed[:, 2:], [wide[[0, 2]], wide[[1, 3]]])
+    np.testing.assert_allclose(placed[:, 1, 1], [0.0, 0.0])  # the wide face's middle
+    # where the pair meets known (halfway between the handles): each goal halfway from its hinge
+    placed, _, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.array([1.0, -1.0]),
+                                np.zeros(2), _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS), np.array([0.0, 0.0]))
+    np.testing.assert_allclose(placed[:, 1, 1], [-0.2, 0.2])
     unpaired, _, _ = place_fronts(head[1:3], types[1:3], q[1:3], [0.3] * 2, pair, np.zeros(2), np.zeros(2),
                                _reading(0.1, (0.0, 0.0), NO_OFFSET_ODDS))
     np.testing.assert_allclose(unpaired[:, 2:], [wide[[1, 3]], wide[[0, 2]]])  # the wrong sides
