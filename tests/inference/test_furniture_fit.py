@@ -304,7 +304,7 @@ def test_a_drawers_goal_from_its_handle_matches_the_generators_drawers():
 
 def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
     """A door (hinged left at y = -0.2) whose face is read turned 40 degrees takes q = 40 / 90
-    whatever the field's q; one read turned 10 degrees (below `read_turn_min_deg`) keeps the
+    whatever the field's q; one read turned 20 degrees (below `read_turn_min_deg`) keeps the
     field's; a drawer keeps the field's q."""
     def turned(angle_deg):
         a = np.radians(angle_deg)
@@ -313,7 +313,7 @@ def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
         corners = np.array([[*hinge, 0.8], [*free, 0.8], [*hinge, 0.2], [*free, 0.2]])
         return SightedFront(np.array([*(hinge + 0.35 * (free - hinge) / 0.4), 0.5]), 0.95, corners, 5)
     drawer = SightedFront(np.array([0.33, 0.0, 1.0]), 0.05, _face(-0.2, 0.2, 0.9, 1.1), 5)
-    fronts = [turned(40.0), turned(10.0), drawer]
+    fronts = [turned(40.0), turned(20.0), drawer]
     head = np.zeros((3, 4, 3))
     head[:, 0] = [f.p_O for f in fronts]
     field_q = np.array([0.05, 0.3, 0.2])
