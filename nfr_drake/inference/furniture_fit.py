@@ -51,6 +51,7 @@ from nfr_drake.perception.front_reading import (
     face_turn,
     face_width,
     handle_offset,
+    handle_turn,
     hinge_points,
     shut_edges,
 )
@@ -123,11 +124,11 @@ class FurnitureFitConfig:
     generator's median (`python benchmarks/handle_layout.py`: over the 728 drawers of 400 pieces of
     seed 123, p10-p90 0.026-0.131; with `handle_standoff_m` and the true travel, `drawer_goal`'s
     x is 1.2 cm in front of the true goal's, median)."""
-    read_turn_min_deg: float = 30.0
-    """`place_fronts`: a read door whose face has turned more than this from shut (`face_turn`),
-    degrees, takes that turn as its q (inf: the field's q always): above the largest turn read on
-    a shut door of the development pipeline's photos (seed 901: 27 degrees; docs/FURNITURE.md,
-    "A door's opening from its read face")."""
+    read_turn_min_deg: float = 15.0
+    """`place_fronts`: a read door whose face (`face_turn`) and handle about its hinge
+    (`handle_turn`) have both turned more than this from shut, degrees, takes the handle's turn
+    as its q (inf: the field's q always; docs/FURNITURE.md, "A door's opening from its read
+    face")."""
     offset_edges: tuple[float, ...] = (0.1, 0.5)
     """`place_fronts`: bins of where a handle sits across its read face (`handle_offset`: 0 in the
     middle, 1 at a vertical edge), between these edges."""
@@ -347,9 +348,11 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     placed from the handle, not from the read face's bottom edge, which is read 4 cm too low,
     median); a drawer the head took for a door gets a pull line through its handle along O's +x,
     `travel[k]` long (m), shut at q[k] (the field's q, (S,)).
-    A door's q is the field's unless its face is read turned more than `read_turn_min_deg`
-    (`face_turn`): the field's q is right on shut doors and often far off on open ones, the read
-    turn a few degrees off either way, and a shut door read ajar would be opened short by as much."""
+    A door's q is the field's unless both its read face (`face_turn`) and its handle about its
+    read hinge (`handle_turn`) have turned more than `read_turn_min_deg`; then it is the handle's
+    turn: the field's q is right on shut doors and often far off on open ones, the handle's turn
+    is a few degrees off, and a shut door read ajar would be opened short by as much (a face alone
+    is read up to 27 degrees ajar on shut doors)."""
     out, types, q = keypoints.copy(), types.copy(), np.array(q, float)
     h, g, a0, a1 = (SLOT_KEYPOINTS.index(n) for n in ("handle", "goal", "axis_0", "axis_1"))
     offset_log_odds = (config.offset_edges, config.offset_type_log_odds)
@@ -363,7 +366,8 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
             middle = left + face_width(front) / 2
             out[k, [a0, a1]] = hinge_points(front, None if sides[k] == 0 else sides[k] > 0)
             types[k] = PART_TYPES.index("door")
-            if (turn := face_turn(front)) > np.radians(config.read_turn_min_deg):
+            turn = handle_turn(front, out[k, [a0, a1]])
+            if min(face_turn(front), turn) > np.radians(config.read_turn_min_deg):
                 q[k] = turn / DOOR_OPENING
             elif pair_middle_y is not None and np.isfinite(pair_middle_y[k]):
                 middle = (out[k, a0, 1] + pair_middle_y[k]) / 2

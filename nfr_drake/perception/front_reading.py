@@ -177,6 +177,15 @@ def face_turn(front: SightedFront) -> float:
     return float(np.mean(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1]))))
 
 
+def handle_turn(front: SightedFront, hinge: np.ndarray) -> float:
+    """How far a door has turned from shut about its hinge line, rad in [-pi/2, pi/2], by where
+    its handle stands in front of the hinge: the arcsine of the handle's offset along O's +x over
+    its horizontal distance from the hinge points (2, 3) in O (`hinge_points`); a shut door's
+    handle stands only its standoff in front of the face."""
+    v = front.p_O[:2] - np.asarray(hinge, float)[:, :2].mean(0)
+    return float(np.arcsin(np.clip(v[0] / max(float(np.linalg.norm(v)), 1e-6), -1.0, 1.0)))
+
+
 def face_width(front: SightedFront) -> float:
     """The read face's width, m: its vertical edges' horizontal distance (the same at any
     opening)."""

@@ -303,9 +303,10 @@ def test_a_drawers_goal_from_its_handle_matches_the_generators_drawers():
 
 
 def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
-    """A door (hinged left at y = -0.2) whose face is read turned 40 degrees takes q = 40 / 90
-    whatever the field's q; one read turned 20 degrees (below `read_turn_min_deg`) keeps the
-    field's; a drawer keeps the field's q."""
+    """A door (hinged left at y = -0.2) whose face and handle are read turned 40 degrees takes
+    q = 40 / 90 whatever the field's q; one turned 10 degrees (below `read_turn_min_deg`) keeps
+    the field's, and so does one whose face is read turned 40 degrees with its handle at the
+    shut face (a misread face); a drawer keeps the field's q."""
     def turned(angle_deg):
         a = np.radians(angle_deg)
         hinge = np.array([0.3, -0.2])
@@ -313,14 +314,15 @@ def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
         corners = np.array([[*hinge, 0.8], [*free, 0.8], [*hinge, 0.2], [*free, 0.2]])
         return SightedFront(np.array([*(hinge + 0.35 * (free - hinge) / 0.4), 0.5]), 0.95, corners, 5)
     drawer = SightedFront(np.array([0.33, 0.0, 1.0]), 0.05, _face(-0.2, 0.2, 0.9, 1.1), 5)
-    fronts = [turned(40.0), turned(20.0), drawer]
-    head = np.zeros((3, 4, 3))
+    misread = SightedFront(np.array([0.3, 0.15, 0.5]), 0.95, turned(40.0).corners, 5)
+    fronts = [turned(40.0), turned(10.0), drawer, misread]
+    head = np.zeros((4, 4, 3))
     head[:, 0] = [f.p_O for f in fronts]
-    field_q = np.array([0.05, 0.3, 0.2])
-    _, types, q = place_fronts(head, np.zeros(3, int), field_q, [0.3] * 3, fronts, np.zeros(3), np.zeros(3),
+    field_q = np.array([0.05, 0.3, 0.2, 0.1])
+    _, types, q = place_fronts(head, np.zeros(4, int), field_q, [0.3] * 4, fronts, np.zeros(4), np.zeros(4),
                                _reading(0.0, (0.0, 0.0), NO_OFFSET_ODDS))
-    assert [PART_TYPES[t] for t in types] == ["door", "door", "drawer"]
-    np.testing.assert_allclose(q, [40.0 / 90.0, 0.3, 0.2])
+    assert [PART_TYPES[t] for t in types] == ["door", "door", "drawer", "door"]
+    np.testing.assert_allclose(q, [40.0 / 90.0, 0.3, 0.2, 0.1])
 
 
 def test_a_read_type_weighs_the_heads_door_margin():
