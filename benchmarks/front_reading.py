@@ -14,7 +14,8 @@ edges' turn, `face_turn`; the fit takes it where it exceeds `read_turn_min_deg`)
 true angle (deg); and the error of the shut left and top edges (`shut_edges`, cm); for true
 drawers, the read face's bottom edge less the true one (signed median, cm: the fit places a
 drawer's goal from its handle, `drawer_goal`, not from that edge); of the shut doors read as doors,
-how many are read turned more than `read_turn_min_deg` (which the fit would open short).
+how many the fit would take as open (face and handle turned more than `read_turn_min_deg`, which
+would open them short), and of the open doors it takes so, the handle turn's error.
 `--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five
 views: each read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its
 handle a white cross, the true faces thin green.
@@ -33,7 +34,7 @@ import torch
 
 from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.inference.furniture_fit import FurnitureFitConfig, pair_sides
-from nfr_drake.perception.front_reading import face_turn, hinge_points, read_front, shut_edges
+from nfr_drake.perception.front_reading import face_turn, handle_turn, hinge_points, read_front, shut_edges
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import locate_handles, project
 
@@ -104,13 +105,14 @@ def main() -> None:
     print(f"{date.today()}, {platform.processor() or platform.machine()}, {args.detector}")
     print("| set | handles matched | type right | corner error (cm) | hinge error (cm) | hinge side "
           "right | door angle error (deg) | left edge error (cm) | top edge error (cm) | "
-          "drawers' bottom edge, read less true (cm) | shut doors read turned more than "
-          f"{FurnitureFitConfig.read_turn_min_deg:g} deg (the largest read turn) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "drawers' bottom edge, read less true (cm) | shut doors whose face and handle are read "
+          f"turned more than {FurnitureFitConfig.read_turn_min_deg:g} deg (the largest face turn) | "
+          "open doors so read, their handle's turn error (deg) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for root in args.sets:
         matched = type_right = side_right = doors = 0
         corner_err, hinge_err, angle_err, left_err, top_err, drawer_bottom = [], [], [], [], [], []
-        shut_turns = []  # deg, shut doors read as doors
+        shut_turns, taken_open = [], []  # (face, handle) turns of shut doors; open doors' errors, deg
         for d in capture_dirs(root):
             capture = read_capture_set(d)
             parts = capture.gt["parts"]
@@ -147,14 +149,19 @@ def main() -> None:
                         else true_corners[[0, 2]]
                     side_right += np.linalg.norm(read - true_hinge) < np.linalg.norm(read - free)
                     angle_err.append(abs(np.degrees(face_turn(front)) - 90.0 * part["q"]))
+                    turns = np.degrees([face_turn(front), handle_turn(front, read)])
                     if part["q"] < 0.01:
-                        shut_turns.append(np.degrees(face_turn(front)))
+                        shut_turns.append(turns)
+                    elif turns.min() > FurnitureFitConfig.read_turn_min_deg:
+                        taken_open.append(abs(turns[1] - 90.0 * part["q"]))
         med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
         print(f"| {root.name} | {matched} | {type_right / max(matched, 1):.3f} | {med(corner_err):.2f} | "
               f"{med(hinge_err):.2f} | {side_right} of {doors} | {med(angle_err):.1f} | "
               f"{med(left_err):.2f} | {med(top_err):.2f} | {med(drawer_bottom):+.2f} | "
-              f"{sum(t > FurnitureFitConfig.read_turn_min_deg for t in shut_turns)} of {len(shut_turns)} "
-              f"({max(shut_turns, default=float('nan')):.1f}) |")
+              f"{sum(t.min() > FurnitureFitConfig.read_turn_min_deg for t in shut_turns)} of "
+              f"{len(shut_turns)} "
+              f"({max((t[0] for t in shut_turns), default=float('nan')):.1f}) | {len(taken_open)}, "
+              f"{med(taken_open):.1f} |")
 
 
 if __name__ == "__main__":
