@@ -345,7 +345,7 @@ def place_fronts(keypoints: np.ndarray, types: np.ndarray, q: np.ndarray, travel
     shut face's middle in y, or for a shut door of a pair halfway between its hinge edge and
     pair_middle_y[k] ((S,), where the pair meets, NaN: not one of a pair; a wide face's middle is
     where the pair meets); a drawer's goal at `drawer_goal` (its box floor, which moves with it:
-    placed from the handle, not from the read face's bottom edge, which is read 4 cm too low,
+    placed from the handle, not from the read face's bottom edge, which is read 3.5-9 cm too low,
     median); a drawer the head took for a door gets a pull line through its handle along O's +x,
     `travel[k]` long (m), shut at q[k] (the field's q, (S,)).
     A door's q is the field's unless both its read face (`face_turn`) and its handle about its
