@@ -290,8 +290,8 @@ def fit_furniture(model: NFRModel, rays: ObservedRays, codes: torch.Tensor,
     types = logits[:, 1:].argmax(-1).cpu().numpy()
     placed = pair_hinges(keypoints + shift[:, None], types, len(handles), config.pair_gap_m)
     sides, middles = np.zeros(S), np.full(S, np.nan)
-    sides[:len(handles)] = pair_sides(handles, config.pair_gap_m)
     middles[:len(handles)] = pair_middles(handles, config.pair_gap_m)
+    sides[:len(handles)] = pair_sides(handles, config.pair_gap_m, middles=middles[:len(handles)])
     q = q.double().cpu().numpy()
     handle = SLOT_KEYPOINTS.index("handle")
     travel = np.array([depth_travel(placed[k, handle, 0], q[k], config.travel_depth_share,
@@ -406,39 +406,29 @@ def handle_shift(slot_handles: np.ndarray, handles: np.ndarray, in_order: bool =
     return shift
 
 
-def pair_neighbours(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
-    """Per sighted handle (M, 3) in O, m, the index (M,) of the nearest other handle within
-    `level_m` in height and `pair_gap_m` in y, -1 where there is none: a door with such a
-    neighbour is one of a pair, whose doors hinge on the edges away from each other (their
-    handles near where they meet; `benchmarks/handle_layout.py` measures the rule)."""
-    out = np.full(len(handles), -1)
+def pair_middles(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the y (M,) halfway between it and the nearest other
+    handle within `level_m` in height and `pair_gap_m` in y (where a pair's doors meet), NaN
+    where there is none: a door with such a neighbour is one of a pair, whose doors hinge on the
+    edges away from each other (their handles near where they meet;
+    `benchmarks/handle_layout.py` measures the rule)."""
+    middles = np.full(len(handles), np.nan)
     for k in range(len(handles)):
         dy, dz = handles[:, 1] - handles[k, 1], handles[:, 2] - handles[k, 2]
         near = np.flatnonzero((np.abs(dz) < level_m) & (np.abs(dy) < pair_gap_m)
                               & (np.arange(len(handles)) != k))
         if near.size:
-            out[k] = near[np.argmin(np.abs(dy[near]))]
-    return out
-
-
-def pair_sides(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
-    """Per sighted handle (M, 3) in O, m, the side (+1: +y, -1: -y) of its pair's other handle
-    (`pair_neighbours`), 0 where it is not one of a pair."""
-    neighbours = pair_neighbours(handles, pair_gap_m, level_m)
-    paired = neighbours >= 0
-    sides = np.zeros(len(handles))
-    sides[paired] = np.sign(handles[neighbours[paired], 1] - handles[paired, 1])
-    return sides
-
-
-def pair_middles(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05) -> np.ndarray:
-    """Per sighted handle (M, 3) in O, m, the y (M,) halfway between it and its pair's other
-    handle (`pair_neighbours`; where the pair's doors meet), NaN where it is not one of a pair."""
-    neighbours = pair_neighbours(handles, pair_gap_m, level_m)
-    paired = neighbours >= 0
-    middles = np.full(len(handles), np.nan)
-    middles[paired] = (handles[neighbours[paired], 1] + handles[paired, 1]) / 2.0
+            middles[k] = handles[k, 1] + dy[near[np.argmin(np.abs(dy[near]))]] / 2.0
     return middles
+
+
+def pair_sides(handles: np.ndarray, pair_gap_m: float, level_m: float = 0.05,
+               middles: np.ndarray | None = None) -> np.ndarray:
+    """Per sighted handle (M, 3) in O, m, the side (+1: +y, -1: -y) of its pair's other handle,
+    0 where it is not one of a pair; from `pair_middles` (computed when not given)."""
+    if middles is None:
+        middles = pair_middles(handles, pair_gap_m, level_m)
+    return np.nan_to_num(np.sign(middles - np.asarray(handles, float).reshape(-1, 3)[:, 1]))
 
 
 def pair_hinges(keypoints: np.ndarray, types: np.ndarray, sighted: int, pair_gap_m: float) -> np.ndarray:
