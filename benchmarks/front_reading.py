@@ -10,12 +10,13 @@ for true doors read as doors, the hinge points' error (`hinge_points`, on the si
 takes: a door of a pair away from its neighbour, `pair_sides`; mean of hinge_top and
 hinge_bottom, cm), whether the hinge is on the right side (the read hinge nearer the true hinge
 edge than the true free edge) and the door's angle read from its face (the top and bottom
-edges' turn, `face_turn`; the fit takes it where it exceeds `read_turn_min_deg`) against the
-true angle (deg); and the error of the shut left and top edges (`shut_edges`, cm); for true
-drawers, the read face's bottom edge less the true one (signed median, cm: the fit places a
-drawer's goal from its handle, `drawer_goal`, not from that edge); of the shut doors read as doors,
-how many the fit would take as open (face and handle turned more than `read_turn_min_deg`, which
-would open them short), and of the open doors it takes so, the handle turn's error.
+edges' turn, `face_turn`; the fit takes its handle's turn, `handle_turn`, where both exceed
+`read_turn_min_deg`) against the true angle (deg); and the error of the shut left and top
+edges (`shut_edges`, cm); for true drawers, the read face's bottom edge less the true one
+(signed median, cm: the fit places a drawer's goal from its handle, `drawer_goal`, not from that
+edge); of the shut doors read as doors, how many the fit would take as open (face and handle
+turned more than `read_turn_min_deg`, which would open them short), and of the open doors it
+takes so, the handle turn's error.
 `--figure` draws what is read of captures (`--figure-capture`, a row each) in their first five
 views: each read front's face (red: door, blue: drawer, its hinge edge thick) over the photo, its
 handle a white cross, the true faces thin green.

@@ -302,7 +302,7 @@ def test_a_drawers_goal_from_its_handle_matches_the_generators_drawers():
             assert abs(goal[2] - kp["goal"][2]) < 0.1
 
 
-def test_a_door_read_well_open_takes_its_faces_turn_as_its_q():
+def test_a_door_read_well_open_takes_its_handles_turn_as_its_q():
     """A door (hinged left at y = -0.2) whose face and handle are read turned 40 degrees takes
     q = 40 / 90 whatever the field's q; one turned 10 degrees (below `read_turn_min_deg`) keeps
     the field's, and so does one whose face is read turned 40 degrees with its handle at the
