@@ -89,16 +89,24 @@ def felt_line(tool_path: np.ndarray, planned: np.ndarray) -> np.ndarray:
 
 
 def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle from the first
-    point to the last about it (rad, within +-pi), its centre (3,) and unit axis (3,), the angle
-    positive about the axis. Plane by SVD, circle by linear least squares in it."""
+    """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle swept to the
+    last point from the point furthest back against the way the path went (first to last; rad,
+    within +-pi), its centre (3,) and unit axis (3,), the angle positive about the axis. Plane by
+    SVD, circle by linear least squares in it. From the furthest point back, not from the first:
+    a grasp can jolt a door open and let it swing back before the pull, so the path's first
+    point can lie ahead of where the door was held shut (pipeline door 46 of seed 200 was
+    thrown 30 degrees open and back as the hand took it, and its turn measured from there came
+    out 19 degrees short of its swept 51)."""
     mean = points.mean(axis=0)
     e1, e2 = np.linalg.svd(points - mean)[2][:2]
     axis = np.cross(e1, e2)
     uv = (points - mean) @ np.c_[e1, e2]
     centre_uv = np.linalg.lstsq(np.c_[2.0 * uv, np.ones(len(uv))], (uv ** 2).sum(axis=1), rcond=None)[0][:2]
-    a, b = uv[0] - centre_uv, uv[-1] - centre_uv
-    return float(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)), mean + centre_uv @ np.r_[[e1], [e2]], axis
+    rel = uv - centre_uv
+    turned = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))  # each point's angle, continuous along the path
+    way = np.sign(turned[-1] - turned[0]) or 1.0
+    swept = float(turned[-1] - (turned.min() if way > 0 else turned.max()))
+    return float(np.clip(swept, -np.pi, np.pi)), mean + centre_uv @ np.r_[[e1], [e2]], axis
 
 
 def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[float, np.ndarray]:

@@ -149,6 +149,11 @@ def test_arc_angle_finds_the_circle_and_the_signed_angle():
     np.testing.assert_allclose(axis, R[:, 2], atol=1e-9)
     assert np.degrees(arc_angle(points[::-1])[0] * (arc_angle(points[::-1])[2] @ R[:, 2])) == \
         pytest.approx(-54.0, abs=1e-6)
+    # a door jolted open by the grasp and swung back before the pull: measured from where it was held
+    jolted = np.radians(np.r_[30.0, 20.0, np.linspace(10.0, 64.0, 12)])
+    points = centre + radius * (np.cos(jolted)[:, None] * R[:, 0] + np.sin(jolted)[:, None] * R[:, 1])
+    angle, _, axis = arc_angle(points)
+    assert np.degrees(angle * (axis @ R[:, 2])) == pytest.approx(54.0, abs=1e-6)
 
 
 def test_grip_points_lie_on_the_bar():
