@@ -49,8 +49,10 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from nfr_drake.errors import NfrDrakeError
+from nfr_drake.objects.fronts import DOOR_OPENING
 from nfr_drake.systems.corrections import (
     door_turn_offset,
+    felt_door_turn_offset,
     felt_line,
     regrasp_step,
     tool_pose_and_jacobian,
@@ -174,7 +176,10 @@ class SimulationConfig:
     where the hand is, when it exceeds `second_turn_min`,
     at most `second_turn_max`, over `second_pull_time`. With the object's pose a few degrees off,
     the planned arc is not the door's: the compliant arm follows the true hinge and stops short of
-    or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept")."""
+    or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept"). A pull
+    planned along a line (the keypoints say drawer) whose held hand swept an arc was a door's: the
+    robot turns it on about that circle until the hand has swept `q_target` of a quarter turn
+    (`feels_for_a_door`; docs/SIMULATION.md, "A door taken for a drawer")."""
     second_turn_min: float = float(np.radians(1.0))
     second_turn_max: float = float(np.radians(25.0))
     second_turn_max_hinge_gap: float = float("inf")
@@ -230,6 +235,13 @@ class SimulationConfig:
         `keypoints` with a hinge."""
         return (self.second_turn and keypoints is not None and "hinge_top" in keypoints.names
                 and straight_pull(plan) is None)
+
+    def feels_for_a_door(self, plan: PlanResult) -> bool:
+        """Whether the run takes `second_pull_time` after a pull planned along a line (the
+        keypoints say drawer; not one that `pulls_to_stop`) to turn the part on as a door where the
+        held hand swept an arc (`second_turn`, `felt_door_turn_offset`): to `q_target` of a
+        quarter turn (`DOOR_OPENING`, the field's door articulation)."""
+        return self.second_turn and straight_pull(plan) is not None and not self.pulls_to_stop(plan)
 
     def pulls_to_stop(self, plan: PlanResult) -> bool:
         """Whether the run ends with a guarded pull to the stop (`PullToStop`): a constraint grasp
@@ -302,9 +314,10 @@ class SimulationResult:
     left, `SimulationConfig.regrasps`); `grasp_offset` is the last close's."""
     turned: float = float("nan")
     """The angle the robot turned a door on after its planned pull, by what its hand swept short
-    of the keypoints' turn about their hinge (`SimulationConfig.second_turn`), rad (negative:
-    back); 0 when within
-    `second_turn_min`; nan when it did not measure (no door, or no grasp)."""
+    of the keypoints' turn about their hinge, or of the target's on a straight pull whose hand
+    swept an arc (`SimulationConfig.second_turn`), rad (negative: back); 0 when within
+    `second_turn_min` or a straight pull's hand swept no arc; nan when it did not measure (no
+    grasp, or a pull it does not check)."""
     q_pulled: float = float("nan")
     """The articulation (in [0, 1]) once the planned motion had settled, before any second pull,
     turn or guarded pull."""
@@ -802,7 +815,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     add_joint_friction(builder, plant, joint)
     fingers = replace(config, finger_closed=config.finger_target(config.finger_closed))
     turns = config.turns_again(plan, keypoints)
-    again = config.second_pull_time if config.pulls_again(plan) or turns else 0.0
+    feels = config.feels_for_a_door(plan)
+    again = config.second_pull_time if config.pulls_again(plan) or turns or feels else 0.0
     to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
     dq_miss = regrasp_step(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(), config.regrasp_step)
     desired = builder.AddNamedSystem("plan", PlanTries(
@@ -879,6 +893,16 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                                                config.second_turn_max_hinge_gap)
             if turned:
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
+        elif t == t_pulled and again and grasped and feels:  # a drawer's pull: did the hand swing?
+            felt = np.array(p_tool)[np.array(times) >= t_pull]
+            dq, turned = felt_door_turn_offset(controller_plant, felt, q_target * DOOR_OPENING,
+                                               plant.GetPositions(plant_context, robot), q_end,
+                                               config.second_turn_min, config.second_turn_max)
+            if turned:
+                second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
+            elif config.pulls_again(plan):
+                shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
+                                             plant.GetPositions(plant_context, robot), config, t)
         elif t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
             shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
                                          plant.GetPositions(plant_context, robot), config, t)

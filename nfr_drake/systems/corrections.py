@@ -1,6 +1,7 @@
 """Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
 a joint step for a tool move, a missed close tried again deeper, a door turned on by the angle
-its hand swept short of the keypoints' turn (docs/SIMULATION.md). All in the world frame W,
+its hand swept short of the keypoints' turn, a door taken for a drawer turned on as the hand felt
+it swing (docs/SIMULATION.md). All in the world frame W,
 metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the
 fingers), steps the 7 arm joints'."""
 
@@ -174,6 +175,44 @@ def door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, keypoin
     gap = hinge_gap(centre, keypoints)
     if abs(angle) < smallest or gap > largest_gap:
         return np.zeros(NUM_ARM_JOINTS), 0.0, gap
+    return (*_turn_offset(robot_plant, q_now, q_command, centre, axis, angle, largest), gap)
+
+
+def _turn_offset(robot_plant: MultibodyPlant, q_now: np.ndarray, q_command: np.ndarray, centre: np.ndarray,
+                 axis: np.ndarray, angle: float, largest: float) -> tuple[np.ndarray, float]:
+    """The offset to add to the arm's command `q_command` that turns the hand, now at `q_now`, by
+    `angle` clipped to +-`largest` (rad) about the line through `centre` along `axis`, and that
+    clipped angle."""
     angle = float(np.clip(angle, -largest, largest))
-    return ((q_now - q_command)[:NUM_ARM_JOINTS] + turn_step(robot_plant, q_now, centre, axis, angle), angle,
-            gap)
+    return (q_now - q_command)[:NUM_ARM_JOINTS] + turn_step(robot_plant, q_now, centre, axis, angle), angle
+
+
+FELT_ARC_MIN = float(np.radians(10.0))
+"""The least angle (rad) the held hand must sweep about the circle through its path, on a pull
+planned along a line, for the robot to take the part for a door (`felt_door_turn_offset`): a
+drawer's slide guides the hand along a line, and a door pulled along one by the compliant arm
+swings open by 20 degrees or more before the arm's pull ends (docs/SIMULATION.md, "A door taken
+for a drawer")."""
+
+
+def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, target: float,
+                          q_now: np.ndarray, q_command: np.ndarray, smallest: float, largest: float
+                          ) -> tuple[np.ndarray, float]:
+    """A pull planned along a line whose held hand swept an arc (`tool_path` (N, 3), forward
+    kinematics since the fingers closed): a door taken for a drawer. The offset to add to the
+    arm's command `q_command` (the plan's last) that turns the hand, now at `q_now`, on about the
+    circle through its path (the hinge as the hand felt it, `arc_angle`) until it has swept
+    `target` rad, clipped to +-`largest` (a turn in one joint step strains the hinge more the
+    larger it is), and that angle; no offset and angle 0 where the path has under 3 points or
+    sweeps under `FELT_ARC_MIN` (a drawer), or the turn is under `smallest`."""
+    none = np.zeros(NUM_ARM_JOINTS), 0.0
+    if len(tool_path) < 3:
+        return none
+    swept, centre, axis = arc_angle(tool_path)
+    if abs(swept) < FELT_ARC_MIN:
+        return none
+    if swept < 0.0:  # the way the door opened, about the circle's axis
+        swept, axis = -swept, -axis
+    if abs(target - swept) < smallest:
+        return none
+    return _turn_offset(robot_plant, q_now, q_command, centre, axis, target - swept, largest)

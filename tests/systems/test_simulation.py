@@ -213,3 +213,27 @@ def test_joint_error_is_told_in_the_joints_unit():
 
     assert joint_error_text("revolute", np.radians(2.5)) == "2.5 deg"
     assert joint_error_text("prismatic", 0.034) == "3.4 cm"
+
+
+def test_a_door_taken_for_a_drawer_is_turned_on_as_the_hand_felt_it_swing(drawer_object):
+    """A closet's door with drawer keypoints (its handle pulled straight out by 40 cm, the fit's
+    type wrong): the compliant arm follows the hinge and the door swings 24 degrees open, 30 short
+    of the target (0.6 of a quarter turn); the robot fits a circle to its hand's path, sees an
+    arc, and turns the door on about it by the most it turns in one step (`second_turn_max`,
+    25 degrees), from a base placed for a straight pull: it ends 14 degrees short. A true
+    drawer's straight pull sweeps no arc and is not turned."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0)
+    p = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0).point("handle", 0.0)
+    q = np.linspace(0.0, 1.0, 11)
+    out = p + np.outer(0.4 * q, [1.0, 0.0, 0.0])[:, None]  # (11, 1, 3): the handle straight out
+    straight = KeypointTrajectory("drawer", q, ("handle",), out, 0.0)
+    planned_only = run_task(scene_object, 0.6, keypoints=straight,
+                            simulation_config=SimulationConfig(second_turn=False)).simulation
+    assert planned_only.grasped and planned_only.joint_error > np.radians(25.0), planned_only.summary()
+    felt = run_task(scene_object, 0.6, keypoints=straight).simulation
+    assert felt.q_pulled == pytest.approx(planned_only.q_final, abs=0.01)  # the same run until then
+    assert felt.turned == pytest.approx(SimulationConfig().second_turn_max)
+    assert felt.joint_error < planned_only.joint_error - np.radians(10.0), felt.summary()
+    drawer = run_task(drawer_object, 0.6).simulation
+    assert drawer.success and drawer.turned == 0.0, drawer.summary()
