@@ -3,6 +3,8 @@ run with a correction off and on.
 
     python scripts/corrections_figure.py --case regrasp --error 0.035 --out docs/images/regrasp_drawer.png
     python scripts/corrections_figure.py --case door-turn --error 12 --out docs/images/door_turn_closet.png
+    python scripts/corrections_figure.py --case door-as-drawer --error 0.4 \
+        --out docs/images/door_as_drawer.png
 
 `regrasp`: the drawer of the simulation tests (training seed, object 3), shut at the identity pose,
 planned from its true keypoints moved `--error` m out of its front (+x of its frame, against the
@@ -11,6 +13,9 @@ approach (cm; the fingers catch it within `capture_half_extents` of 0); the clos
 `door-turn`: the closet of the simulation tests (object 0), shut, planned from its true keypoints
 turned `--error` degrees about the vertical through its handle (the object's yaw off);
 `second_turn` off and on. Top: the door's angle from its target (deg), the turn's start marked.
+`door-as-drawer`: the same closet planned from drawer keypoints, its handle pulled straight out
+along the front's normal by `--error` m (a door the fit took for a drawer); `second_turn` off and
+on (the turn as the hand felt it swing). Top as `door-turn`.
 Bottom, both: the articulation. Prints each run's summary.
 """
 
@@ -37,10 +42,10 @@ from nfr_drake.world.keypoints import KeypointTrajectory  # noqa: E402
 
 @dataclass
 class Args:
-    case: Literal["regrasp", "door-turn"] = "regrasp"
+    case: Literal["regrasp", "door-turn", "door-as-drawer"] = "regrasp"
     error: float = 0.035
     """regrasp: how far out of the drawer's front the keypoints are moved, m; door-turn: how far
-    they are turned about the handle, deg."""
+    they are turned about the handle, deg; door-as-drawer: how far the straight pull goes, m."""
     out: Path = Path("docs/images/regrasp_drawer.png")
 
 
@@ -53,11 +58,17 @@ def main(args: Args) -> None:
         keypoints, q_target = truth.shifted([args.error, 0.0, 0.0]), 1.0
         settings = [(f"regrasps {n}", SimulationConfig(regrasps=n)) for n in (0, 1)]
     else:
-        p, R = truth.point("handle", 0.0), RotationMatrix.MakeZRotation(np.radians(args.error))
-        keypoints = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
-        q_target = 0.6
-        settings = [("planned pull only", SimulationConfig(second_turn=False)),
-                    ("turned on by what the hand swept", SimulationConfig())]
+        p, q_target = truth.point("handle", 0.0), 0.6
+        if args.case == "door-turn":
+            R = RotationMatrix.MakeZRotation(np.radians(args.error))
+            keypoints = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
+        else:
+            q = np.linspace(0.0, 1.0, 11)
+            keypoints = KeypointTrajectory("drawer", q, ("handle",),
+                                           p + np.outer(args.error * q, [1.0, 0.0, 0.0])[:, None], 0.0)
+        turned = "turned on by what the hand swept" if args.case == "door-turn" else \
+            "turned on as the hand felt it swing"
+        settings = [("planned pull only", SimulationConfig(second_turn=False)), (turned, SimulationConfig())]
     scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 5.5), sharex=True)
     config = SimulationConfig()
@@ -90,11 +101,13 @@ def main(args: Args) -> None:
     else:
         tolerance = np.degrees(config.revolute_tolerance)
         top.axhspan(-tolerance, tolerance, color="0.9", label="within the tolerance")
-        top.set_ylim(-20, 10)
+        top.set_ylim(-60 if args.case == "door-as-drawer" else -20, 10)
         top.set_ylabel("door angle from its target, deg")
         bottom.set_xlabel("time, s (dotted: the turn starts)")
         title = (f"Keypoints turned {args.error:.0f} deg about the closet's handle: the planned pull, "
-                 "and a turn on")
+                 "and a turn on" if args.case == "door-turn" else
+                 f"The closet's door taken for a drawer, its handle pulled {100 * args.error:.0f} cm "
+                 "straight out: the planned pull, and a turn on")
     top.legend(fontsize=8, loc="lower right")
     bottom.set_ylabel("articulation q")
     fig.suptitle(title, fontsize=10)
