@@ -178,7 +178,7 @@ class SimulationConfig:
     the planned arc is not the door's: the compliant arm follows the true hinge and stops short of
     or past the target (docs/SIMULATION.md, "Turning a door by what the hand swept"). A pull
     planned along a line (the keypoints say drawer) whose held hand swept an arc was a door's: the
-    robot turns it on about that circle until the hand has swept `q_target` of a quarter turn
+    robot turns it on about that circle until the hand has swept `q_target` of the door's range
     (`feels_for_a_door`; docs/SIMULATION.md, "A door taken for a drawer")."""
     second_turn_min: float = float(np.radians(1.0))
     second_turn_max: float = float(np.radians(25.0))
@@ -239,8 +239,8 @@ class SimulationConfig:
     def feels_for_a_door(self, plan: PlanResult) -> bool:
         """Whether the run takes `second_pull_time` after a pull planned along a line (the
         keypoints say drawer; not one that `pulls_to_stop`) to turn the part on as a door where the
-        held hand swept an arc (`second_turn`, `felt_door_turn_offset`): to `q_target` of a
-        quarter turn (`DOOR_OPENING`, the field's door articulation)."""
+        held hand swept an arc (`second_turn`, `felt_door_turn_offset`): to `q_target` of the
+        door's range (a generated door's quarter turn, `DOOR_OPENING`)."""
         return self.second_turn and straight_pull(plan) is not None and not self.pulls_to_stop(plan)
 
     def pulls_to_stop(self, plan: PlanResult) -> bool:
@@ -845,6 +845,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
     span = opened - shut
+    # A door's angle at q_target: of its joint's range (a generated door's quarter turn, a model
+    # file's own, as `SceneObject.in_joint_units` tells its keypoints); a slide sweeps no arc.
+    door_target = q_target * (abs(span) if joint.type_name() == "revolute" else DOOR_OPENING)
     set_joint_value(plant, plant_context, joint, shut + obj.ground_truth.q_current * span)
     lock_shut(plant, plant_context, [plant.GetJointByName(name, model) for name in obj.locked_joints])
     plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
@@ -895,7 +898,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
         elif t == t_pulled and again and grasped and feels:  # a drawer's pull: did the hand swing?
             felt = np.array(p_tool)[np.array(times) >= t_pull]
-            dq, turned = felt_door_turn_offset(controller_plant, felt, q_target * DOOR_OPENING,
+            dq, turned = felt_door_turn_offset(controller_plant, felt, door_target,
                                                plant.GetPositions(plant_context, robot), q_end,
                                                config.second_turn_min, config.second_turn_max)
             if turned:
