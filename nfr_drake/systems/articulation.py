@@ -888,27 +888,21 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             q_end[:NUM_ARM_JOINTS] += misses * dq_miss  # the plan's last command
         if t == t_pulled:
             q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
-        if t == t_pulled and again and grasped and turns:  # the robot measures its turn, turns on
+        if t == t_pulled and again and grasped:  # the robot measures its turn or its pull, goes on
             felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
             q_now = plant.GetPositions(plant_context, robot)
-            dq, turned, gap = door_turn_offset(controller_plant, felt, keypoints, q_target, q_now, q_end,
-                                               config.second_turn_min, config.second_turn_max,
-                                               config.second_turn_max_hinge_gap)
-            if turned:
+            dq = None
+            if turns:  # a door's arc: turned on by what the hand swept short
+                dq, turned, gap = door_turn_offset(controller_plant, felt, keypoints, q_target, q_now, q_end,
+                                                   config.second_turn_min, config.second_turn_max,
+                                                   config.second_turn_max_hinge_gap)
+            elif feels:  # a straight pull: did the hand swing?
+                dq, turned = felt_door_turn_offset(controller_plant, felt, door_target, q_now, q_end,
+                                                   config.second_turn_min, config.second_turn_max)
+            if dq is not None and turned:
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
-        elif t == t_pulled and again and grasped and feels:  # a drawer's pull: did the hand swing?
-            felt = np.array(p_tool)[np.array(times) >= t_pull]
-            dq, turned = felt_door_turn_offset(controller_plant, felt, door_target,
-                                               plant.GetPositions(plant_context, robot), q_end,
-                                               config.second_turn_min, config.second_turn_max)
-            if turned:
-                second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
-            elif config.pulls_again(plan):
-                shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
-                                             plant.GetPositions(plant_context, robot), config, t)
-        elif t == t_pulled and again and grasped:  # the robot measures its pull and pulls again
-            shortfall = second_pull.pull(context, controller_plant, plan, q_grasp,
-                                         plant.GetPositions(plant_context, robot), config, t)
+            elif not turns and config.pulls_again(plan):  # pulled again by the shortfall
+                shortfall = second_pull.pull(context, controller_plant, plan, q_grasp, q_now, config, t)
         if t == t_held and again and grasped:
             second_pull.hold(context, plant.GetPositions(plant_context, robot), q_end)
         if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop

@@ -190,9 +190,9 @@ def _turn_offset(robot_plant: MultibodyPlant, q_now: np.ndarray, q_command: np.n
 FELT_ARC_MIN = float(np.radians(10.0))
 """The least angle (rad) the held hand must sweep about the circle through its path, on a pull
 planned along a line, for the robot to take the part for a door (`felt_door_turn_offset`): a
-drawer's slide guides the hand along a line (four drawers of the simulation tests pulled to 0.6
-swept 0.01 degrees or less), and the doors the furniture pipeline took for drawers swung 27-42
-degrees open before the arm's pull ended (docs/SIMULATION.md, "A door taken for a drawer")."""
+drawer's slide guides the hand along a line (the drawer of the simulation tests pulled to 0.6 is
+not turned), and the doors the furniture pipeline took for drawers swung 27-42 degrees open
+before the arm's pull ended (docs/SIMULATION.md, "A door taken for a drawer")."""
 
 
 def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, target: float,
