@@ -329,6 +329,9 @@ class SimulationResult:
     pull_line: np.ndarray = field(default_factory=lambda: np.full(3, np.nan), repr=False)
     """The unit direction (W, (3,)) the guarded pull to the stop went along (`felt_line`); nan
     without one."""
+    felt_from: float = float("nan")
+    """The time the pull began, the fingers closed on the handle, s: the tool's path from then on
+    (`p_W_tool`) is the held hand's, what the robot felt; nan without a grasp."""
 
     def summary(self) -> str:
         """One line: SUCCESS or FAILURE, then `details`."""
@@ -956,7 +959,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                             config.grasp, shortfall,
                             pull_to_stop.stopped_at(context)[1] if to_stop and grasped else float("nan"),
                             misses + 1, turned, q_pulled, gap, plant.GetPositions(plant_context, robot),
-                            pull_line)
+                            pull_line, t_pull if grasped else float("nan"))
 
 
 def hydroelastic_grip(plant: MultibodyPlant, scene_graph, pads, held) -> None:

@@ -110,16 +110,68 @@ def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     return float(np.clip(swept, -np.pi, np.pi)), mean + centre_uv @ np.r_[[e1], [e2]], axis
 
 
-def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[float, np.ndarray]:
-    """The angle a door's keypoints turn the handle by from their present articulation to
-    `q_target`, about their hinge (rad, signed about the returned unit axis, hinge_bottom to
-    hinge_top at the present articulation). About the hinge, not about a circle through the handle's
-    path: a fitted path's curvature can be off where its ends are right."""
+def handle_turns(keypoints: KeypointTrajectory, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The angles a door's keypoints turn the handle by from their present articulation to each
+    of `qs` (M,), about their hinge (rad, (M,), signed about the returned unit axis, hinge_bottom
+    to hinge_top at the present articulation)."""
     bottom, top = (keypoints.point(name, keypoints.q_current) for name in ("hinge_bottom", "hinge_top"))
     axis = (top - bottom) / np.linalg.norm(top - bottom)
-    a, b = ((p - bottom) - ((p - bottom) @ axis) * axis
-            for p in (keypoints.point("handle", q) for q in (keypoints.q_current, q_target)))
-    return float(np.arctan2(np.cross(a, b) @ axis, a @ b)), axis
+    a = keypoints.point("handle", keypoints.q_current) - bottom
+    a = a - (a @ axis) * axis
+    b = keypoints.point("handle", np.atleast_1d(qs)) - bottom
+    b = b - np.outer(b @ axis, axis)
+    return np.arctan2(np.cross(a, b) @ axis, b @ a), axis
+
+
+def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[float, np.ndarray]:
+    """The angle a door's keypoints turn the handle by from their present articulation to
+    `q_target`, about their hinge (rad, signed about the returned unit axis, `handle_turns`).
+    About the hinge, not about a circle through the handle's path: a fitted path's curvature can
+    be off where its ends are right."""
+    angles, axis = handle_turns(keypoints, np.array([q_target]))
+    return float(angles[0]), axis
+
+
+MOVES_WITH_THE_DOOR = 1e-3
+"""The least path (m) a keypoint travels over a door's articulation to move with it."""
+
+
+def felt_door(keypoints: KeypointTrajectory, tool_path: np.ndarray, p_WH: np.ndarray) -> KeypointTrajectory:
+    """A door's keypoints as the robot holding its handle takes them (W, m): `keypoints`' grid and
+    names, about the hinge its hand felt (the circle through `tool_path`, (N, 3), the tool's path
+    by forward kinematics since the fingers closed, `arc_angle`), the handle where the hand holds
+    it (`p_WH`, (3,)), and the present articulation where `keypoints`' turn from theirs
+    (`handle_turns`) equals the angle the hand swept. The hinge keypoints lie on the felt axis
+    at their own heights along it; the others that move with the door keep their offsets from the
+    handle, turned by the angle between the two hinges' directions to the handle, and turn with
+    the handle about the felt axis by `keypoints`' angles; those that do not (the goal) stay.
+    What the robot plans a door's turn from a second base with (`systems.task.turn_on`)."""
+    angles, planned_axis = handle_turns(keypoints, keypoints.q_grid)
+    swept, centre, axis = arc_angle(tool_path)
+    if axis @ planned_axis < 0.0:
+        swept, axis = -swept, -axis
+    angles = np.maximum.accumulate(angles)  # a fitted path's small wiggles: one angle per q
+    q_now = float(np.interp(swept, angles, keypoints.q_grid))
+    now = keypoints.at(q_now)
+    handle = keypoints.names.index("handle")
+
+    def across(p: np.ndarray, on_axis: np.ndarray) -> np.ndarray:  # from the axis, across it
+        r = p - on_axis
+        return r - (r @ axis) * axis
+
+    hinge_kt = keypoints.point("hinge_bottom", q_now)
+    a, b = across(now[handle], hinge_kt), across(p_WH, centre)
+    to_felt = RotationMatrix(AngleAxis(float(np.arctan2(np.cross(a, b) @ axis, a @ b)), axis)).matrix()
+    travel = np.linalg.norm(np.diff(keypoints.p_WK, axis=0), axis=2).sum(axis=0)  # (K,)
+    p_WK = np.repeat(now[None], len(keypoints.q_grid), axis=0)
+    for k, name in enumerate(keypoints.names):
+        if name.startswith("hinge_"):
+            p_WK[:, k] = centre + ((now[k] - centre) @ axis) * axis
+        elif travel[k] >= MOVES_WITH_THE_DOOR:
+            p_k = p_WH + to_felt @ (now[k] - now[handle]) - centre
+            p_WK[:, k] = centre + np.stack([RotationMatrix(AngleAxis(float(t), axis)).matrix() @ p_k
+                                            for t in angles - swept])
+    return KeypointTrajectory(keypoints.category, keypoints.q_grid, keypoints.names, p_WK, q_now)
 
 
 def door_turn(tool_path: np.ndarray, planned: float, planned_axis: np.ndarray

@@ -21,6 +21,7 @@ from nfr_drake.systems.articulation import (
     SimulationResult,
     simulate_articulation,
 )
+from nfr_drake.systems.corrections import door_turn, felt_door, planned_door_turn
 from nfr_drake.systems.keypoints import AddKeypointTrajectorySource
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
@@ -47,9 +48,9 @@ def task_span(category: str, task: Literal["open", "close"], start_q: float | No
 
 @dataclass
 class PulledOn:
-    """A pull to the stop that the arm's own reach ended, taken on from a second base (`pull_on`):
-    why the first base's reach ended, the second plan (None if planning failed) and its error,
-    its simulation and replay."""
+    """A pull to the stop that the arm's own reach ended (`pull_on`) or a door's turn that ended
+    short (`turn_on`), taken on from a second base: why, the second plan (None if planning
+    failed) and its error, its simulation and replay."""
 
     reason: str
     plan: PlanResult | None
@@ -141,8 +142,10 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
     config = simulation_config or SimulationConfig()
     simulation = simulate_articulation(obj, plan, q_target, meshcat, config, keypoints=kt)
     path = write_replay(meshcat, replay) if replay is not None else None
-    pulled_on = pull_on(obj, kt, plan, simulation, obstacles, planner_config or PlannerConfig(), config,
-                        meshcat, replay)
+    pulled_on = (pull_on(obj, kt, plan, simulation, obstacles, planner_config or PlannerConfig(), config,
+                         meshcat, replay)
+                 or turn_on(obj, kt, plan, simulation, obstacles, planner_config or PlannerConfig(), config,
+                            meshcat, replay))
     return TaskOutcome(q_target, kt, plan, "", plan.seconds["total"], simulation, path, pulled_on)
 
 
@@ -187,14 +190,9 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
     """The pull to the stop taken on from a second base, where the arm's own reach ended the
     guarded pull of `first` (`SimulationConfig.pull_on`: the pull stopped short of its distance,
     and at its last joint positions the arm cannot move on along the line it pulled along,
-    `SimulationResult.pull_line`, `reach_limit`);
-    None where it did not. The handle is taken where the
-    hand let go of it, the keypoints' path along the line it pulled along (`held_handle`,
-    `handle_left_at`), the base placed again for it as for any
-    pull (the obstacles those of the first plan: `obstacles`, else the keypoints' carcass box), and
-    the second simulation starts with the part where the first left it, the arm at home; the
-    drive between the bases is not simulated. With `replay`, its replay goes beside it
-    (`*_pulled_on.html`)."""
+    `SimulationResult.pull_line`, `reach_limit`); None where it did not. The handle is taken where
+    the hand let go of it, the keypoints' path along the line it pulled along (`held_handle`,
+    `handle_left_at`); `from_a_second_base` goes on."""
     if not (config.pull_on and config.pulls_to_stop(plan) and first.grasped
             and first.pulled_past < config.guarded_pull):
         return None
@@ -202,6 +200,52 @@ def pull_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
     if reason is None:
         return None
     kt_on = handle_left_at(kt, held_handle(plan, first.q_robot), first.pull_line)
+    return from_a_second_base(obj, kt, kt_on, reason, first, obstacles, planner_config, config, meshcat,
+                              replay)
+
+
+TURN_ON_MIN = float(np.radians(3.0))
+"""The least angle (rad) a door's turn must end short of its target, as the robot measures it
+(`door_turn` over its hand's whole held path), for it to turn on from a second base
+(`turn_on`): over the second turn's 1 degree, under the task's 5."""
+
+
+def turn_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: SimulationResult,
+            obstacles: list[ObstacleBox] | None, planner_config: PlannerConfig, config: SimulationConfig,
+            meshcat: Meshcat | None, replay: Path | None) -> PulledOn | None:
+    """A door's turn taken on from a second base where `first` ended at least `TURN_ON_MIN` short
+    of the keypoints' turn to the target as the robot measures it: the angle its hand swept
+    about the circle through its held path (`door_turn`; the arm's reach, a joint at its limit,
+    or the second turn's largest step ended it; `SimulationConfig.pull_on`); None where it did
+    not. The door is taken as the hand felt it (`felt_door`: about the felt hinge, the handle
+    where the hand let go of it, turned by the angle swept); `from_a_second_base` goes on. The
+    reason names the arm's limit where `reach_limit` finds one along the turn's way."""
+    if not (config.pull_on and config.turns_again(plan, kt) and first.grasped):
+        return None
+    felt = first.p_W_tool[first.times >= first.felt_from]
+    if len(felt) < 3:
+        return None
+    left, centre, axis = door_turn(felt, *planned_door_turn(kt, first.q_target))
+    if left < TURN_ON_MIN:
+        return None
+    p_WH = held_handle(plan, first.q_robot)
+    way = np.cross(axis, p_WH - centre)
+    reason = (reach_limit(plan.X_WB, first.q_robot, way / np.linalg.norm(way))
+              or f"the turn ended {np.degrees(left):.0f} deg short")
+    kt_on = felt_door(kt, felt, p_WH)
+    return from_a_second_base(obj, kt, kt_on, reason, first, obstacles, planner_config, config, meshcat,
+                              replay)
+
+
+def from_a_second_base(obj: SceneObject, kt: KeypointTrajectory, kt_on: KeypointTrajectory, reason: str,
+                       first: SimulationResult, obstacles: list[ObstacleBox] | None,
+                       planner_config: PlannerConfig, config: SimulationConfig, meshcat: Meshcat | None,
+                       replay: Path | None) -> PulledOn:
+    """The task taken on from a second base, `reason` why: the base placed again for the part
+    as the robot takes it when it let go (`kt_on`) as for any task (the obstacles those of the
+    first plan: `obstacles`, else `kt`'s carcass box), and the second simulation starting with
+    the part where `first` left it, the arm at home; the drive between the bases is not
+    simulated. With `replay`, its replay goes beside it (`*_pulled_on.html`)."""
     try:
         plan_on = plan_articulation(kt_on, first.q_target, config=planner_config,
                                     obstacles=obstacles if obstacles is not None else [carcass_box(kt)])

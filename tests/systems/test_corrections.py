@@ -6,12 +6,15 @@ from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 
+from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.systems.corrections import (
     LIMIT_MARGIN,
     bounded_step,
+    felt_door,
     tool_pose_and_jacobian,
     turn_step,
 )
+from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.robot import NUM_ARM_JOINTS, add_panda
 
 X_WB = RigidTransform(RollPitchYaw(0.0, 0.0, np.pi), [0.9531, -0.0718, 0.0])
@@ -57,3 +60,25 @@ def test_a_door_turned_at_a_wrist_limit_turns_the_tool_within_the_limits(arm):
     X_reached, _ = tool_pose_and_jacobian(arm, context, q)
     assert np.linalg.norm(X_reached.translation() - goal.translation()) < 0.002
     assert goal.rotation().InvertAndCompose(X_reached.rotation()).ToAngleAxis().angle() < np.radians(0.5)
+
+
+def test_a_door_as_the_hand_felt_it_turns_about_the_true_hinge_from_where_it_let_go():
+    """Keypoints of a closet turned 12 degrees about its shut handle (a pose a few degrees off):
+    a hand that turned the true door from shut to 0.3 (27 degrees) with the handle held takes
+    the door as turned that far about the true hinge: hinge keypoints on its axis, the handle
+    where the hand let go, present articulation 0.3, the rest of the turn along the true door's
+    path; the goal (which does not move with the door) stays."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    truth = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    p = truth.point("handle", 0.0)
+    R = RotationMatrix.MakeZRotation(np.radians(12.0))
+    turned = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
+    q_held = np.linspace(0.0, 0.3, 20)
+    felt = felt_door(turned, truth.point("handle", q_held), truth.point("handle", 0.3))
+    assert felt.q_current == pytest.approx(0.3, abs=0.005)
+    for name in ("hinge_bottom", "hinge_top"):
+        np.testing.assert_allclose(felt.point(name, 0.5), truth.point(name, 0.5), atol=2e-3)
+    for q in (0.3, 0.6, 0.9):
+        np.testing.assert_allclose(felt.point("handle", q), truth.point("handle", q), atol=3e-3)
+    np.testing.assert_allclose(felt.point("goal", 0.6), turned.point("goal", 0.6))
+    assert np.linalg.norm(turned.point("handle", 0.6) - truth.point("handle", 0.6)) > 0.05

@@ -1,5 +1,7 @@
 """Planned motions executed on the true object in the SAP simulation, and the success check."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
@@ -132,6 +134,30 @@ def test_a_door_planned_on_a_turned_arc_is_turned_on_by_what_the_hand_swept_shor
     gated = run_task(scene_object, 0.6, keypoints=turned_arc, simulation_config=SimulationConfig(
         second_turn_max_hinge_gap=0.5 * moved)).simulation
     assert gated.turned == 0.0 and gated.q_final == pytest.approx(planned_only.q_final, abs=0.01)
+
+
+def test_a_door_turn_that_ends_short_is_taken_on_from_a_second_base():
+    """The closet's keypoints turned 25 degrees about its handle (clockwise from above), one turn
+    step at most 2 degrees: the planned pull leaves the door 11 degrees short, the turn step 9
+    (over `TURN_ON_MIN` as the robot measures it).
+    It lets go, takes the door as its hand felt it (`felt_door`), plans from a second base and
+    turns the door to within a degree and a half of the target; with `pull_on` off it stays short."""
+    from nfr_drake.systems.task import TURN_ON_MIN
+
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    p = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0).point("handle", 0.0)
+    R = RotationMatrix.MakeZRotation(np.radians(-25.0))
+    turned_arc = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
+    scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0)
+    small_steps = SimulationConfig(second_turn_max=np.radians(2.0))
+    stays = run_task(scene_object, 0.6, keypoints=turned_arc,
+                     simulation_config=replace(small_steps, pull_on=False))
+    assert stays.pulled_on is None and not stays.success
+    assert stays.simulation.joint_error > TURN_ON_MIN, stays.summary()
+    on = run_task(scene_object, 0.6, keypoints=turned_arc, simulation_config=small_steps)
+    assert on.simulation.q_final == pytest.approx(stays.simulation.q_final, abs=0.005)  # the same first run
+    assert on.pulled_on is not None and "short" in on.pulled_on.reason, on.summary()
+    assert on.success and on.final.joint_error < np.radians(1.5), on.summary()
 
 
 def test_arc_angle_finds_the_circle_and_the_signed_angle():
