@@ -14,7 +14,8 @@ would have prevented. One row per model and field: what the fit read the part as
 drawer), the handle's error at the observed state, for a door read as one how far its hinge line
 lies from the joint's axis (horizontally; both are upright), P(handle within 2 cm), whether the
 calibrated threshold refuses it, the simulated outcome (a failure with how far the joint ended
-from its target), the fit's time.
+from its target; where it went on from a second base, why: `systems.task.pull_on`, `turn_on`),
+the fit's time.
 """
 
 from __future__ import annotations
@@ -84,9 +85,13 @@ def run(model, field: str, image_size: int) -> list[str]:
     refused = "refused" if refusal(outcome.confidence) else "kept"
     task = outcome.task
     result = ("no plan" if task.plan is None else "opened" if task.success else "failed") if task else "-"
-    if result == "failed" and task.simulation is not None:
-        sim = task.simulation
+    if result == "failed" and task.final is not None:
+        sim = task.final
         result += f" ({joint_error_text(sim.joint_type, sim.joint_error)} off the target)"
+    if task is not None and task.pulled_on is not None:
+        first = task.simulation
+        result += (f", from a second base ({task.pulled_on.reason}; the first left it "
+                   f"{joint_error_text(first.joint_type, first.joint_error)} off)")
     predicted = outcome.predicted
     read = {"closet": "door", "drawer": "drawer"}[predicted.category] if predicted else "-"
     hinge = "-"

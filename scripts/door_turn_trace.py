@@ -10,7 +10,8 @@ samples: the fit's articulation of the part; the largest articulation between th
 and the pull starting (a grasp's jolt); the angle the held hand swept about the circle through its
 path until the pull settled, measured from the path's first sample and from its point furthest
 back (`corrections.arc_angle`, today's measure); the articulation then; the turn the robot asked
-for (`SimulationResult.turned`) and the turn the door made; the final articulation. Angles in
+for (`SimulationResult.turned`) and the turn the door made; the final articulation; and where
+the turn was taken on from a second base (`systems.task.turn_on`), how that ended. Angles in
 degrees (generated doors: a quarter turn per unit of q); a drawer is named and skipped.
 """
 
@@ -59,7 +60,7 @@ def main(args: Args) -> None:
             continue
         span = 90.0  # degrees per unit of q
         delay = (sim.tries - 1) * config.regrasp_time
-        t_close, t_pull = plan.t_grasp + delay + 0.5 * config.dwell, plan.t_grasp + delay + config.dwell
+        t_close, t_pull = plan.t_grasp + delay + 0.5 * config.dwell, sim.felt_from
         t_pulled = plan.duration + config.dwell + config.settle + delay
         held = (sim.times >= t_pull) & (sim.times < t_pulled)
         jolt = sim.q_object[(sim.times >= t_close) & (sim.times <= t_pull)].max(initial=0.0)
@@ -70,6 +71,8 @@ def main(args: Args) -> None:
               f"pulled to {span * sim.q_pulled:.1f}, turn asked {abs(np.degrees(sim.turned)):.1f}, "
               f"made {span * (sim.q_final - sim.q_pulled):.1f}, final {span * sim.q_final:.1f} "
               f"(target {span * sim.q_target:.1f}): {'opened' if sim.success else 'not opened'}", flush=True)
+        if task.pulled_on is not None:
+            print(f"  {task.pulled_on.details()}: {'opened' if task.success else 'not opened'}", flush=True)
 
 
 if __name__ == "__main__":
