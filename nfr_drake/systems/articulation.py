@@ -186,20 +186,22 @@ class SimulationConfig:
     """The door is turned only when the hinge its hand felt (the circle's axis) lies within this
     of the keypoints' hinge line (`hinge_gap`), m; inf: always. `SimulationResult.hinge_gap`
     records the gap either way."""
-    regrasps: int = 1
+    regrasps: int = 2
     """How many times the robot tries again when its fingers close on nothing (a gripper senses
     it from their closed width; here the grip point outside `capture_half_extents` at the close):
-    it opens them (`regrasp_open`), moves the tool `regrasp_step` further along the approach
-    (`regrasp_move`) and closes them again; the rest of the plan follows shifted by that joint
-    step. 0: one close only. The handle of a fit in a room lay 1.6-3.2 cm off, mostly beyond the
-    predicted point along the approach (docs/SIMULATION.md, "Trying again after a miss")."""
+    it opens them (`regrasp_open`), moves the tool along the approach (`regrasp_move`) and closes
+    them again, first `regrasp_step` further than the planned grasp, then as far short of it, then
+    twice as far each way (`try_steps`); the rest of the plan follows shifted by that joint step.
+    0: one close only. The handle of a fit in a room lay 1.6-3.2 cm off, mostly beyond the
+    predicted point along the approach; furniture fits also leave it short of the point, the hand
+    then stopped beyond the bar (docs/SIMULATION.md, "Trying again after a miss")."""
     regrasp_step: float = 0.02
-    """How much further along the approach each new try closes, m: the fingers' pads catch a bar
-    within about 2 cm either side of the tool point along the approach."""
+    """How far along the approach each new try moves, m: the fingers' pads catch a bar within
+    about 2 cm either side of the tool point along the approach."""
     regrasp_open: float = 0.3
     """Time the fingers take to open after a miss, s."""
     regrasp_move: float = 0.5
-    """Time the tool takes to move `regrasp_step` deeper, s."""
+    """Time the tool takes to move to the next try, s."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.grasped_stiffness <= 1.0:
@@ -694,13 +696,20 @@ class PullToStop(LeafSystem):
         output.SetFromVector(command)
 
 
+def try_steps(tries: int) -> int:
+    """How many `regrasp_step`s along the approach the `tries`-th close after the first lies from
+    the planned grasp: 0, then 1 further, 1 back, 2 further, 2 back, ..."""
+    return (tries + 1) // 2 * (1 if tries % 2 else -1)
+
+
 def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0,
                               misses: int = 0, dq_miss: np.ndarray | None = None) -> PiecewisePolynomial:
     """The plan with a dwell at the grasp and the fingers closing during it, held `hold` s longer
     at its end; [q; v], 9 + 9 values. With `misses` > 0 the grasp is first missed that many times:
-    each time the fingers close (`dwell`), open (`regrasp_open`) and the arm moves by the joint
-    step `dq_miss` (NUM_ARM_JOINTS,; `regrasp_step`) over `regrasp_move`; the rest of the plan
-    follows `misses * config.regrasp_time` s later, shifted by `misses * dq_miss`."""
+    each time the fingers close (`dwell`), open (`regrasp_open`) and the arm moves over
+    `regrasp_move` to the next try, `try_steps` joint steps `dq_miss` (NUM_ARM_JOINTS,;
+    `regrasp_step`) from the planned grasp; the rest of the plan follows `misses *
+    config.regrasp_time` s later, shifted by the last try's steps."""
     traj, t_g, dwell = plan.trajectory, plan.t_grasp, config.dwell
     period, opened = config.regrasp_time, config.dwell + config.regrasp_open
     velocity = traj.MakeDerivative()
@@ -721,8 +730,9 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: 
             a_dot = 0.5 * np.pi / config.regrasp_move * np.sin(np.pi * a) if 0.0 < a < 1.0 else 0.0
             q = traj.value(t_g).ravel().copy()
             v = np.zeros_like(q)
-            q[:NUM_ARM_JOINTS] += (j + 0.5 - 0.5 * np.cos(np.pi * a)) * dq
-            v[:NUM_ARM_JOINTS] = a_dot * dq
+            here, on = try_steps(int(j)), try_steps(int(j) + 1)
+            q[:NUM_ARM_JOINTS] += (here + (on - here) * (0.5 - 0.5 * np.cos(np.pi * a))) * dq
+            v[:NUM_ARM_JOINTS] = (on - here) * a_dot * dq
             closing = min(s / dwell, 1.0) if s <= dwell else max(0.0, 1.0 - (s - dwell) / config.regrasp_open)
         else:
             shift = misses * period if t >= t_last else 0.0
@@ -730,7 +740,7 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: 
             q = traj.value(tp).ravel().copy()
             moving = (t <= t_g or t >= t_last + dwell) and tp < plan.duration
             v = velocity.value(tp).ravel().copy() if moving else np.zeros_like(q)
-            q[:NUM_ARM_JOINTS] += (misses if t >= t_last else 0) * dq
+            q[:NUM_ARM_JOINTS] += (try_steps(misses) if t >= t_last else 0) * dq
             closing = np.clip((t - t_last) / dwell, 0.0, 1.0)
         q[NUM_ARM_JOINTS:] = FINGER_OPEN + closing * (config.finger_closed - FINGER_OPEN)
         v[NUM_ARM_JOINTS:] = 0.0
@@ -888,7 +898,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             q_grasp = plant.GetPositions(plant_context, robot)
         if t in (t_pulled, t_held):
             q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
-            q_end[:NUM_ARM_JOINTS] += misses * dq_miss  # the plan's last command
+            q_end[:NUM_ARM_JOINTS] += try_steps(misses) * dq_miss  # the plan's last command
         if t == t_pulled:
             q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
         if t == t_pulled and again and grasped:  # the robot measures its turn or its pull, goes on
@@ -924,7 +934,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                 for cid in constraint_ids[grip]:
                     plant.SetConstraintActiveStatus(plant_context, cid, True)
                 grasped = True
-            elif misses < config.regrasps:  # nothing between the fingers: open, deeper, close again
+            elif misses < config.regrasps:  # nothing between the fingers: open, move on, close again
                 misses += 1
                 t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
                 samples = [s for s in samples if s > t]
