@@ -13,7 +13,8 @@ stretch (`SceneObject.grip_half_length`), so grip points are laid along it every
 a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
 the tool origin is switched on through the context, only if it lies inside the open gripper
 (`capture_half_extents`, in the tool frame); after a miss the hand opens and tries again
-further along the approach (`SimulationConfig.regrasps`, `PlanTries`).
+further along the approach, then short of the planned grasp (`SimulationConfig.regrasps`,
+`try_steps`, `PlanTries`).
 `SimulationConfig.grasp = "contact"` instead closes the fingers on the handle with a set force and
 lets friction hold it (compliant hydroelastic pads on a rigid hydroelastic handle), the arm stiff
 throughout, as on a real robot. A drawer's pull
