@@ -5,6 +5,8 @@ it swing (docs/SIMULATION.md). All in the world frame W,
 metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the
 fingers), steps the 7 arm joints'."""
 
+from dataclasses import replace
+
 import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
@@ -123,12 +125,28 @@ def handle_turns(keypoints: KeypointTrajectory, qs: np.ndarray) -> tuple[np.ndar
     return np.arctan2(np.cross(a, b) @ axis, b @ a), axis
 
 
+def door_turns(keypoints: KeypointTrajectory, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The angles a door turns by from the keypoints' present articulation to each of `qs` (M,),
+    as the robot plans its turn (rad, (M,), signed about the returned unit axis): the mean of two
+    readings of one fit, the keypoints' own turn of the handle about their hinge
+    (`handle_turns`) and the articulation's, (q - q_current) times `turn_per_q` the way the handle
+    turns as q grows; the keypoints' alone where `turn_per_q` is unknown. The first errs where the
+    fitted hinge or handle path is off, the second where the fit's q is (docs/SIMULATION.md,
+    "The turn planned from two readings of the fit")."""
+    angles, axis = handle_turns(keypoints, qs)
+    if keypoints.turn_per_q is None:
+        return angles, axis
+    ends = handle_turns(keypoints, keypoints.q_grid[[0, -1]])[0]
+    way = 1.0 if ends[1] >= ends[0] else -1.0
+    return 0.5 * (angles + way * (np.atleast_1d(qs) - keypoints.q_current) * keypoints.turn_per_q), axis
+
+
 def planned_door_turn(keypoints: KeypointTrajectory, q_target: float) -> tuple[float, np.ndarray]:
-    """The angle a door's keypoints turn the handle by from their present articulation to
-    `q_target`, about their hinge (rad, signed about the returned unit axis, `handle_turns`).
-    About the hinge, not about a circle through the handle's path: a fitted path's curvature can
-    be off where its ends are right."""
-    angles, axis = handle_turns(keypoints, np.array([q_target]))
+    """The angle a door turns by from the keypoints' present articulation to `q_target` as the
+    robot plans it (rad, signed about the returned unit axis, hinge_bottom to hinge_top:
+    `door_turns`). About the hinge, not about a circle through the handle's path: a fitted path's
+    curvature can be off where its ends are right."""
+    angles, axis = door_turns(keypoints, np.array([q_target]))
     return float(angles[0]), axis
 
 
@@ -141,12 +159,12 @@ def felt_door(keypoints: KeypointTrajectory, tool_path: np.ndarray, p_WH: np.nda
     names, about the hinge its hand felt (the circle through `tool_path`, (N, 3), the tool's path
     by forward kinematics since the fingers closed, `arc_angle`), the handle where the hand holds
     it (`p_WH`, (3,)), and the present articulation where `keypoints`' turn from theirs
-    (`handle_turns`) equals the angle the hand swept. The hinge keypoints lie on the felt axis
+    (`door_turns`) equals the angle the hand swept. The hinge keypoints lie on the felt axis
     at their own heights along it; the others that move with the door keep their offsets from the
     handle, turned by the angle between the two hinges' directions to the handle, and turn with
     the handle about the felt axis by `keypoints`' angles; those that do not (the goal) stay.
     What the robot plans a door's turn from a second base with (`systems.task.turn_on`)."""
-    angles, planned_axis = handle_turns(keypoints, keypoints.q_grid)
+    angles, planned_axis = door_turns(keypoints, keypoints.q_grid)
     swept, centre, axis = arc_angle(tool_path)
     if axis @ planned_axis < 0.0:
         swept, axis = -swept, -axis
@@ -171,7 +189,7 @@ def felt_door(keypoints: KeypointTrajectory, tool_path: np.ndarray, p_WH: np.nda
             p_k = p_WH + to_felt @ (now[k] - now[handle]) - centre
             p_WK[:, k] = centre + np.stack([RotationMatrix(AngleAxis(float(t), axis)).matrix() @ p_k
                                             for t in angles - swept])
-    return KeypointTrajectory(keypoints.category, keypoints.q_grid, keypoints.names, p_WK, q_now)
+    return replace(keypoints, p_WK=p_WK, q_current=q_now)
 
 
 def door_turn(tool_path: np.ndarray, planned: float, planned_axis: np.ndarray

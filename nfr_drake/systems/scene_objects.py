@@ -93,7 +93,8 @@ def _swept_keypoints(plant: MultibodyPlant, context, joint, body, p_BH: np.ndarr
             foot = X_WJ.translation() + ((p_WK[i, 0] - X_WJ.translation()) @ a) * a
             p_WK[i, 1], p_WK[i, 2] = foot + _HINGE_HALF_SPAN * a, foot - _HINGE_HALF_SPAN * a
         p_WK[i, len(names) - len(moving_points):] = [X_WB @ p for p in moving_points.values()]
-    return KeypointTrajectory("closet" if revolute else "drawer", q_grid, names, p_WK, q)
+    kt = KeypointTrajectory("closet" if revolute else "drawer", q_grid, names, p_WK, q)
+    return kt.told_turn(abs(opened - shut))
 
 
 GRIP_END_MARGIN = 0.02

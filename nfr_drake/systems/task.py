@@ -180,7 +180,7 @@ def handle_left_at(kt: KeypointTrajectory, p_WH: np.ndarray, along_W: np.ndarray
     if not np.isfinite(turn) or np.hypot(*along_W[:2]) < 1e-6 or np.hypot(*predicted[:2]) < 1e-6:
         turn = 0.0
     R = RotationMatrix.MakeZRotation(float(turn)).matrix()
-    turned = KeypointTrajectory(kt.category, kt.q_grid, kt.names, kt.p_WK @ R.T, kt.q_current)
+    turned = replace(kt, p_WK=kt.p_WK @ R.T)
     return turned.shifted(np.asarray(p_WH) - turned.point("handle", q_left)).with_current(q_left)
 
 

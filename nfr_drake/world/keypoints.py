@@ -8,13 +8,14 @@ model) or from the neural field's forward simulation (`from_fit_result`).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects.articulated import ArticulatedObject
+from nfr_drake.objects.fronts import DOOR_OPENING
 
 DEFAULT_GRID_SIZE = 41
 GRIP_AXIS_KEYPOINT = "grip_axis"
@@ -43,6 +44,9 @@ class KeypointTrajectory:
             "hinge_bottom").
         p_WK: keypoint positions in W at each grid articulation, m, shape (N, K, 3).
         q_current: the object's present articulation, in [0, 1].
+        turn_per_q: a door's turn per unit of q as its model tells, rad (a generated door's or
+            a fit's quarter turn, `DOOR_OPENING`; a model file's own range); None where unknown
+            (and for drawers).
     """
 
     category: str
@@ -50,6 +54,7 @@ class KeypointTrajectory:
     names: tuple[str, ...]
     p_WK: np.ndarray
     q_current: float
+    turn_per_q: float | None = None
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q_grid, dtype=float)
@@ -90,19 +95,23 @@ class KeypointTrajectory:
 
     def with_current(self, q_current: float) -> KeypointTrajectory:
         """The same trajectory with another present articulation."""
-        return KeypointTrajectory(self.category, self.q_grid, self.names, self.p_WK, q_current)
+        return replace(self, q_current=q_current)
 
     def rescaled(self, factor: float) -> KeypointTrajectory:
         """The same motion with its articulations multiplied by `factor` > 0 (q_grid and q_current):
         a door's keypoints, whose q is 90 degrees per unit, told in the q of a joint whose range
         from shut to open is another angle (`SceneObject.in_joint_units`)."""
-        return KeypointTrajectory(self.category, self.q_grid * factor, self.names, self.p_WK,
-                                  self.q_current * factor)
+        return replace(self, q_grid=self.q_grid * factor, q_current=self.q_current * factor,
+                       turn_per_q=None if self.turn_per_q is None else self.turn_per_q / factor)
 
     def shifted(self, offset_W: np.ndarray) -> KeypointTrajectory:
         """All keypoints translated by `offset_W` (m, (3,)): a deliberately wrong estimate."""
-        return KeypointTrajectory(self.category, self.q_grid, self.names,
-                                  self.p_WK + np.asarray(offset_W, dtype=float), self.q_current)
+        return replace(self, p_WK=self.p_WK + np.asarray(offset_W, dtype=float))
+
+    def told_turn(self, turn_per_q: float = DOOR_OPENING) -> KeypointTrajectory:
+        """A door's trajectory with its turn per unit of q (rad; by default a generated door's and
+        a fit's quarter turn); a drawer's as it is."""
+        return replace(self, turn_per_q=turn_per_q) if self.category == "closet" else self
 
     @staticmethod
     def from_object_frame(category: str, q_grid: np.ndarray, names: Sequence[str], p_OK: np.ndarray,
@@ -129,7 +138,8 @@ class KeypointTrajectory:
                     + GRIP_AXIS_OFFSET * np.asarray(front.grip_axis_M))
             p_OA = np.stack([X[:3, :3] @ p_MA + X[:3, 3] for X in map(front.X_OM, q_grid)])
             names, p_OK = (*names, GRIP_AXIS_KEYPOINT), np.concatenate([p_OK, p_OA[:, None]], axis=1)
-        return KeypointTrajectory.from_object_frame(category, q_grid, names, p_OK, X_WO, q_current)
+        kt = KeypointTrajectory.from_object_frame(category, q_grid, names, p_OK, X_WO, q_current)
+        return kt.told_turn()
 
     @staticmethod
     def from_fit_result(result: Mapping, X_WO: RigidTransform) -> KeypointTrajectory:
@@ -142,7 +152,8 @@ class KeypointTrajectory:
             p_OK = np.stack([np.asarray(traj["keypoints"][n], dtype=float) for n in names], axis=1)
             part = result.get("part")
             category = result["category"] if part is None else PART_CATEGORY[part["type"]]
-            return KeypointTrajectory.from_object_frame(
+            kt = KeypointTrajectory.from_object_frame(
                 category, np.asarray(traj["q"], dtype=float), names, p_OK, X_WO, float(result["q"]))
+            return kt.told_turn()
         except (KeyError, TypeError, ValueError) as err:
             raise NfrDrakeError(f"fit result has no usable keypoint trajectory: {err}") from None
