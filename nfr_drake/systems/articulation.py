@@ -166,7 +166,9 @@ class SimulationConfig:
     joint positions along its line: a joint at a limit that going on drives further, links
     touching that going on brings closer), the robot lets go, its base is placed
     again in front of the handle where the hand left it, and it grasps and pulls on to the stop,
-    once (`systems.task.pull_on`; the base's drive is not simulated)."""
+    once (`systems.task.pull_on`; the base's drive is not simulated). A door's turn that ended
+    `systems.task.TURN_ON_MIN` or more short of its planned turn, as the hand measured it, is
+    taken on likewise, the door as the hand felt it (`systems.task.turn_on`)."""
 
     second_turn: bool = True
     """A door's pull (a planned handle path that is no line, `straight_pull`): once it has

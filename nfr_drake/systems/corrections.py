@@ -162,7 +162,7 @@ def felt_door(keypoints: KeypointTrajectory, tool_path: np.ndarray, p_WH: np.nda
     (`door_turns`) equals the angle the hand swept. The hinge keypoints lie on the felt axis
     at their own heights along it; the others that move with the door keep their offsets from the
     handle, turned by the angle between the two hinges' directions to the handle, and turn with
-    the handle about the felt axis by `keypoints`' angles; those that do not (the goal) stay.
+    the handle about the felt axis by the `door_turns` angles; those that do not (the goal) stay.
     What the robot plans a door's turn from a second base with (`systems.task.turn_on`)."""
     angles, planned_axis = door_turns(keypoints, keypoints.q_grid)
     swept, centre, axis = arc_angle(tool_path)
