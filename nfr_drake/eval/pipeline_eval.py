@@ -49,8 +49,9 @@ class PipelineRow:
     before a second pull, a door's turn or a guarded pull (nan when nothing was simulated).
     hinge_gap_cm: where a door's turn was measured, the hinge the hand felt against the
     keypoints' (`SimulationResult.hinge_gap`; nan otherwise). pulled_on: where the arm's reach
-    ended a guarded pull and the robot pulled on from a second base (`systems.task.pull_on`), why
-    ("panda_joint6 at its upper limit"); empty otherwise. success, final_error and max_drift_cm are
+    ended a guarded pull and the robot pulled on from a second base (`systems.task.pull_on`), or a
+    door's turn ended short and it turned on from one (`turn_on`), why ("panda_joint6 at its upper
+    limit"); empty otherwise. success, final_error and max_drift_cm are
     then the second base's.
     """
 
@@ -284,8 +285,9 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
         pull_on: where the arm's own reach ends that pull (a joint at its limit, links touching),
-            the robot re-places its base and pulls on to the stop (`SimulationConfig.pull_on`);
-            the CSV's pulled_on says why.
+            the robot re-places its base and pulls on to the stop, and a door's turn that ended
+            short is taken on from a second base too (`SimulationConfig.pull_on`); the CSV's
+            pulled_on says why.
         regrasps: how many times the hand tries again after its fingers closed on nothing, 2 cm
             further along the approach, then 2 cm short of the planned grasp
             (`SimulationConfig.regrasps`; 0: one close).
