@@ -168,6 +168,8 @@ def felt_door(keypoints: KeypointTrajectory, tool_path: np.ndarray, p_WH: np.nda
     swept, centre, axis = arc_angle(tool_path)
     if axis @ planned_axis < 0.0:
         swept, axis = -swept, -axis
+    if angles[-1] < angles[0]:  # told about the axis the door opens positively about
+        angles, swept, axis = -angles, -swept, -axis
     angles = np.maximum.accumulate(angles)  # a fitted path's small wiggles: one angle per q
     q_now = float(np.interp(swept, angles, keypoints.q_grid))
     now = keypoints.at(q_now)

@@ -225,13 +225,15 @@ def turn_on(obj: SceneObject, kt: KeypointTrajectory, plan: PlanResult, first: S
     felt = first.p_W_tool[first.times >= first.felt_from]
     if len(felt) < 3:
         return None
-    left, centre, axis = door_turn(felt, *planned_door_turn(kt, first.q_target))
-    if left < TURN_ON_MIN:
+    planned, planned_axis = planned_door_turn(kt, first.q_target)
+    opening = 1.0 if planned >= 0.0 else -1.0  # the sign of the door's opening about the axis
+    left, centre, axis = door_turn(felt, planned, planned_axis)
+    if opening * left < TURN_ON_MIN:
         return None
     p_WH = held_handle(plan, first.q_robot)
-    way = np.cross(axis, p_WH - centre)
+    way = opening * np.cross(axis, p_WH - centre)
     reason = (reach_limit(plan.X_WB, first.q_robot, way / np.linalg.norm(way))
-              or f"the turn ended {np.degrees(left):.0f} deg short")
+              or f"the turn ended {np.degrees(abs(left)):.0f} deg short")
     kt_on = felt_door(kt, felt, p_WH)
     return from_a_second_base(obj, kt, kt_on, reason, first, obstacles, planner_config, config, meshcat,
                               replay)

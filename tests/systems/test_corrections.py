@@ -62,17 +62,24 @@ def test_a_door_turned_at_a_wrist_limit_turns_the_tool_within_the_limits(arm):
     assert goal.rotation().InvertAndCompose(X_reached.rotation()).ToAngleAxis().angle() < np.radians(0.5)
 
 
-def test_a_door_as_the_hand_felt_it_turns_about_the_true_hinge_from_where_it_let_go():
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_a_door_as_the_hand_felt_it_turns_about_the_true_hinge_from_where_it_let_go(mirrored):
     """Keypoints of a closet turned 12 degrees about its shut handle (a pose a few degrees off):
     a hand that turned the true door from shut to 0.3 (27 degrees) with the handle held takes
     the door as turned that far about the true hinge: hinge keypoints on its axis, the handle
     where the hand let go, present articulation 0.3, the rest of the turn along the true door's
-    path; the goal (which does not move with the door) stays."""
+    path; the goal (which does not move with the door) stays. Mirrored, the door opens the other
+    way about the hinge's axis: the same."""
+    from dataclasses import replace
+
     obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    mirror = np.diag([1.0, -1.0 if mirrored else 1.0, 1.0])
     truth = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    truth = replace(truth, p_WK=truth.p_WK @ mirror)
     p = truth.point("handle", 0.0)
     R = RotationMatrix.MakeZRotation(np.radians(12.0))
     turned = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
+    turned = replace(turned, p_WK=turned.p_WK @ mirror)
     q_held = np.linspace(0.0, 0.3, 20)
     felt = felt_door(turned, truth.point("handle", q_held), truth.point("handle", 0.3))
     assert felt.q_current == pytest.approx(0.3, abs=0.005)
