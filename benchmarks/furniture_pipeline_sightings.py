@@ -61,13 +61,16 @@ from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.front_reading import SightedFront, handle_offset, read_front
 from nfr_drake.perception.handle_detector.model import DETECTOR_DIR, load_detector
 from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_BAR_SHARE,
     FURNITURE_BEHIND_M,
     FURNITURE_LOOSE,
     FURNITURE_MERGED_PX,
     FURNITURE_MIN_SHARE,
+    bar_sightings,
     in_front,
     project,
     sightings,
+    triangulate_bars,
     triangulate_handles,
 )
 from nfr_drake.systems.pipeline import perception_photos
@@ -174,6 +177,12 @@ def main() -> None:
     parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
     parser.add_argument("--merged-px", type=float, default=FURNITURE_MERGED_PX,
                         help="triangulate_handles' merged_px (0: every view counts in a point's share)")
+    parser.add_argument("--no-bars", action="store_true",
+                        help="without the views' bar segments: no upright bars the points leave unexplained "
+                             "(`triangulate_bars`), and two points close in every view are one "
+                             "handle whether or not they lie on one bar")
+    parser.add_argument("--bar-share", type=float, default=FURNITURE_BAR_SHARE,
+                        help="triangulate_bars' min_share")
     parser.add_argument("--offset-log-odds", type=float, nargs="+",
                         default=list(FurnitureFitConfig.offset_type_log_odds))
     args = parser.parse_args()
@@ -199,9 +208,13 @@ def main() -> None:
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
         handle_maps = detector.detect(images)
         found = [s for i, m in enumerate(handle_maps) for s in sightings(m, i)]
-        handles = in_front(triangulate_handles(frames, found, min_share=args.min_share,
-                                               loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
-                                               merged_px=args.merged_px), args.behind_m)
+        segments = [b for i, m in enumerate(handle_maps) for b in bar_sightings(m, i)]
+        points = triangulate_handles(frames, found, min_share=args.min_share, loose_share=args.loose_share,
+                                     loose_rms_px=args.loose_rms_px, merged_px=args.merged_px,
+                                     bars=None if args.no_bars else segments)
+        if not args.no_bars:
+            points += triangulate_bars(frames, segments, points, min_share=args.bar_share)
+        handles = in_front(points, args.behind_m)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         points = np.array([h.p_O for h in handles]).reshape(-1, 3)

@@ -24,6 +24,12 @@ and the other in the rest, scores below either handle), its agreeing sightings r
 until no point has `min_views` views. Where an earlier handle projects within a few pixels of a
 point, the detector sees the two as one (one sighting, taken by the earlier handle): that view
 neither supports nor counts against the point's share of views (`FURNITURE_MERGED_PX`).
+
+A long upright bar (a door's) is often detected pixel by pixel in most views while its votes
+spread along it and agree in few (the farther a pixel from the grip centre, the larger its vote's
+error): `bar_sightings` takes each elongated blob of handle pixels as a segment, and
+`triangulate_bars` finds the upright bars that the points left unexplained from the planes
+through each camera and its segment (`locate_handles`, `FURNITURE_BARS`).
 """
 
 from __future__ import annotations
@@ -291,16 +297,33 @@ def _side_by_side(a: np.ndarray, b: np.ndarray, apart_m: float) -> bool:
     return horizontal > abs(float(a[2] - b[2])) and horizontal >= apart_m
 
 
+def _on_one_bar(frames: list[CaptureFrame], bars: list[BarSighting], views: tuple[int, ...],
+                a: np.ndarray, b: np.ndarray, max_error_px: float) -> bool:
+    """Whether points a, b (3,) in O both project within `max_error_px` (scaled to a 128 px high
+    image) of one bar segment in at least half of the `views`."""
+    on_one = 0
+    for f in views:
+        uv_a, uv_b = project(frames[f], a), project(frames[f], b)
+        tolerance = max_error_px * frames[f].camera.height / _REFERENCE_HEIGHT_PX
+        on_one += uv_a is not None and uv_b is not None and any(
+            bar.frame == f and bar.distance_px(uv_a) <= tolerance and bar.distance_px(uv_b) <= tolerance
+            for bar in bars)
+    return 2 * on_one >= len(views)
+
+
 def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
                         max_error_px: float = AGREE_PX, min_views: int = MIN_VIEWS,
                         min_share: float = 0.0, side_by_side_m: float = SIDE_BY_SIDE_M,
                         loose_share: float = 0.0, loose_rms_px: float = np.inf,
-                        merged_px: float = 0.0) -> list[TriangulatedHandle]:
+                        merged_px: float = 0.0, bars: list[BarSighting] | None = None
+                        ) -> list[TriangulatedHandle]:
     """Several handles from the sightings of all views (module docstring), strongest first; a
     point that projects within 2 `max_error_px` of an earlier one in all its views is the same
     handle and dropped, unless the two lie side by side (further apart horizontally in O than
     vertically) and at least `side_by_side_m` apart: the handles of a pair of doors, near the
-    edge where the doors meet (`SIDE_BY_SIDE_M`). A point must agree with at least `min_share`
+    edge where the doors meet (`SIDE_BY_SIDE_M`); with the views' `bars` (`bar_sightings`), only
+    where both lie on one bar segment in at least half its views (a bar whose votes split in two,
+    not two stacked drawers' pulls, `_on_one_bar`). A point must agree with at least `min_share`
     of the views it projects into (sightings that agree by chance across a few views do not), and
     one that agrees with fewer than `loose_share` of them must agree within `loose_rms_px` RMS
     (scaled to a 128 px high image): edges that line up by chance agree with few views and
@@ -361,10 +384,175 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
                    and all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
                                           - _project_many(frames[f], p[None])[0])
                            <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
+                   and (bars is None or _on_one_bar(frames, bars, frames_in, h.p_O, p, max_error_px))
                    for h in handles)
         if not same:
             handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))
     return handles
+
+
+BAR_MIN_PX = 8.0
+"""`bar_sightings`: a blob of handle pixels at least this long (px, scaled to a 128 px high image)
+and `BAR_ASPECT` times as long as it is wide is a bar's segment."""
+BAR_ASPECT = 3.0
+BAR_UPRIGHT_DEG = 20.0
+"""`triangulate_bars` keeps bars within this of O's z (upright: a door's bar; a drawer's pull is
+horizontal, and a horizontal line seen by cameras spread along it fixes no depth)."""
+BAR_PARALLEL_DEG = 15.0
+"""A segment agrees with a 3D bar only if the bar's projection runs within this of its axis."""
+
+
+@dataclass(frozen=True)
+class BarSighting:
+    """An elongated blob of handle pixels in one view, a bar seen whole or in part whatever its
+    votes say of its grip centre: the middle of its extent `centre` (2,) px (top-left pixel centre
+    at (0.5, 0.5)), unit `axis` (2,) along it, `half_length` px, and its mass (summed
+    probability, pixels)."""
+
+    frame: int
+    centre: np.ndarray
+    axis: np.ndarray
+    half_length: float
+    mass: float
+
+    def distance_px(self, uv: np.ndarray) -> float:
+        """Distance, px, from pixel uv (2,) to the segment."""
+        d = np.asarray(uv, float) - self.centre
+        t = float(np.clip(d @ self.axis, -self.half_length, self.half_length))
+        return float(np.linalg.norm(d - t * self.axis))
+
+    def plane(self, frame: CaptureFrame) -> tuple[np.ndarray, np.ndarray]:
+        """The plane through the camera centre and the segment's image line, in O: a point on it
+        (3,) (the camera centre) and its unit normal (3,)."""
+        origin, d_a = ray(frame, self.centre - self.half_length * self.axis)
+        _, d_b = ray(frame, self.centre + self.half_length * self.axis)
+        normal = np.cross(d_a, d_b)
+        return origin, normal / np.linalg.norm(normal)
+
+
+def bar_sightings(handle_map: HandleMap, frame: int, threshold: float = 0.5,
+                  min_length_px: float = BAR_MIN_PX, aspect: float = BAR_ASPECT) -> list[BarSighting]:
+    """The view's blobs of pixels with probability > threshold (8-connected) that are at least
+    `min_length_px` long (scaled to a 128 px high image) and `aspect` times as long as wide
+    (their probability-weighted second moments), as segments along their principal axis."""
+    prob = handle_map.probability
+    count, labels = cv2.connectedComponents((prob > threshold).astype(np.uint8), connectivity=8)
+    min_length = min_length_px * prob.shape[0] / _REFERENCE_HEIGHT_PX
+    bars = []
+    for blob in range(1, count):
+        rows, cols = np.nonzero(labels == blob)
+        if rows.size < 3:
+            continue
+        w = prob[rows, cols].astype(np.float64)
+        xy = np.stack([cols + 0.5, rows + 0.5], -1)
+        mean = (w[:, None] * xy).sum(0) / w.sum()
+        values, vectors = np.linalg.eigh(np.cov((xy - mean).T, aweights=w, bias=True))
+        axis = vectors[:, 1]
+        along = (xy - mean) @ axis
+        length = float(along.max() - along.min()) + 1.0  # pixel centres to pixel edges
+        width = np.sqrt(12.0 * max(float(values[0]), 0.0)) + 1.0
+        if length < min_length or length < aspect * width:
+            continue
+        centre = mean + 0.5 * (along.max() + along.min()) * axis
+        bars.append(BarSighting(frame, centre, axis, 0.5 * length, float(w.sum())))
+    return bars
+
+
+def _on_bar(origins: np.ndarray, normals: np.ndarray, rays: np.ndarray, weights: np.ndarray,
+            along_weight: float = 1e-3) -> np.ndarray:
+    """The point (3,) on the planes (origins, unit normals (n, 3)) in least squares, placed along
+    their common line by the rays through the segments' middles (origins, unit directions (n, 3))
+    with `along_weight`: the middle of the bar as the views see it."""
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for o, n, d, w in zip(origins, normals, rays, weights, strict=True):
+        P = np.outer(n, n) + along_weight * (np.eye(3) - np.outer(d, d))
+        A += w * P
+        b += w * P @ o
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
+def _bar_agreement(frames: list[CaptureFrame], bars: list[BarSighting], tolerance: np.ndarray,
+                   p: np.ndarray, u: np.ndarray, left: np.ndarray) -> tuple[list[int], int]:
+    """Which of the `left` segments agree with the bar through p (3,) along unit u (3,) in O (at most
+    one per view, the nearest: p's projection within its tolerance of the segment, the bar's
+    projected direction within `BAR_PARALLEL_DEG` of its axis), and in how many frames p projects
+    into the image."""
+    agree, inside = [], 0
+    cos_parallel = np.cos(np.radians(BAR_PARALLEL_DEG))
+    for f, frame in enumerate(frames):
+        uv = project(frame, p)
+        tip = project(frame, p + 0.05 * u)
+        if uv is None or tip is None:
+            continue
+        inside += bool(np.all(uv >= 0) and np.all(uv <= [frame.camera.width, frame.camera.height]))
+        direction = (tip - uv) / max(float(np.linalg.norm(tip - uv)), 1e-9)
+        near = [(bars[k].distance_px(uv), k) for k in np.flatnonzero(left) if bars[k].frame == f
+                and abs(float(direction @ bars[k].axis)) >= cos_parallel]
+        near = [(e, k) for e, k in near if e <= tolerance[k]]
+        if near:
+            agree.append(min(near)[1])
+    return agree, inside
+
+
+def triangulate_bars(frames: list[CaptureFrame], bars: list[BarSighting],
+                     handles: list[TriangulatedHandle], max_error_px: float = AGREE_PX,
+                     min_views: int = MIN_VIEWS, min_share: float = 0.0) -> list[TriangulatedHandle]:
+    """Upright bars (within `BAR_UPRIGHT_DEG` of O's z) from the views' segments that none of the
+    `handles` (points already triangulated) explains (projects within `max_error_px` of, scaled
+    to a 128 px high image), strongest first: every two segments of two views whose planes cross
+    at least 5 degrees apart propose their common line, the point on it nearest the rays
+    through their middles; the proposal whose agreeing segments (`_bar_agreement`) have the
+    largest summed mass, with at least `min_views` of them and `min_share` of the views it
+    projects into, is refitted on them (`_on_bar`) and its agreeing segments removed; again
+    until none is left. Each bar is returned as its middle as the agreeing views see it."""
+    tolerance = np.array([max_error_px * frames[b.frame].camera.height / _REFERENCE_HEIGHT_PX for b in bars])
+    planes = [b.plane(frames[b.frame]) for b in bars]
+    middles = [ray(frames[b.frame], b.centre)[1] for b in bars]
+    explained = [any((uv := project(frames[b.frame], h.p_O)) is not None and b.distance_px(uv) <= tolerance[k]
+                     for h in handles) for k, b in enumerate(bars)]
+    left = ~np.array(explained, bool).reshape(-1)
+    mass = np.array([b.mass for b in bars])
+    upright, coincident = np.cos(np.radians(BAR_UPRIGHT_DEG)), np.cos(np.radians(5.0))
+    found: list[TriangulatedHandle] = []
+
+    def fit(members: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        normals = np.array([planes[k][1] for k in members])
+        u = np.linalg.svd(normals)[2][-1]  # the direction in every plane
+        p = _on_bar(np.array([planes[k][0] for k in members]), normals,
+                    np.array([middles[k] for k in members]), mass[members])
+        return p, u
+
+    while left.sum() >= max(2, min_views):
+        best: tuple[float, list[int]] | None = None
+        for i, j in combinations(np.flatnonzero(left), 2):
+            if bars[i].frame == bars[j].frame or abs(float(planes[i][1] @ planes[j][1])) > coincident:
+                continue
+            p, u = fit([i, j])
+            if abs(u[2]) < upright:
+                continue
+            agree, inside = _bar_agreement(frames, bars, tolerance, p, u, left)
+            if len(agree) < min_views or len(agree) < min_share * inside:
+                continue
+            score = float(mass[agree].sum())
+            if best is None or score > best[0]:
+                best = (score, agree)
+        if best is None:
+            break
+        members = best[1]
+        p, u = fit(members)
+        agree, inside = _bar_agreement(frames, bars, tolerance, p, u, left)
+        left[members] = False
+        if len(agree) < max(min_views, min_share * inside) or abs(u[2]) < upright:
+            continue
+        p, _ = fit(agree)
+        left[agree] = False
+        errors = [bars[k].distance_px(uv) if (uv := project(frames[bars[k].frame], p)) is not None else np.inf
+                  for k in agree]
+        found.append(TriangulatedHandle(p, tuple(bars[k].frame for k in agree),
+                                        float(np.sqrt(np.mean(np.square(errors)))),
+                                        len({b.frame for b in bars})))
+    return found
 
 
 FURNITURE_MIN_SHARE = 0.5
@@ -397,6 +585,13 @@ no point of no front more than 2.2 cm (docs/FURNITURE.md, "Handle detector: seve
 handles")."""
 
 
+FURNITURE_BARS = True
+"""Whether `locate_handles` adds the upright bars the points leave unexplained
+(`triangulate_bars`)."""
+FURNITURE_BAR_SHARE = 0.5
+"""`triangulate_bars`' min_share in `locate_handles`."""
+
+
 def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[TriangulatedHandle]:
     """The handles (p_O in O, whose +x is the fronts' outward normal) but those more than
     `behind_m` behind every other one, where there are at least two others: a handle stands in
@@ -409,13 +604,18 @@ def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[Triangu
 
 
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
-                   min_share: float = FURNITURE_MIN_SHARE) -> list[TriangulatedHandle]:
-    """Every handle triangulated from per-frame handle maps, one per frame (furniture), those
-    behind all the others left out (`in_front`)."""
+                   min_share: float = FURNITURE_MIN_SHARE, bars: bool = FURNITURE_BARS
+                   ) -> list[TriangulatedHandle]:
+    """Every handle triangulated from per-frame handle maps, one per frame (furniture): the
+    points of the votes, then (`bars`) the upright bars they leave unexplained, those behind all
+    the others left out (`in_front`)."""
     loose_share, loose_rms_px = FURNITURE_LOOSE
+    segments = [b for i, m in enumerate(maps) for b in bar_sightings(m, i)]
     handles = triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
                                   min_share=min_share, loose_share=loose_share, loose_rms_px=loose_rms_px,
-                                  merged_px=FURNITURE_MERGED_PX)
+                                  merged_px=FURNITURE_MERGED_PX, bars=segments if bars else None)
+    if bars:
+        handles = handles + triangulate_bars(frames, segments, handles, min_share=FURNITURE_BAR_SHARE)
     return in_front(handles, FURNITURE_BEHIND_M)
 
 

@@ -13,10 +13,13 @@ from nfr_drake.perception.handle_triangulation import (
     HandleMap,
     HandleSighting,
     TriangulatedHandle,
+    bar_sightings,
     in_front,
     inside_masks,
+    locate_handles,
     sighting,
     sightings,
+    triangulate_bars,
     triangulate_handle,
     triangulate_handles,
 )
@@ -318,3 +321,71 @@ def test_a_point_behind_every_other_one_is_no_handle():
     assert [h.p_O[0] for h in kept] == [0.30, 0.31, 0.60, 0.28]
     assert len(in_front([handle(0.30), handle(0.10)], behind_m=0.05)) == 2
     assert in_front([], behind_m=0.05) == []
+
+
+def _bar_map(size: int, frame: CaptureFrame, ends: list[tuple[np.ndarray, np.ndarray]],
+             shift_px: float) -> HandleMap:
+    """Each bar's pixels between the projections of its ends (3D points in O), 1 px wide, their
+    votes at `shift_px` along the bar from its middle: the detector on a long bar, its votes off
+    by another distance in each view."""
+    prob = np.zeros((size, size), np.float32)
+    offset = np.zeros((size, size, 2), np.float32)
+    for a, b in ends:
+        uv_a, uv_b = _project(frame, a), _project(frame, b)
+        axis = (uv_b - uv_a) / np.linalg.norm(uv_b - uv_a)
+        for t in np.linspace(0.0, 1.0, 4 * int(np.linalg.norm(uv_b - uv_a)) + 1):
+            c, r = (uv_a + t * (uv_b - uv_a)).astype(int)
+            prob[r, c] = 0.9
+            wrong = (uv_a + uv_b) / 2 + shift_px * axis
+            offset[r, c] = wrong - [c + 0.5, r + 0.5]
+    return HandleMap(prob, offset)
+
+
+def test_an_upright_bar_whose_votes_disagree_is_found_from_its_pixels():
+    """A door's 40 cm upright bar detected in every view, its votes scattered along it: no point
+    from the votes, and one bar from the pixels (`bar_sightings`, `triangulate_bars`), its middle
+    within 1 cm; segments a point already explains give no second handle; a horizontal bar (a
+    drawer's pull, whose votes the points find) seen the same way is no bar."""
+    frames = _frames(10, 128)
+    shifts = np.random.default_rng(0).permutation(np.linspace(-12.0, 12.0, 10))  # 2.7 px apart
+    upright = (P_TRUE - [0, 0, 0.2], P_TRUE + [0, 0, 0.2])
+    maps = [_bar_map(128, f, [upright], d) for f, d in zip(frames, shifts, strict=True)]
+    assert triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
+                               min_share=0.5) == []
+    segments = [b for i, m in enumerate(maps) for b in bar_sightings(m, i)]
+    assert len(segments) == 10 and all(abs(b.axis[1]) > 0.95 for b in segments)
+    (bar,) = triangulate_bars(frames, segments, [], min_share=0.5)
+    assert np.linalg.norm(bar.p_O - P_TRUE) < 0.01 and len(bar.views) == 10
+    (located,) = locate_handles(maps, frames)
+    assert np.linalg.norm(located.p_O - P_TRUE) < 0.01
+    assert locate_handles(maps, frames, bars=False) == []
+    assert triangulate_bars(frames, segments, [bar], min_share=0.5) == []
+    level = (P_TRUE - [0, 0.2, 0], P_TRUE + [0, 0.2, 0])
+    flat = [b for i, f in enumerate(frames) for b in bar_sightings(_bar_map(128, f, [level], 0.0), i)]
+    assert len(flat) == 10 and triangulate_bars(frames, flat, [], min_share=0.5) == []
+
+
+def test_a_bar_seen_in_too_few_views_is_dropped_with_min_share():
+    """An upright bar's pixels in 3 of the 10 views it projects into: a bar with min_share 0,
+    none with 0.5."""
+    frames = _frames(10, 128)
+    upright = (P_TRUE - [0, 0, 0.2], P_TRUE + [0, 0, 0.2])
+    segments = [b for i, f in enumerate(frames) if i in (1, 4, 8)
+                for b in bar_sightings(_bar_map(128, f, [upright], 0.0), i)]
+    assert len(triangulate_bars(frames, segments, [], min_share=0.0)) == 1
+    assert triangulate_bars(frames, segments, [], min_share=0.5) == []
+
+
+def test_points_one_above_the_other_are_one_handle_only_where_one_bar_holds_both():
+    """Two points 5 cm one above the other, 3-6 px apart in every view: one handle by their
+    projections alone (a bar whose votes split in two); given the views' bar segments, two where
+    no segment holds both (two stacked drawers' pulls) and one where an upright bar's does."""
+    frames = _frames(8, 128)
+    pair = [P_TRUE, P_TRUE + np.array([0.0, 0.0, 0.05])]
+    found = [s for i, f in enumerate(frames)
+             for s in sightings(_votes_map(128, [_project(f, p) for p in pair], spread=1), i)]
+    assert len(triangulate_handles(frames, found)) == 1
+    assert len(triangulate_handles(frames, found, bars=[])) == 2
+    bar = (P_TRUE - [0.0, 0.0, 0.1], P_TRUE + [0.0, 0.0, 0.15])
+    segments = [b for i, f in enumerate(frames) for b in bar_sightings(_bar_map(128, f, [bar], 0.0), i)]
+    assert len(triangulate_handles(frames, found, bars=segments)) == 1
