@@ -115,8 +115,8 @@ def _row(scenario: Scenario) -> PipelineRow:
     task = outcome.task
     sim = task.simulation if task is not None else None
     opening = task.opening if isinstance(task, PlaceTaskOutcome) else sim  # its SimulationResult
-    pulled_on = task.pulled_on if isinstance(task, TaskOutcome) else None
-    ended = task.final if isinstance(task, TaskOutcome) else opening  # where the part ended
+    pulled_on = task.pulled_on if task is not None else None
+    ended = task.final if isinstance(task, TaskOutcome) else task.opened if task is not None else None
     if task is None:
         failure = outcome.refused
     elif task.plan is None:
@@ -157,7 +157,7 @@ def _row(scenario: Scenario) -> PipelineRow:
     if scenario.task == "open":
         return row
     item = scenario.sample_item()
-    opened = task is not None and task.opening is not None and task.opening.success
+    opened = task is not None and task.opened is not None and task.opened.success
     return PlaceRow(**asdict(row), grasp=scenario.grasp, item=str(item), opened=opened,
                     picked=bool(sim and sim.picked),
                     item_error_cm=float(100 * sim.item_error) if sim else float("nan"),

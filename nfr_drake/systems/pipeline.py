@@ -102,7 +102,7 @@ class PipelineOutcome:
             lines.append(f"replay of the opening: {task.opening_replay}")
         if task is not None and task.replay is not None:
             lines.append(f"replay: {task.replay}")
-        if isinstance(task, TaskOutcome) and task.pulled_on is not None and task.pulled_on.replay is not None:
+        if task is not None and task.pulled_on is not None and task.pulled_on.replay is not None:
             lines.append(f"replay from the second base: {task.pulled_on.replay}")
         return "\n".join(lines)
 

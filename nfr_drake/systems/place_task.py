@@ -2,8 +2,9 @@
 
 The scene: the object, the arm where the opening plan put its base, a small table beside the
 arm (`table_beside`) with an item on it (`nfr_drake.world.items`). The opening is simulated
-first (`simulate_articulation`, with its second close, second pull and door turn), then the place
-(`simulate_place`) in a second simulation that starts with the front where the opening left it,
+first (`simulate_articulation`, with its further closes, second pull and door turn, then, as in
+`run_task`, from a second base where the arm's reach ended it: `pull_on`, `turn_on`), then the
+place (`simulate_place`) in a second simulation that starts with the front where the opening left it,
 at rest: from the same base with the arm where the opening left it, its fingers on the handle,
 or (`MOVE_BASE`: closets) from a second base with the arm at the place's first posture; the
 base's drive between the two (the hand letting go, the arm tucking in) is not simulated, and the
@@ -72,6 +73,7 @@ from nfr_drake.systems.articulation import (
 from nfr_drake.systems.interior import look_into_compartment
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
+from nfr_drake.systems.task import PulledOn, pull_on, turn_on
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.items import Item
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -391,6 +393,15 @@ class PlaceTaskOutcome:
     replay: Path | None
     opening: SimulationResult | None = None
     opening_replay: Path | None = None
+    pulled_on: PulledOn | None = None
+    """The opening taken on from a second base (`systems.task.pull_on`, `turn_on`), where it was."""
+
+    @property
+    def opened(self) -> SimulationResult | None:
+        """The simulation the opening ended in: the second base's where it pulled on, else the first."""
+        if self.pulled_on is not None and self.pulled_on.simulation is not None:
+            return self.pulled_on.simulation
+        return self.opening
 
     @property
     def success(self) -> bool:
@@ -529,8 +540,10 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     and simulated first, then the place planned around the front where the opening left it
     (`measured_articulation`, `door_band`; with given keypoints, a closet's floor and the shelf
     over the goal where a look inside sees them, `look_inside`, the goal at the floor's height).
-    `replay`: an HTML replay of the place, with the keypoint paths used (and `reference`'s under
-    "keypoints_true"), the opening's beside it (`*_opening.html`). `cloud`: the fitted field's
+    Where the opening is taken on from a second base (`pull_on`, `turn_on`), the place is
+    planned from a base placed after it, as a closet's. `replay`: an HTML replay of the place,
+    with the keypoint paths used (and `reference`'s under "keypoints_true"), the opening's beside
+    it (`*_opening.html`, and the second base's `*_opening_pulled_on.html`). `cloud`: the fitted field's
     points that came with `keypoints`; the moving part's obstacles then have its measured width
     (`compartment_obstacles`)."""
     started = time.perf_counter()
@@ -543,8 +556,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     obstacles = obstacles_at(q_target)
     simulation_config = simulation_config or PlaceSimulationConfig()
     config = grasp_planner(planner_config or PlannerConfig(), simulation_config.opening.grasp)
-    failed = lambda why, seconds=float("nan"), opening=None, opening_replay=None: PlaceTaskOutcome(  # noqa: E731
-        q_target, kt, None, None, why, seconds, None, None, opening, opening_replay)
+    failed = lambda why, seconds=float("nan"), opening=None, opening_replay=None, on=None: (  # noqa: E731
+        PlaceTaskOutcome(q_target, kt, None, None, why, seconds, None, None, opening, opening_replay, on))
     errors, plan = [], None
     if not MOVE_BASE[kt.category]:
         try:
@@ -564,11 +577,22 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening, kt)
     opening_replay = None if replay is None else write_replay(
         meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
+    pulled_on = None
+    if simulation_config.opening.pull_on:  # as `run_task`: the opening taken on from a second base
+        started_on = time.perf_counter()
+        pulled_on = (pull_on(scene_object, kt, plan, opening, None, config, simulation_config.opening,
+                             meshcats[1], opening_replay)
+                     or turn_on(scene_object, kt, plan, opening, None, config, simulation_config.opening,
+                                meshcats[1], opening_replay))
+        seconds += time.perf_counter() - started_on
+    opened = opening
+    if pulled_on is not None and pulled_on.simulation is not None:
+        opened, moved = pulled_on.simulation, True  # the place goes from a base placed after it
     if moved:
-        q_door = measured_articulation(kt, opening)
+        q_door = measured_articulation(kt, opened)
         look = None
         if keypoints is not None and kt.category == "closet":  # look in for the floor and the shelf
-            look = look_inside(obj, X_WO, opening.q_final, kt, q_door)
+            look = look_inside(obj, X_WO, opened.q_final, kt, q_door)
             obstacles_at = lambda q: compartment_obstacles(keypoints, q, look, cloud)  # noqa: E731
         obstacles = door_band(obstacles_at, q_door)
         planned = time.perf_counter()
@@ -578,7 +602,7 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         except PlanningError as err:
             return failed("; ".join([*errors, f"base moved after the opening (front measured at "
                                      f"{q_door:.3f}): {err}"]), seconds + time.perf_counter() - planned,
-                          opening, opening_replay)
+                          opening, opening_replay, pulled_on)
         seconds += time.perf_counter() - planned
     for meshcat in meshcats[:1] if replay is not None else []:
         draw_keypoint_trajectory(meshcat, kt, "keypoints", (kt.q_current, q_target))
@@ -593,7 +617,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
         away[2] = 0.0
         side = np.cross([0.0, 0.0, 1.0], away / np.linalg.norm(away))
         frame_camera(meshcat, centre, centre + 0.6 * away + 1.2 * side + [0.0, 0.0, 0.9])
-    simulation = simulate_place(obj, X_WO, opening, place, item, table, None if moved else opening.q_robot,
+    simulation = simulate_place(obj, X_WO, opened, place, item, table, None if moved else opening.q_robot,
                                 meshcats[0], simulation_config)
     path = write_replay(meshcats[0], replay) if replay is not None else None
-    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path, opening, opening_replay)
+    return PlaceTaskOutcome(q_target, kt, plan, place, "", seconds, simulation, path, opening, opening_replay,
+                            pulled_on)

@@ -1,5 +1,6 @@
 """Open-and-place simulated on the true object, and grasps by contact."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -215,3 +216,30 @@ def test_a_base_no_fallback_can_mend_is_not_tried_again(monkeypatch):
                                    place_task.PlaceConfig())
     assert [base for base, _ in tried] == [0] + [1] * len(configs)
     assert [cfg for base, cfg in tried if base == 1] == configs
+
+
+@pytest.mark.slow
+def test_an_opening_that_ends_short_is_taken_on_from_a_second_base_before_the_place():
+    """As in `run_task` (tests/systems/test_simulation.py): the closet's keypoints turned 25
+    degrees about its handle, one turn step at most 2 degrees, leave the door short of its target
+    from the first base; the place task turns it on from a second base (`turn_on`) and plans the
+    place from a base placed after that: the opening it places behind is the second base's, at
+    its target. With `pull_on` off the door stays short."""
+    from pydrake.math import RotationMatrix
+
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    p = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0).point("handle", 0.0)
+    R = RotationMatrix.MakeZRotation(np.radians(-25.0))
+    turned_arc = KeypointTrajectory.from_articulated_object(obj, RigidTransform(R, p - R @ p), 0.0)
+    small_steps = SimulationConfig(second_turn_max=np.radians(2.0))
+    item = sample_item(np.random.default_rng(0))
+    on = run_place_task(obj, RigidTransform(), 0.0, 0.6, item, keypoints=turned_arc,
+                        simulation_config=PlaceSimulationConfig(opening=small_steps))
+    assert on.pulled_on is not None and "short" in on.pulled_on.reason
+    assert not on.opening.success and on.opened is on.pulled_on.simulation
+    assert on.opened.success and on.opened.joint_error < np.radians(1.5), on.opened.summary()
+    assert on.simulation is None or on.simulation.opening is on.opened
+    without = PlaceSimulationConfig(opening=replace(small_steps, pull_on=False))
+    stays = run_place_task(obj, RigidTransform(), 0.0, 0.6, item, keypoints=turned_arc,
+                           simulation_config=without)
+    assert stays.pulled_on is None and stays.opened is stays.opening and not stays.opening.success
