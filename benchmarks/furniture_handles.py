@@ -1,10 +1,11 @@
 """Several handles per piece: the 2D handle detector's sightings and the handles triangulated from
-them (`sightings`, `triangulate_handles`), against the gt.json of furniture capture sets.
+them (`sightings`, `triangulate_handles`, then the upright bars they leave unexplained:
+`bar_sightings`, `triangulate_bars`), against the gt.json of furniture capture sets.
 
 Usage: python benchmarks/furniture_handles.py --detector models/furniture/handle_detector
        --sets data/eval/furniture_cams128 [--true-maps] [--px 3] [--cm 3] [--min-share 0.5]
        [--loose-share 0.6] [--loose-rms-px 1.2]
-       [--merged-px 4]
+       [--merged-px 4] [--no-bars]
 Per set, in 2D: the visible handles of each view (a front whose handle label has a pixel there)
 against the view's sightings, matched one to one by distance, a match within `--px` px (scaled
 to a 128 px high image): recall, precision, median distance of the matches. In 3D: the
@@ -30,12 +31,15 @@ from nfr_drake.data.capture import capture_dirs, read_capture_set
 from nfr_drake.objects import SemanticClass
 from nfr_drake.perception.handle_detector.model import load_detector
 from nfr_drake.perception.handle_triangulation import (
+    FURNITURE_BAR_SHARE,
     FURNITURE_LOOSE,
     FURNITURE_MERGED_PX,
     FURNITURE_MIN_SHARE,
     HandleMap,
+    bar_sightings,
     project,
     sightings,
+    triangulate_bars,
     triangulate_handles,
 )
 
@@ -95,6 +99,8 @@ def main() -> None:
     parser.add_argument("--loose-rms-px", type=float, default=FURNITURE_LOOSE[1])
     parser.add_argument("--merged-px", type=float, default=FURNITURE_MERGED_PX,
                         help="triangulate_handles' merged_px (0: every view counts in a point's share)")
+    parser.add_argument("--no-bars", action="store_true",
+                        help="without the views' bar segments (`bar_sightings`, `triangulate_bars`)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path, help="per-piece rows as JSON")
     args = parser.parse_args()
@@ -128,9 +134,12 @@ def main() -> None:
                 sighted += len(s)
                 true_visible += len(visible)
                 d2 += [x / scale for x in dist]
+            segments = None if args.no_bars else [b for i, m in enumerate(maps) for b in bar_sightings(m, i)]
             points = triangulate_handles(capture.frames, found, min_share=args.min_share,
                                          loose_share=args.loose_share, loose_rms_px=args.loose_rms_px,
-                                         merged_px=args.merged_px)
+                                         merged_px=args.merged_px, bars=segments)
+            if segments is not None:
+                points += triangulate_bars(capture.frames, segments, points, min_share=FURNITURE_BAR_SHARE)
             dist3 = match(handles, np.array([h.p_O for h in points]).reshape(-1, 3), args.cm / 100)
             d3 += dist3
             n_true += len(handles)

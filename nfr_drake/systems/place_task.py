@@ -73,7 +73,7 @@ from nfr_drake.systems.articulation import (
 from nfr_drake.systems.interior import look_into_compartment
 from nfr_drake.systems.replay import draw_keypoint_trajectory, draw_obstacle, frame_camera, write_replay
 from nfr_drake.systems.scene_objects import SceneObject, set_joint_value
-from nfr_drake.systems.task import PulledOn, pull_on, turn_on
+from nfr_drake.systems.task import PulledOn, ended_in, pull_on, turn_on
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.items import Item
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -399,9 +399,7 @@ class PlaceTaskOutcome:
     @property
     def opened(self) -> SimulationResult | None:
         """The simulation the opening ended in: the second base's where it pulled on, else the first."""
-        if self.pulled_on is not None and self.pulled_on.simulation is not None:
-            return self.pulled_on.simulation
-        return self.opening
+        return ended_in(self.opening, self.pulled_on)
 
     @property
     def success(self) -> bool:
@@ -585,9 +583,8 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
                      or turn_on(scene_object, kt, plan, opening, None, config, simulation_config.opening,
                                 meshcats[1], opening_replay))
         seconds += time.perf_counter() - started_on
-    opened = opening
-    if pulled_on is not None and pulled_on.simulation is not None:
-        opened, moved = pulled_on.simulation, True  # the place goes from a base placed after it
+    opened = ended_in(opening, pulled_on)
+    moved = moved or opened is not opening  # after a second base the place goes from a base placed anew
     if moved:
         q_door = measured_articulation(kt, opened)
         look = None

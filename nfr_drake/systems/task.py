@@ -64,6 +64,12 @@ class PulledOn:
         return f"pulled on from a second base ({self.reason}): {then}"
 
 
+def ended_in(first: SimulationResult | None, pulled_on: PulledOn | None) -> SimulationResult | None:
+    """The simulation a part ended in: the second base's where the robot took it on from one
+    (and planned there), else `first`."""
+    return pulled_on.simulation if pulled_on is not None and pulled_on.simulation is not None else first
+
+
 @dataclass
 class TaskOutcome:
     """Result of `run_task`: the plan (None if planning failed), its error, the simulation, and
@@ -81,9 +87,7 @@ class TaskOutcome:
     @property
     def final(self) -> SimulationResult | None:
         """The simulation the object ended in: the second base's, if it pulled on, else the first."""
-        if self.pulled_on is not None and self.pulled_on.simulation is not None:
-            return self.pulled_on.simulation
-        return self.simulation
+        return ended_in(self.simulation, self.pulled_on)
 
     @property
     def success(self) -> bool:
