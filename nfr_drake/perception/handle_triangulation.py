@@ -290,6 +290,13 @@ projection test); a bar the detector splits in two gives two points along it, an
 is upright (so the test stays for points one above the other)."""
 
 
+STACKED_M = 0.10
+"""`triangulate_handles` with bar segments: two points close in every view and at least this far
+apart are two handles unless one bar holds both (`_on_one_bar`), m. Stacked fronts' pulls lie at
+least a front's height apart (a generated drawer front is at least 12 cm tall, as a kitchen's
+is); nearer points are one handle that the detector's votes split."""
+
+
 def _side_by_side(a: np.ndarray, b: np.ndarray, apart_m: float) -> bool:
     """Whether points a, b (3,) in O lie side by side (further apart in xy than in z) and at
     least `apart_m` apart."""
@@ -321,11 +328,12 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     point that projects within 2 `max_error_px` of an earlier one in all its views is the same
     handle and dropped, unless the two lie side by side (further apart horizontally in O than
     vertically) and at least `side_by_side_m` apart: the handles of a pair of doors, near the
-    edge where the doors meet (`SIDE_BY_SIDE_M`); with the views' `bars` (`bar_sightings`), only
-    where both lie on one bar segment in at least half its views (a bar whose votes split in two,
-    not two stacked drawers' pulls, `_on_one_bar`). A point must agree with at least `min_share`
-    of the views it projects into (sightings that agree by chance across a few views do not), and
-    one that agrees with fewer than `loose_share` of them must agree within `loose_rms_px` RMS
+    edge where the doors meet (`SIDE_BY_SIDE_M`); with the views' `bars` (`bar_sightings`), two
+    at least `STACKED_M` apart only where both lie on one bar segment in at least half its views
+    (a bar whose votes split in two, not two stacked drawers' pulls, `_on_one_bar`). A point must
+    agree with at least `min_share` of the views it projects into (sightings that agree by chance
+    across a few views do not), and one that agrees with fewer than `loose_share` of them must
+    agree within `loose_rms_px` RMS
     (scaled to a 128 px high image): edges that line up by chance agree with few views and
     loosely (`FURNITURE_LOOSE`). Neither share counts the views where an earlier handle projects
     within `merged_px` (scaled to a 128 px high image) of the point (`FURNITURE_MERGED_PX`)."""
@@ -384,7 +392,8 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
                    and all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
                                           - _project_many(frames[f], p[None])[0])
                            <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
-                   and (bars is None or _on_one_bar(frames, bars, frames_in, h.p_O, p, max_error_px))
+                   and (bars is None or np.linalg.norm(h.p_O - p) < STACKED_M
+                        or _on_one_bar(frames, bars, frames_in, h.p_O, p, max_error_px))
                    for h in handles)
         if not same:
             handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))

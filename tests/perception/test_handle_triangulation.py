@@ -38,14 +38,14 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return X
 
 
-def _frames(n: int, size: int, distortion=None) -> list[CaptureFrame]:
+def _frames(n: int, size: int, distortion=None, distance: float = 1.6) -> list[CaptureFrame]:
     cam = PinholeCamera.from_fov(size, size, np.radians(50.0))
     if distortion is not None:
         cam = PinholeCamera(cam.fx, cam.fy, cam.cx, cam.cy, size, size, distortion)
     frames = []
     for az in np.linspace(-50, 50, n):
         a = np.radians(az)
-        eye = np.array([1.6 * np.cos(a), 1.6 * np.sin(a), 1.0])
+        eye = np.array([distance * np.cos(a), distance * np.sin(a), 1.0])
         frames.append(CaptureFrame(Path(f"{az}.png"), _look_at(eye, np.array([0.0, 0, 0.5])), cam))
     return frames
 
@@ -377,15 +377,20 @@ def test_a_bar_seen_in_too_few_views_is_dropped_with_min_share():
 
 
 def test_points_one_above_the_other_are_one_handle_only_where_one_bar_holds_both():
-    """Two points 5 cm one above the other, 3-6 px apart in every view: one handle by their
-    projections alone (a bar whose votes split in two); given the views' bar segments, two where
-    no segment holds both (two stacked drawers' pulls) and one where an upright bar's does."""
-    frames = _frames(8, 128)
-    pair = [P_TRUE, P_TRUE + np.array([0.0, 0.0, 0.05])]
+    """Two points 12 cm one above the other, 3-6 px apart in every view (cameras 4 m away): one
+    handle by their projections alone (a bar whose votes split in two); given the views' bar
+    segments, two where no segment holds both (two stacked drawers' pulls) and one where an
+    upright bar's does. Points 5 cm apart (nearer than `STACKED_M`) stay one either way."""
+    frames = _frames(8, 128, distance=4.0)
+    pair = [P_TRUE, P_TRUE + np.array([0.0, 0.0, 0.12])]
     found = [s for i, f in enumerate(frames)
              for s in sightings(_votes_map(128, [_project(f, p) for p in pair], spread=1), i)]
     assert len(triangulate_handles(frames, found)) == 1
     assert len(triangulate_handles(frames, found, bars=[])) == 2
-    bar = (P_TRUE - [0.0, 0.0, 0.1], P_TRUE + [0.0, 0.0, 0.15])
+    bar = (P_TRUE - [0.0, 0.0, 0.1], P_TRUE + [0.0, 0.0, 0.25])
     segments = [b for i, f in enumerate(frames) for b in bar_sightings(_bar_map(128, f, [bar], 0.0), i)]
     assert len(triangulate_handles(frames, found, bars=segments)) == 1
+    near = [P_TRUE, P_TRUE + np.array([0.0, 0.0, 0.05])]
+    found = [s for i, f in enumerate(frames)
+             for s in sightings(_votes_map(128, [_project(f, p) for p in near], spread=1), i)]
+    assert len(triangulate_handles(frames, found, bars=[])) == 1
