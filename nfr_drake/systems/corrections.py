@@ -67,17 +67,11 @@ def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarra
     return bounded_step(robot_plant, q, J, np.r_[np.zeros(3), translation])
 
 
-def regrasp_steps(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
-    """The arm joints' steps (2, NUM_ARM_JOINTS) from `q_grasp`, where the fingers missed, that move
-    the tool `step` m further along its approach (its z axis) and `step` m across it, horizontally
-    (the approach crossed with W's z: across a front; the tool's x where the approach is near
-    vertical)."""
+def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
+    """The arm joints' step that moves the tool `step` m further along its approach (its z axis)
+    from `q_grasp`, where the fingers missed."""
     X_WT, _ = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
-    R = X_WT.rotation().matrix()
-    across = np.cross(R[:, 2], [0.0, 0.0, 1.0])
-    across = across / np.linalg.norm(across) if np.linalg.norm(across) > 0.3 else R[:, 0]
-    return np.stack([tool_step(robot_plant, q_grasp, step * R[:, 2]),
-                     tool_step(robot_plant, q_grasp, step * across)])
+    return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
 
 
 FELT_LINE_MIN = 0.05

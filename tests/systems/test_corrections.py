@@ -11,7 +11,6 @@ from nfr_drake.systems.corrections import (
     LIMIT_MARGIN,
     bounded_step,
     felt_door,
-    regrasp_steps,
     tool_pose_and_jacobian,
     turn_step,
 )
@@ -38,20 +37,6 @@ def test_away_from_the_limits_the_step_is_the_least_squares_one(arm):
     error = np.array([0.01, -0.02, 0.0, 0.01, 0.0, -0.01])
     np.testing.assert_allclose(bounded_step(arm, q, J, error), np.linalg.lstsq(J, error, rcond=None)[0],
                                atol=1e-12)
-
-
-def test_the_steps_after_a_miss_move_the_tool_along_its_approach_and_across_it(arm):
-    """Each of `regrasp_steps`' two joint steps moves the tool 2 cm (to first order), the hand's
-    orientation kept: along its approach (its z), and across it horizontally (at right angles to
-    the approach and to W's z: across a front). The hand here reaches out nearly level."""
-    q = np.r_[0.0, 0.0, 0.0, -2.0, 0.0, 3.5, 0.7, 0.02, 0.02]
-    X_WT, J = tool_pose_and_jacobian(arm, arm.CreateDefaultContext(), q)
-    along, across = (J @ regrasp_steps(arm, q, 0.02).T).T
-    approach = X_WT.rotation().col(2)
-    np.testing.assert_allclose(along, np.r_[0.0, 0.0, 0.0, 0.02 * approach], atol=1e-9)
-    assert np.linalg.norm(across[3:]) == pytest.approx(0.02, abs=1e-9)
-    np.testing.assert_allclose(across[:3], 0.0, atol=1e-9)
-    assert abs(across[3:] @ approach) < 1e-9 and abs(across[5]) < 1e-9
 
 
 def test_a_door_turned_at_a_wrist_limit_turns_the_tool_within_the_limits(arm):
