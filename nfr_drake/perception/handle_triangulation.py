@@ -333,10 +333,10 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     (a bar whose votes split in two, not two stacked drawers' pulls, `_on_one_bar`). A point must
     agree with at least `min_share` of the views it projects into (sightings that agree by chance
     across a few views do not), and one that agrees with fewer than `loose_share` of them must
-    agree within `loose_rms_px` RMS
-    (scaled to a 128 px high image): edges that line up by chance agree with few views and
-    loosely (`FURNITURE_LOOSE`). Neither share counts the views where an earlier handle projects
-    within `merged_px` (scaled to a 128 px high image) of the point (`FURNITURE_MERGED_PX`)."""
+    agree within `loose_rms_px` RMS (scaled to a 128 px high image): edges that line up by chance
+    agree with few views and loosely (`FURNITURE_LOOSE`). Neither share counts the views where an
+    earlier handle projects within `merged_px` (scaled to a 128 px high image) of the point
+    (`FURNITURE_MERGED_PX`)."""
     found = list(found)
     tolerance = np.array([max_error_px * frames[s.frame].camera.height / _REFERENCE_HEIGHT_PX
                           for s in found])
