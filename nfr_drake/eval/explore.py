@@ -335,6 +335,12 @@ def explore_command(
         raise ConfigError("--q-ends and --sample-q must lie in [0, 1]")
     set_torch_threads(threads)
     fitted = FittedModel(model)
+    slots = fitted.model.config.num_slots
+    if slots > 1:
+        raise ConfigError(f"{model}: a model of {slots} part slots ({fitted.category}); explore draws the "
+                          "one-part models (models/closet, models/drawer); for a piece of furniture, "
+                          "`nfr-drake infer CAPTURE --model MODEL --report R.png --point-cloud P.ply` "
+                          "gives every part, its keypoints and paths")
     for c in capture:
         fitted.check_capture(read_capture_set(c))
     _check_writable(out)

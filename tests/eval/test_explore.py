@@ -162,3 +162,13 @@ def test_bad_inputs_exit_2_with_one_line(model_folder, capture, tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert err.startswith("nfr-drake explore: error:") and "\n" not in err, err
     assert not out.exists()  # checked before any work
+
+
+def test_a_model_of_several_part_slots_is_refused_with_one_line(furniture_model_folder, tmp_path, capsys):
+    """The furniture model (8 part slots) is not drawn: one line says so and what to use instead,
+    exit status 2, nothing written."""
+    out = tmp_path / "out"
+    assert main(["explore", str(furniture_model_folder), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "8 part slots" in err and "nfr-drake infer" in err and "\n" not in err, err
+    assert not out.exists()
