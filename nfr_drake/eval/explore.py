@@ -339,8 +339,8 @@ def explore_command(
     if slots > 1:
         raise ConfigError(f"{model}: a model of {slots} part slots ({fitted.category}); explore draws the "
                           "one-part models (models/closet, models/drawer); for a piece of furniture, "
-                          "`nfr-drake infer CAPTURE --model MODEL --report R.png --point-cloud P.ply` "
-                          "gives every part, its keypoints and paths")
+                          "`nfr-drake infer CAPTURE --model MODEL` lists every part with its keypoints "
+                          "and paths, and `nfr-drake eval --category furniture` draws them")
     for c in capture:
         fitted.check_capture(read_capture_set(c))
     _check_writable(out)
