@@ -44,15 +44,17 @@ class SimulatedView:
 
 
 @torch.no_grad()
-def render_view(model: NFRModel, z: torch.Tensor, q: float, camera: PinholeCamera,
+def render_view(model: NFRModel, z: torch.Tensor, q: float | None, camera: PinholeCamera,
                 X_OC: np.ndarray, chunk: int = 8192) -> SimulatedView:
-    """Render the fitted object at articulation q from a camera at X_OC (4x4, OpenCV axes)."""
+    """Render the fitted object at articulation q from a camera at X_OC (4x4, OpenCV axes); q
+    None: the code z as it is (a code of several part slots, each at its own articulation)."""
     frame = CaptureFrame(image_path=None, X_OC=np.asarray(X_OC, float), camera=camera)
     dtype = next(model.parameters()).dtype
     device = next(model.parameters()).device
     directions = torch.from_numpy(frame_ray_directions(frame)).to(dtype=dtype, device=device)
     origin = torch.as_tensor(X_OC[:3, 3], dtype=dtype, device=device)
-    code = code_at(z.to(dtype=dtype, device=device), q)
+    z = z.to(dtype=dtype, device=device)
+    code = z[None] if q is None else code_at(z, q)
     rgb, logits, points, depth = [], [], [], []
     for s in range(0, len(directions), chunk):
         d = directions[s:s + chunk][None]
@@ -70,11 +72,11 @@ def render_view(model: NFRModel, z: torch.Tensor, q: float, camera: PinholeCamer
                          depth=torch.cat(depth).float().cpu().numpy().reshape(H, W))
 
 
-def semantic_point_cloud(model: NFRModel, z: torch.Tensor, q: float,
+def semantic_point_cloud(model: NFRModel, z: torch.Tensor, q: float | None,
                          views: list[tuple[PinholeCamera, np.ndarray]]
                          ) -> tuple[np.ndarray, np.ndarray]:
-    """Surface points (N, 3) in O and their classes (N,) of the object at q, seen from `views`
-    (camera, X_OC); background pixels are dropped."""
+    """Surface points (N, 3) in O and their classes (N,) of the object at q (None: the code z as
+    it is, `render_view`), seen from `views` (camera, X_OC); background pixels are dropped."""
     points, classes = [], []
     for camera, X_OC in views:
         view = render_view(model, z, q, camera, X_OC)

@@ -755,13 +755,15 @@ def write_report(path: Path, fitted: FittedModel, capture: CaptureSet, result: F
     return figure
 
 
-def write_point_cloud(path: Path, fitted: FittedModel, capture: CaptureSet, outcome: FitOutcome) -> int:
-    """Write the fitted object's semantically labelled points at the fitted q, seen from the
-    capture's cameras, as a PLY at `path`. Returns the number of points."""
+def write_point_cloud(path: Path, fitted: FittedModel, capture: CaptureSet, z: torch.Tensor,
+                      q: float | None) -> int:
+    """Write the fitted object's semantically labelled points, its code z at articulation q (None:
+    z as fitted, every part slot at its own articulation), seen from the capture's cameras, as a
+    PLY at `path`. Returns the number of points."""
     from nfr_drake.perception.pointcloud import write_semantic_ply
 
     views = [(f.camera, f.X_OC) for f in capture.frames]
-    points, classes = semantic_point_cloud(fitted.model, outcome.z, outcome.q, views)
+    points, classes = semantic_point_cloud(fitted.model, z, q, views)
     write_semantic_ply(path, points, classes)
     return len(points)
 
@@ -821,7 +823,8 @@ def infer_command(
         out: result JSON to write.
         report: optional PNG: observed views, renders of the fit, its segmentation and, with a
             handle detector, its handle probability with the triangulated and fitted handle.
-        point_cloud: optional PLY: semantically labelled points of the object at the fitted q.
+        point_cloud: optional PLY: semantically labelled points of the object at the fitted q (a
+            piece of furniture: every part at its fitted state).
         handle_plot: optional PNG: predicted handle path over q against gt.json's (needs gt.json).
         category: the capture's category, checked against the model's (gt.json's when omitted).
         fit: options of the fit.
@@ -866,16 +869,19 @@ def infer_command(
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
     q_grid = np.linspace(0.0, 1.0, trajectory_points)
     if fitted.num_slots > 1:
-        asked = [name for name, on in (("--report", report), ("--point-cloud", point_cloud),
-                                       ("--handle-plot", handle_plot), ("--estimate-pose", estimate_pose),
+        asked = [name for name, on in (("--report", report), ("--handle-plot", handle_plot),
+                                       ("--estimate-pose", estimate_pose),
                                        ("--keypoints geometry", keypoints == "geometry")) if on]
         if asked:
             raise NfrDrakeError(f"{', '.join(asked)}: not available for a model with several parts "
                                 f"({fitted.folder}) yet")
-        result, _, _ = infer_parts(fitted, cap, furniture_fit, q_grid, part=part)
+        result, parts_fit, _ = infer_parts(fitted, cap, furniture_fit, q_grid, part=part)
         found = "; ".join(f"{p['index']} {p['type']} q = {p['q']:.3f}" for p in result.parts) or "none"
         _write_result(result, out, f"parts found: {found}; part {result.part['index']} in the single-part "
                       f"fields; image loss {result.image_loss:.5f}, {result.seconds:.1f} s -> {out}")
+        if point_cloud is not None:
+            count = write_point_cloud(point_cloud, fitted, cap, parts_fit.z, None)
+            print(f"point cloud: {point_cloud} ({count} points, every part at its fitted state)")
         return
     if part is not None:
         raise NfrDrakeError(f"--part is for models with several parts (furniture); {model} has one")
@@ -913,7 +919,7 @@ def infer_command(
         write_report(report, fitted, cap, result, outcome, fit.handle_detector)
         print(f"report: {report}")
     if point_cloud is not None:
-        count = write_point_cloud(point_cloud, fitted, cap, outcome)
+        count = write_point_cloud(point_cloud, fitted, cap, outcome.z, outcome.q)
         print(f"point cloud: {point_cloud} ({count} points)")
     if handle_plot is not None:
         write_handle_plot(handle_plot, cap, result)
