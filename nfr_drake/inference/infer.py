@@ -697,14 +697,14 @@ def confidence_line(confidence: dict) -> str:
             f"silhouette IoU {f['silhouette_iou']:.2f} (worst {f['silhouette_iou_worst_view']:.2f})")
 
 
-def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: CaptureSet,
+def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float | None, capture: CaptureSet,
                          max_views: int = 10, detector: HandleDetector | None = None,
                          sighted_p_O: np.ndarray | None = None,
                          handle_p_O: np.ndarray | None = None) -> np.ndarray:
-    """uint8 RGB figure: observed views (top row), renders of the fit (second), segmentation
-    (third) and, with a `detector`, its handle probability over the photo (bottom row) with the
-    triangulated handle `sighted_p_O` (green cross) and the fitted handle `handle_p_O` (magenta
-    square), both (3,) in O."""
+    """uint8 RGB figure: observed views (top row), renders of the fit at q (None: z as fitted,
+    `render_view`; second), segmentation (third) and, with a `detector`, its handle probability
+    over the photo (bottom row) with the triangulated handles `sighted_p_O` (green crosses) and
+    the fitted ones `handle_p_O` (magenta squares), (3,) or (M, 3) in O."""
     images = capture.load_images()[:max_views]
     frames = capture.frames[:max_views]
     rows = [[], [], [], []]
@@ -723,32 +723,39 @@ def observed_vs_rendered(model: NFRModel, z: torch.Tensor, q: float, capture: Ca
 
 def _detector_view(image: np.ndarray, prob: np.ndarray, frame: CaptureFrame, size: tuple[int, int],
                    sighted_p_O: np.ndarray | None, handle_p_O: np.ndarray | None) -> np.ndarray:
-    """The photo greyed, the handle probability in red, and the two handle points marked."""
+    """The photo greyed, the handle probability in red, and the handle points marked ((3,) or
+    (M, 3) each)."""
     grey = np.repeat(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[..., None], 3, -1) * 0.6
     overlay = (grey + prob[..., None] * np.array([255.0, -150.0, -150.0])).clip(0, 255)
     overlay = np.ascontiguousarray(overlay.astype(np.uint8))
-    for point, colour, marker in ((sighted_p_O, (0, 255, 0), cv2.MARKER_CROSS),
-                                  (handle_p_O, (255, 0, 255), cv2.MARKER_SQUARE)):
-        uv = None if point is None else project(frame, np.asarray(point, float))
-        if uv is not None:
-            centre = (int(round(uv[0] - 0.5)), int(round(uv[1] - 0.5)))
-            cv2.drawMarker(overlay, centre, colour, marker, markerSize=7, thickness=1)
+    for points, colour, marker in ((sighted_p_O, (0, 255, 0), cv2.MARKER_CROSS),
+                                   (handle_p_O, (255, 0, 255), cv2.MARKER_SQUARE)):
+        for point in [] if points is None else np.asarray(points, float).reshape(-1, 3):
+            uv = project(frame, point)
+            if uv is not None:
+                centre = (int(round(uv[0] - 0.5)), int(round(uv[1] - 0.5)))
+                cv2.drawMarker(overlay, centre, colour, marker, markerSize=7, thickness=1)
     return cv2.resize(overlay, size, interpolation=cv2.INTER_NEAREST)
 
 
 def write_report(path: Path, fitted: FittedModel, capture: CaptureSet, result: FitResult,
-                 outcome: FitOutcome, with_detector: bool = True) -> np.ndarray:
-    """Write `observed_vs_rendered` of the fit, pixels doubled, as a PNG at `path`; the detector's
-    row when `with_detector` and the model ships one. `capture` has its poses in O (a result in
-    W, `infer_in_world`, is moved back). Returns the written uint8 RGB image."""
-    handle = result.keypoints.get("handle")
+                 z: torch.Tensor, q: float | None, with_detector: bool = True) -> np.ndarray:
+    """Write `observed_vs_rendered` of the fit (its code z at q; None: z as fitted, every part
+    slot at its own articulation), pixels doubled, as a PNG at `path`; the detector's row when
+    `with_detector` and the model ships one, with the sighted handles and the fitted ones (every
+    part's for a piece of furniture). `capture` has its poses in O (a result in W,
+    `infer_in_world`, is moved back). Returns the written uint8 RGB image."""
+    if result.parts is not None:
+        handle = np.array([p["keypoints"]["handle"] for p in result.parts]).reshape(-1, 3)
+        sighted = result.extra["handles"].get("p_O")
+    else:
+        handle, sighted = result.keypoints.get("handle"), result.extra["handle_sighting"].get("p_O")
     if handle is not None and "object_pose" in result.extra:  # the result is in W, the capture in O
         X_OW = np.linalg.inv(np.array(result.extra["object_pose"]["X_WO"]))
         handle = X_OW[:3, :3] @ handle + X_OW[:3, 3]
     figure = observed_vs_rendered(
-        fitted.model, outcome.z, outcome.q, capture,
-        detector=fitted.handle_detector if with_detector else None,
-        sighted_p_O=result.extra["handle_sighting"].get("p_O"), handle_p_O=handle)
+        fitted.model, z, q, capture, detector=fitted.handle_detector if with_detector else None,
+        sighted_p_O=sighted, handle_p_O=handle)
     figure = np.repeat(np.repeat(figure, 2, 0), 2, 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), cv2.cvtColor(figure, cv2.COLOR_RGB2BGR))
@@ -869,8 +876,7 @@ def infer_command(
         raise NfrDrakeError(f"--handle-plot needs ground truth, and {capture} has no gt.json")
     q_grid = np.linspace(0.0, 1.0, trajectory_points)
     if fitted.num_slots > 1:
-        asked = [name for name, on in (("--report", report), ("--handle-plot", handle_plot),
-                                       ("--estimate-pose", estimate_pose),
+        asked = [name for name, on in (("--handle-plot", handle_plot), ("--estimate-pose", estimate_pose),
                                        ("--keypoints geometry", keypoints == "geometry")) if on]
         if asked:
             raise NfrDrakeError(f"{', '.join(asked)}: not available for a model with several parts "
@@ -879,6 +885,9 @@ def infer_command(
         found = "; ".join(f"{p['index']} {p['type']} q = {p['q']:.3f}" for p in result.parts) or "none"
         _write_result(result, out, f"parts found: {found}; part {result.part['index']} in the single-part "
                       f"fields; image loss {result.image_loss:.5f}, {result.seconds:.1f} s -> {out}")
+        if report is not None:
+            write_report(report, fitted, cap, result, parts_fit.z, None, furniture_fit.handle_detector)
+            print(f"report: {report}")
         if point_cloud is not None:
             count = write_point_cloud(point_cloud, fitted, cap, parts_fit.z, None)
             print(f"point cloud: {point_cloud} ({count} points, every part at its fitted state)")
@@ -916,7 +925,7 @@ def infer_command(
                   f"{result.seconds:.1f} s ({outcome.steps} steps, {fit.restarts} starts; close look "
                   f"at the handle: {outcome.focus}) -> {out}")
     if report is not None:
-        write_report(report, fitted, cap, result, outcome, fit.handle_detector)
+        write_report(report, fitted, cap, result, outcome.z, outcome.q, fit.handle_detector)
         print(f"report: {report}")
     if point_cloud is not None:
         count = write_point_cloud(point_cloud, fitted, cap, outcome.z, outcome.q)

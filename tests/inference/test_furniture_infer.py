@@ -6,6 +6,7 @@ import re
 
 import numpy as np
 import pytest
+from PIL import Image
 from pydrake.math import RigidTransform
 
 from nfr_drake.data.capture import read_capture_set
@@ -86,16 +87,19 @@ def test_a_part_the_field_does_not_find_is_given_with_a_warning(furniture_model_
         infer_parts(fitted, read_capture_set(capture_dir), QUICK, np.linspace(0, 1, 3), part=8)
 
 
-def test_the_point_cloud_of_a_furniture_fit_is_written(furniture_model_folder, capture_dir, tmp_path,
-                                                       capsys):
-    """`--point-cloud` with a furniture model: the fitted code rendered as it is (every part slot at
-    its own articulation) from the capture's cameras, labelled points in a PLY; before, the
-    option was refused."""
+def test_the_point_cloud_and_report_of_a_furniture_fit_are_written(furniture_model_folder, capture_dir,
+                                                                   tmp_path, capsys):
+    """`--point-cloud` and `--report` with a furniture model: the fitted code rendered as it is
+    (every part slot at its own articulation) from the capture's cameras, labelled points in a
+    PLY, and the photos over the renders and their segmentation (three rows of the three views,
+    pixels doubled); before, both options were refused."""
     from nfr_drake.inference.forward import semantic_point_cloud
 
-    cloud = tmp_path / "cloud.ply"
+    cloud, report = tmp_path / "cloud.ply", tmp_path / "report.png"
     infer_command(capture_dir, model=furniture_model_folder, out=tmp_path / "r.json", point_cloud=cloud,
-                  furniture_fit=QUICK, trajectory_points=3, threads=1)
+                  report=report, furniture_fit=QUICK, trajectory_points=3, threads=1)
+    figure = np.asarray(Image.open(report))
+    assert figure.shape[0] >= 3 * 2 * 24 and figure.shape[1] >= 3 * 2 * 24
     count = int(re.search(r"point cloud: .* \((\d+) points", capsys.readouterr().out).group(1))
     header = cloud.read_bytes()[:400].decode("ascii", "ignore")
     assert f"element vertex {count}" in header
@@ -109,9 +113,9 @@ def test_the_point_cloud_of_a_furniture_fit_is_written(furniture_model_folder, c
 
 def test_options_a_furniture_fit_does_not_have_are_refused(furniture_model_folder, model_folder,
                                                            capture_dir, tmp_path):
-    with pytest.raises(NfrDrakeError, match="--report: not available for a model with several parts"):
+    with pytest.raises(NfrDrakeError, match="--handle-plot: not available for a model with several parts"):
         infer_command(capture_dir, model=furniture_model_folder, out=tmp_path / "r.json",
-                      report=tmp_path / "r.png", furniture_fit=QUICK, threads=1)
+                      handle_plot=tmp_path / "h.png", furniture_fit=QUICK, threads=1)
     closets = tmp_path / "closets"
     captures_command(category="closet", n=1, out=closets, views=3, size=16)
     with pytest.raises(NfrDrakeError, match="--part is for models with several parts"):
