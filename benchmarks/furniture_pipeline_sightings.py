@@ -66,12 +66,9 @@ from nfr_drake.perception.handle_triangulation import (
     FURNITURE_LOOSE,
     FURNITURE_MERGED_PX,
     FURNITURE_MIN_SHARE,
-    bar_sightings,
-    in_front,
+    locate_handles,
     project,
     sightings,
-    triangulate_bars,
-    triangulate_handles,
 )
 from nfr_drake.systems.pipeline import perception_photos
 from nfr_drake.systems.scenario import Scenario
@@ -208,13 +205,9 @@ def main() -> None:
                   for i, (X_WC, camera) in enumerate(zip(X_WCs, cameras, strict=True))]
         handle_maps = detector.detect(images)
         found = [s for i, m in enumerate(handle_maps) for s in sightings(m, i)]
-        segments = [b for i, m in enumerate(handle_maps) for b in bar_sightings(m, i)]
-        points = triangulate_handles(frames, found, min_share=args.min_share, loose_share=args.loose_share,
-                                     loose_rms_px=args.loose_rms_px, merged_px=args.merged_px,
-                                     bars=None if args.no_bars else segments)
-        if not args.no_bars:
-            points += triangulate_bars(frames, segments, points, min_share=args.bar_share)
-        handles = in_front(points, args.behind_m)
+        handles = locate_handles(handle_maps, frames, min_share=args.min_share, bars=not args.no_bars,
+                                 loose=(args.loose_share, args.loose_rms_px), merged_px=args.merged_px,
+                                 bar_share=args.bar_share, behind_m=args.behind_m)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         points = np.array([h.p_O for h in handles]).reshape(-1, 3)

@@ -618,19 +618,22 @@ def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[Triangu
 
 
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
-                   min_share: float = FURNITURE_MIN_SHARE, bars: bool = FURNITURE_BARS
+                   min_share: float = FURNITURE_MIN_SHARE, bars: bool = FURNITURE_BARS,
+                   loose: tuple[float, float] = FURNITURE_LOOSE, merged_px: float = FURNITURE_MERGED_PX,
+                   bar_share: float = FURNITURE_BAR_SHARE, behind_m: float = FURNITURE_BEHIND_M
                    ) -> list[TriangulatedHandle]:
     """Every handle triangulated from per-frame handle maps, one per frame (furniture): the
-    points of the votes, then (`bars`) the upright bars they leave unexplained, those behind all
-    the others left out (`in_front`)."""
-    loose_share, loose_rms_px = FURNITURE_LOOSE
-    segments = [b for i, m in enumerate(maps) for b in bar_sightings(m, i)]
+    points of the votes (`triangulate_handles` with `min_share`, `loose` = (loose_share,
+    loose_rms_px) and `merged_px`), then (`bars`) the upright bars they leave unexplained
+    (`triangulate_bars` with `bar_share`), those more than `behind_m` behind all the others left
+    out (`in_front`). The defaults are the fit's; a benchmark varies them."""
+    segments = [b for i, m in enumerate(maps) for b in bar_sightings(m, i)] if bars else None
     handles = triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
-                                  min_share=min_share, loose_share=loose_share, loose_rms_px=loose_rms_px,
-                                  merged_px=FURNITURE_MERGED_PX, bars=segments if bars else None)
-    if bars:
-        handles = handles + triangulate_bars(frames, segments, handles, min_share=FURNITURE_BAR_SHARE)
-    return in_front(handles, FURNITURE_BEHIND_M)
+                                  min_share=min_share, loose_share=loose[0], loose_rms_px=loose[1],
+                                  merged_px=merged_px, bars=segments)
+    if segments is not None:
+        handles = handles + triangulate_bars(frames, segments, handles, min_share=bar_share)
+    return in_front(handles, behind_m)
 
 
 def locate_handle(maps: list[HandleMap], frames: list[CaptureFrame]) -> TriangulatedHandle | None:

@@ -575,14 +575,13 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening, kt)
     opening_replay = None if replay is None else write_replay(
         meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
-    pulled_on = None
-    if simulation_config.opening.pull_on:  # as `run_task`: the opening taken on from a second base
-        started_on = time.perf_counter()
-        pulled_on = (pull_on(scene_object, kt, plan, opening, None, config, simulation_config.opening,
-                             meshcats[1], opening_replay)
-                     or turn_on(scene_object, kt, plan, opening, None, config, simulation_config.opening,
-                                meshcats[1], opening_replay))
-        seconds += time.perf_counter() - started_on
+    started_on = time.perf_counter()  # as `run_task`: the opening taken on from a second base
+    true_geometry = list(scene_object.obstacles) if keypoints is None and scene_object.obstacles else None
+    pulled_on = (pull_on(scene_object, kt, plan, opening, true_geometry, config, simulation_config.opening,
+                         meshcats[1], opening_replay)
+                 or turn_on(scene_object, kt, plan, opening, true_geometry, config, simulation_config.opening,
+                            meshcats[1], opening_replay))
+    seconds += time.perf_counter() - started_on
     opened = ended_in(opening, pulled_on)
     moved = moved or opened is not opening  # after a second base the place goes from a base placed anew
     if moved:
