@@ -9,13 +9,19 @@ Four products, from the training codes of a model folder or from codes fitted to
 - `object.html`: a self-contained Meshcat page of one object: its labelled point cloud at its q
   and its keypoint trajectories over q, to turn around in a browser (offline).
 
-All renders come from one camera per model, framing the mean object (`model_view`).
+A model of several part slots (furniture) is drawn slot by slot: an object has a q per slot,
+each slot's z_art moves on its own circle along an interpolation, articulations.png sweeps one
+part at a time with the others held, and the keypoints drawn are those of the parts the keypoint
+head finds at the code (`object_parts`). All renders come from one camera per model, framing the
+mean object (`model_view`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import textwrap
+from collections.abc import Collection
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +34,7 @@ from nfr_drake.cpu import set_torch_threads
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import look_at
 from nfr_drake.data.capture import CaptureFrame, read_capture_set
+from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS
 from nfr_drake.data.visualize import SEMANTIC_PALETTE, colorize_labels, pyplot
 from nfr_drake.errors import ConfigError, NfrDrakeError
 from nfr_drake.inference.fit import FitConfig
@@ -37,43 +44,113 @@ from nfr_drake.inference.forward import (
     render_view,
     semantic_point_cloud,
 )
-from nfr_drake.inference.infer import FittedModel, infer
+from nfr_drake.inference.furniture_fit import FurnitureFitConfig
+from nfr_drake.inference.infer import FittedModel, infer, infer_parts
 from nfr_drake.inference.latent_space import CodeGaussian, farthest_code, interpolate_codes
-from nfr_drake.nfr.latent import q_to_z_art
+from nfr_drake.inference.result import PART_KEYPOINTS
+from nfr_drake.nfr.latent import ART_DIM, slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.perception.handle_triangulation import project
 from nfr_drake.systems.replay import KEYPOINT_COLOURS, draw_keypoint_trajectory, frame_camera, write_replay
-from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.keypoints import PART_CATEGORY, KeypointTrajectory
 
 VIEW_AZIMUTH_DEG = 30.0
 VIEW_ELEVATION_DEG = 20.0
 FOV_Y_DEG = 50.0
 VIEW_FILL = 0.85
-"""Share of the image height that the mean object's bounding sphere spans in the figures."""
+"""Share of the image height that the framed objects' bounding sphere spans in the figures."""
 PROBE_DISTANCE_M = 2.2
-"""Distance of the low-resolution view that measures the mean object (`model_view`)."""
+"""Least distance of the low-resolution view that measures the framed objects (`model_view`), m."""
 TRAJECTORY_POINTS = 21
 """Points of the q grid over [0, 1] of keypoint trajectories."""
 
 
+def q_text(q: float | np.ndarray) -> str:
+    """q as text: "0.11", or one per slot "0.96 0.00 0.20"."""
+    return " ".join(f"{v:.2f}" for v in np.atleast_1d(np.asarray(q, float)))
+
+
 @dataclass(frozen=True)
 class ExploredObject:
-    """An object in the model's code space: its name, z_obj (k,), articulation q in [0, 1] and,
-    for a fitted capture with ground truth, the capture's true q."""
+    """An object in the model's code space: its name, z_obj (k,), articulation q in [0, 1] (a
+    model of S part slots: one per slot, (S,)) and, for a fitted capture with ground truth, the
+    capture's true q (a piece of furniture's: one per part, (M,)); a fitted piece of furniture's
+    fit_parts: the parts its fit lists, as `nfr-drake infer` does ("0 drawer, 1 door")."""
 
     name: str
     z_obj: torch.Tensor
-    q: float
-    true_q: float | None = None
+    q: float | np.ndarray
+    true_q: float | np.ndarray | None = None
+    fit_parts: str | None = None
+
+    @property
+    def qs(self) -> np.ndarray:
+        """q per slot (S,) ((1,) for a one-part model)."""
+        return np.atleast_1d(np.asarray(self.q, float))
 
     def describe(self) -> str:
-        """Name and q, e.g. "fitted closet_000 (q 0.11, true 0.10)"."""
-        truth = "" if self.true_q is None else f", true {self.true_q:.2f}"
-        return f"{self.name} (q {self.q:.2f}{truth})"
+        """Name and q, e.g. "fitted closet_000 (q 0.11, true 0.10)" (`q_text`)."""
+        truth = "" if self.true_q is None else f", true {q_text(self.true_q)}"
+        return f"{self.name} (q {q_text(self.q)}{truth})"
 
     @property
     def z(self) -> torch.Tensor:
-        """The code (2 + k,): z_art = (cos(pi q), sin(pi q)), then z_obj."""
-        return torch.cat([q_to_z_art(self.z_obj.new_tensor(self.q)), self.z_obj])
+        """The code (2 S + k,): per slot z_art = (cos(pi q), sin(pi q)), then z_obj."""
+        qs = self.qs
+        return torch.cat([slots_q_to_z_art(self.z_obj.new_tensor(qs)[None], len(qs))[0], self.z_obj])
+
+    def with_slot(self, slot: int, q: float) -> ExploredObject:
+        """This object with slot `slot` at q, the other slots held."""
+        if np.ndim(self.q) == 0:
+            return replace(self, q=float(q))
+        qs = self.qs.copy()
+        qs[slot] = q
+        return replace(self, q=qs)
+
+
+@dataclass(frozen=True)
+class Part:
+    """A part slot of a code as the keypoint head reads it: the slot, its kind ("door" or
+    "drawer"; a one-part model's category), and its keypoints: names (K',) as the planner names
+    them (`PART_KEYPOINTS`) and their indices (K',) among the head's K keypoints."""
+
+    slot: int
+    kind: str
+    names: tuple[str, ...]
+    indices: tuple[int, ...]
+
+    @property
+    def category(self) -> str:
+        """The category of its keypoint trajectory: "closet" (a door) or "drawer"."""
+        return PART_CATEGORY.get(self.kind, self.kind)
+
+
+@torch.no_grad()
+def object_parts(fitted: FittedModel, z: torch.Tensor) -> list[Part]:
+    """The parts of code z (2 S + k,): a one-part model's one part; for several slots, those whose
+    existence logit is positive, typed by their door and drawer logits (a drawer's axis points,
+    its handle shut and fully open, left out)."""
+    if fitted.num_slots == 1:
+        names = fitted.keypoint_names
+        return [Part(0, fitted.category, names, tuple(range(len(names))))]
+    logits = fitted.model.slot_logits(z[None].to(fitted.codes))[0]
+    parts = []
+    for k in np.flatnonzero((logits[:, 0] > 0).cpu().numpy()):
+        kind = PART_TYPES[int(logits[k, 1:].argmax())]
+        names = PART_KEYPOINTS[kind]
+        parts.append(Part(int(k), kind, tuple(names.values()),
+                          tuple(int(k) * len(SLOT_KEYPOINTS) + SLOT_KEYPOINTS.index(n) for n in names)))
+    return parts
+
+
+def explored_at(fitted: FittedModel, name: str, z_obj: torch.Tensor, q: float) -> ExploredObject:
+    """The object of z_obj (k,) at q in [0, 1]; for several slots, every part the keypoint head
+    finds with all slots shut at q, the other slots shut."""
+    S = fitted.num_slots
+    if S == 1:
+        return ExploredObject(name, z_obj, q)
+    qs = np.zeros(S)
+    qs[[p.slot for p in object_parts(fitted, ExploredObject(name, z_obj, qs).z)]] = q
+    return ExploredObject(name, z_obj, qs)
 
 
 @dataclass(frozen=True)
@@ -102,47 +179,66 @@ def orbit_view(p_OT: np.ndarray, distance_m: float, azimuth_deg: float, size: in
                 look_at(p_OT + distance_m * direction, p_OT), np.asarray(p_OT, float))
 
 
-def model_view(fitted: FittedModel, size: int = 128, azimuth_deg: float = VIEW_AZIMUTH_DEG) -> View:
-    """The camera of a model's figures: it looks at the centre of the mean object's surface
-    (z_obj the mean training code, at q = 0 and 0.5, as the field renders it; the 2nd to 98th
-    percentile box of its points) from the distance at which the box's bounding sphere spans
-    VIEW_FILL of the image height."""
-    mean = fitted.z_obj_mean
-    probe = orbit_view(np.array(fitted.model.config.bound_center), PROBE_DISTANCE_M, azimuth_deg, 32)
+def model_view(fitted: FittedModel, size: int = 128, azimuth_deg: float = VIEW_AZIMUTH_DEG,
+               z_objs: torch.Tensor | None = None) -> View:
+    """The camera of a model's figures: it looks at the centre of the surface of the objects
+    z_objs (M, k) (default: the mean training code), their parts at q = 0 and 0.5, as the field
+    renders them (the 2nd to 98th percentile box of their points), from the distance at which
+    the box's bounding sphere spans VIEW_FILL of the image height. The points come from a
+    low-resolution view PROBE_DISTANCE_M away, or further where the field's bounding sphere
+    needs it to fit in."""
+    half_fov = math.radians(FOV_Y_DEG) / 2.0
+    probe_distance = max(PROBE_DISTANCE_M, fitted.model.config.bound_radius / math.sin(half_fov))
+    probe = orbit_view(np.array(fitted.model.config.bound_center), probe_distance, azimuth_deg, 32)
+    z_objs = fitted.z_obj_mean[None] if z_objs is None else z_objs
     points = np.concatenate([
-        semantic_point_cloud(fitted.model, ExploredObject("mean", mean, q).z, q,
-                             [(probe.camera, probe.X_OC)])[0] for q in (0.0, 0.5)])
+        semantic_point_cloud(fitted.model, explored_at(fitted, "framed", z_obj, q).z, None,
+                             [(probe.camera, probe.X_OC)])[0] for z_obj in z_objs for q in (0.0, 0.5)])
     if len(points) == 0:  # a field that renders nothing: the probe's view
-        return orbit_view(probe.p_OT, PROBE_DISTANCE_M, azimuth_deg, size)
+        return orbit_view(probe.p_OT, probe_distance, azimuth_deg, size)
     lo, hi = np.percentile(points, [2.0, 98.0], axis=0)  # stray surface points left out
     centre = (lo + hi) / 2.0
     radius = float(np.linalg.norm(hi - lo)) / 2.0
-    distance = radius / math.sin(VIEW_FILL * math.radians(FOV_Y_DEG) / 2.0)
+    distance = radius / math.sin(VIEW_FILL * half_fov)
     return orbit_view(centre, distance, azimuth_deg, size)
 
 
 def training_object(fitted: FittedModel, index: int, q: float) -> ExploredObject:
-    return ExploredObject(f"training object {index}", fitted.codes[index], q)
+    """Training code `index` at q (`explored_at`)."""
+    return explored_at(fitted, f"training object {index}", fitted.codes[index], q)
 
 
 def fitted_object(fitted: FittedModel, capture: Path) -> ExploredObject:
-    """The code the shipped fit defaults (`FitConfig()`) find for a capture set."""
+    """The code the shipped fit defaults find for a capture set (`FitConfig()`; a model of several
+    slots: `FurnitureFitConfig()` as `nfr-drake infer` fits furniture, `infer_parts`, every slot
+    at the q of its z_art in the fitted code)."""
     cap = read_capture_set(capture)
     fitted.check_capture(cap)
-    _, outcome = infer(fitted, cap, FitConfig(), np.linspace(0.0, 1.0, TRAJECTORY_POINTS))
-    return ExploredObject(f"fitted {cap.root.name}", outcome.z[2:].detach(), outcome.q,
-                          None if cap.gt is None else float(cap.gt["q"]))
+    grid = np.linspace(0.0, 1.0, TRAJECTORY_POINTS)
+    name, true_q = f"fitted {cap.root.name}", None if cap.gt is None else cap.gt["q"]
+    if fitted.num_slots == 1:
+        _, outcome = infer(fitted, cap, FitConfig(), grid)
+        return ExploredObject(name, outcome.z[2:].detach(), outcome.q,
+                              None if true_q is None else float(true_q))
+    result, fit, _ = infer_parts(fitted, cap, FurnitureFitConfig(), grid)
+    z_art, z_obj = split_z(fit.z.detach(), fitted.num_slots)
+    return ExploredObject(name, z_obj, z_art_to_q(z_art.view(-1, ART_DIM)).double().cpu().numpy(),
+                          None if true_q is None else np.asarray(true_q, float),
+                          ", ".join(f"{p['index']} {p['type']}" for p in result.parts) or "none")
 
 
 def interpolation_path(a: ExploredObject, b: ExploredObject, steps: int) -> list[ExploredObject]:
-    """`steps` objects from a to b (ends included), named by their fraction t of the path."""
+    """`steps` objects from a to b (ends included), named by their fraction t of the path; each
+    slot's q moves from a's to b's."""
     t = np.linspace(0.0, 1.0, steps)
     z_obj, q = interpolate_codes(a.z_obj, a.q, b.z_obj, b.q, t)
-    return [ExploredObject(f"t = {ti:.2f}", z, float(qi)) for ti, z, qi in zip(t, z_obj, q, strict=True)]
+    return [ExploredObject(f"t = {ti:.2f}", z, qi if np.ndim(qi) else float(qi))
+            for ti, z, qi in zip(t, z_obj, q, strict=True)]
 
 
 def render(fitted: FittedModel, obj: ExploredObject, view: View) -> SimulatedView:
-    return render_view(fitted.model, obj.z, obj.q, view.camera, view.X_OC)
+    """The object rendered by the field from `view`, every slot at its q."""
+    return render_view(fitted.model, obj.z, None, view.camera, view.X_OC)
 
 
 def sampled_objects(fitted: FittedModel, count: int, seed: int) -> tuple[list[torch.Tensor], np.ndarray]:
@@ -157,12 +253,17 @@ def _rgb(image: np.ndarray) -> tuple[float, float, float]:
     return tuple(float(c) / 255.0 for c in image)
 
 
+def _keypoint_kind(name: str) -> str:
+    """The keypoint's name without its slot ("2/handle" -> "handle")."""
+    return name.rsplit("/", 1)[-1]
+
+
 def _figure(rows: list[list[np.ndarray]], row_names: list[str], titles: list[str], title: str,
-            path: Path, category: str, keypoints: list[list[dict[str, np.ndarray]]] | None = None,
-            keypoint_row: int | None = None) -> None:
+            path: Path, category: str, keypoints: dict[int, list[dict[str, dict]]] | None = None) -> None:
     """A grid of uint8 RGB images with row names, column titles, a title and a legend of the
-    classes (and keypoints). `keypoints[j]` of column j: name -> {"now": (2,), "path": (N, 2)}
-    pixels, drawn over row `keypoint_row`."""
+    classes (and keypoints). `keypoints[i][j]`, drawn over row i in column j: name -> {"now":
+    (2,), "path": (N, 2)} pixels (`_keypoint_marks`; a name "SLOT/name" is one of a part slot,
+    whose number is written by its handle)."""
     plt = pyplot()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -180,68 +281,102 @@ def _figure(rows: list[list[np.ndarray]], row_names: list[str], titles: list[str
                 ax.set_title(titles[j], fontsize=8)
             if j == 0:
                 ax.set_ylabel(row_names[i], fontsize=8)
-            if keypoints is not None and i == keypoint_row:
-                for name, marks in keypoints[j].items():
-                    colour = KEYPOINT_COLOURS[name].rgba[:3]
+            if keypoints is not None and i in keypoints:
+                for name, marks in keypoints[i][j].items():
+                    colour = KEYPOINT_COLOURS[_keypoint_kind(name)].rgba[:3]
                     ax.plot(marks["path"][:, 0], marks["path"][:, 1], "-", color=colour, lw=0.8)
                     ax.plot(*marks["now"], "o", color=colour, ms=3.5, mec="white", mew=0.5)
+                    if "/" in name and _keypoint_kind(name) == "handle":
+                        ax.annotate(name.split("/")[0], marks["now"], xytext=(2.5, 2.5), fontsize=6,
+                                    textcoords="offset points", color="white", fontweight="bold")
                 ax.set_xlim(-0.5, image.shape[1] - 0.5)
                 ax.set_ylim(image.shape[0] - 0.5, -0.5)
-    moving = {"closet": "door", "drawer": "drawer"}.get(category, "moving part")
+    moving = {"closet": "door", "drawer": "drawer",
+              "furniture": "door or drawer"}.get(category, "moving part")
     classes = [Patch(color=_rgb(SEMANTIC_PALETTE[c]), label=name)
                for c, name in ((1, "carcass"), (2, moving), (3, "handle"))]
     legend = {"fontsize": 7, "title_fontsize": 7, "frameon": False}
     fig.legend(handles=classes, loc="lower left" if keypoints else "lower center", ncol=3,
                title="segmentation classes", bbox_to_anchor=(0.05, 0) if keypoints else None, **legend)
     if keypoints is not None:
-        names = dict.fromkeys(n for marks in keypoints for n in marks)
+        names = dict.fromkeys(_keypoint_kind(n) for row in keypoints.values() for marks in row for n in marks)
+        slots = any("/" in n for row in keypoints.values() for marks in row for n in marks)
         fig.legend(handles=[Line2D([], [], color=KEYPOINT_COLOURS[n].rgba[:3], marker="o", ms=4,
                                    label=n) for n in names],
-                   loc="lower right", bbox_to_anchor=(0.95, 0), ncol=len(names),
-                   title="keypoints (dot: at the column's q; line: path over q in [0, 1])", **legend)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0.07, 1, 1), h_pad=0.3, w_pad=0.3)
+                   loc="lower right", bbox_to_anchor=(0.95, 0), ncol=max(1, len(names)),
+                   title="keypoints (dot: at the column's q; line: path over q in [0, 1]"
+                         + ("; number: part slot" if slots else "") + ")", **legend)
+    width, height = fig.get_size_inches()  # the title's lines above the grid, the legends' 0.4 in below
+    lines = [wrapped for line in title.split("\n") for wrapped in textwrap.wrap(line, int(12 * width))]
+    fig.text(0.5, 1 - 0.08 / height, "\n".join(lines), ha="center", va="top", fontsize=9)
+    fig.tight_layout(rect=(0, 0.4 / height, 1, 1 - (0.12 + 0.16 * len(lines)) / height),
+                     h_pad=0.3, w_pad=0.3)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def _keypoint_marks(fitted: FittedModel, obj: ExploredObject, view: View) -> dict[str, dict]:
-    """Pixels of the object's keypoints at its q ("now") and along q in [0, 1] ("path")."""
+def _keypoint_marks(fitted: FittedModel, obj: ExploredObject, view: View,
+                    swept: Collection[int] | None = None) -> dict[str, dict]:
+    """Pixels of the keypoints of the object's parts (`object_parts`) at its q ("now") and, for
+    the slots in `swept` (None: every part), along the slot's q over [0, 1] with the other slots
+    held ("path", (N, 2); (0, 2) for the others). Keyed by name; "SLOT/name" for several slots."""
     grid = np.linspace(0.0, 1.0, TRAJECTORY_POINTS)
-    path = keypoint_trajectory(fitted.model, obj.z, grid)
-    now = keypoint_trajectory(fitted.model, obj.z, np.array([obj.q]))[0]
+    now = keypoint_trajectory(fitted.model, obj.z, obj.qs[:1])[0]
     marks = {}
-    for k, name in enumerate(fitted.keypoint_names):
-        pixels = [view.pixel(p) for p in path[:, k]]
-        marks[name] = {"now": view.pixel(now[k]),
-                       "path": np.array([p for p in pixels if p is not None]).reshape(-1, 2)}
+    for part in object_parts(fitted, obj.z):
+        path = (keypoint_trajectory(fitted.model, obj.z, grid, part.slot)[:, part.indices]
+                if swept is None or part.slot in swept else np.zeros((0, len(part.indices), 3)))
+        for i, (name, k) in enumerate(zip(part.names, part.indices, strict=True)):
+            pixels = [p for p in map(view.pixel, path[:, i]) if p is not None]
+            marks[f"{part.slot}/{name}" if fitted.num_slots > 1 else name] = {
+                "now": view.pixel(now[k]), "path": np.array(pixels).reshape(-1, 2)}
     return {n: m for n, m in marks.items() if m["now"] is not None}
 
 
-def strip_figure(fitted: FittedModel, objects: list[ExploredObject], view: View, titles: list[str],
-                 title: str, path: Path) -> list[SimulatedView]:
-    """Columns of objects; rows RGB, segmentation and keypoints (now: dots, over q: lines)."""
-    views = [render(fitted, o, view) for o in tqdm(objects, desc=path.stem, unit="render")]
-    marks = [_keypoint_marks(fitted, o, view) for o in objects]
-    dim = [(v.rgb * 0.55 + 255 * 0.45).astype(np.uint8) for v in views]
-    _figure([[v.rgb for v in views], [colorize_labels(v.labels) for v in views], dim],
-            ["RGB", "segmentation", "keypoints"], titles, title, path, fitted.category, marks, 2)
-    return views
+@dataclass(frozen=True)
+class Strip:
+    """Objects side by side in a strip figure: a name for its rows ("" for none), the objects
+    (one per column) and the slots whose keypoint paths are drawn (`_keypoint_marks`' swept)."""
+
+    name: str
+    objects: list[ExploredObject]
+    swept: Collection[int] | None = None
+
+
+def strip_figure(fitted: FittedModel, strips: list[Strip], view: View, titles: list[str],
+                 title: str, path: Path) -> list[list[SimulatedView]]:
+    """Columns of objects; per strip, rows RGB (left out for several strips), segmentation and
+    keypoints over the dimmed RGB (now: dots, over q: lines); returns the renders per strip and
+    column."""
+    renders = [[render(fitted, o, view) for o in tqdm(s.objects, desc=f"{path.stem} {s.name}".strip(),
+                                                       unit="render")] for s in strips]
+    kinds = ("RGB", "segmentation", "keypoints") if len(strips) == 1 else ("segmentation", "keypoints")
+    rows, names, keypoints = [], [], {}
+    for strip, views in zip(strips, renders, strict=True):
+        images = {"RGB": [v.rgb for v in views], "segmentation": [colorize_labels(v.labels) for v in views],
+                  "keypoints": [(v.rgb * 0.55 + 255 * 0.45).astype(np.uint8) for v in views]}
+        keypoints[len(rows) + kinds.index("keypoints")] = [_keypoint_marks(fitted, o, view, strip.swept)
+                                                           for o in strip.objects]
+        rows += [images[kind] for kind in kinds]
+        names += [f"{strip.name}\n{kind}" if strip.name else kind for kind in kinds]
+    _figure(rows, names, titles, title, path, fitted.category, keypoints)
+    return renders
 
 
 def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[float, ...],
                    view: View, path: Path) -> tuple[np.ndarray, float]:
-    """New objects (columns) at each q of q_values (an RGB and a segmentation row per q);
-    returns each sample's distance to its nearest training code (count,) and, for comparison,
-    the median distance of a training code to its nearest other one."""
+    """New objects (columns) at each q of q_values (an RGB and a segmentation row per q; several
+    slots: every part the keypoint head finds at q, `explored_at`); returns each sample's distance
+    to its nearest training code (count,) and, for comparison, the median distance of a training
+    code to its nearest other one."""
     z_objs, nearest = sampled_objects(fitted, count, seed)
     rows, names = [], []
     with tqdm(total=count * len(q_values), desc=path.stem, unit="render") as bar:
         for q in q_values:
             views = []
             for i, z_obj in enumerate(z_objs):
-                views.append(render(fitted, ExploredObject(f"sample {i}", z_obj, q), view))
+                views.append(render(fitted, explored_at(fitted, f"sample {i}", z_obj, q), view))
                 bar.update()
             rows += [[v.rgb for v in views], [colorize_labels(v.labels) for v in views]]
             names += [f"RGB, q = {q:.2f}", f"segmentation, q = {q:.2f}"]
@@ -249,10 +384,14 @@ def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[f
     pairwise.fill_diagonal_(math.inf)
     typical = float(pairwise.min(-1).values.median())
     titles = [f"sample {i}\nnearest: {d:.2f}" for i, d in enumerate(nearest)]
+    if fitted.num_slots > 1:
+        titles = [f"{title}\n{_parts_count(fitted, explored_at(fitted, '', z, 0.0))}"
+                  for title, z in zip(titles, z_objs, strict=True)]
     gaussian = "diagonal" if CodeGaussian.fit(fitted.codes).is_diagonal else "full"
+    parts = "; every part the keypoint head finds at the row's q" if fitted.num_slots > 1 else ""
     _figure(rows, names, titles,
             f"{fitted.category}: new objects, z_obj ~ Gaussian of the {len(fitted.codes)} training codes "
-            f"({gaussian} covariance)\ncolumn titles: distance to the nearest training code "
+            f"({gaussian} covariance){parts}\ncolumn titles: distance to the nearest training code "
             f"(a training code's to its nearest other: median {typical:.2f})",
             path, fitted.category)
     return nearest, typical
@@ -260,16 +399,17 @@ def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[f
 
 def object_html(fitted: FittedModel, obj: ExploredObject, view: View, path: Path,
                 cloud_views: int = 5, cloud_size: int = 96) -> int:
-    """Write the Meshcat page of `obj` (its semantic point cloud at its q, coloured by class, and
-    its keypoint trajectories over q in [0, 1]); returns the number of points."""
+    """Write the Meshcat page of `obj` (its semantic point cloud at its q, every slot at its own,
+    coloured by class, and the keypoint trajectories over q in [0, 1] of each of its parts,
+    `object_parts`: under "object/keypoints", or per part slot K "object/keypoints/partK" swept
+    with the other slots held); returns the number of points."""
     from pydrake.geometry import Meshcat, Rgba
     from pydrake.perception import BaseField, Fields, PointCloud
 
     distance = float(np.linalg.norm(view.X_OC[:3, 3] - view.p_OT))
     around = [orbit_view(view.p_OT, distance, az, cloud_size)
               for az in np.linspace(-60.0, 60.0, cloud_views)]
-    points, classes = semantic_point_cloud(fitted.model, obj.z, obj.q,
-                                           [(v.camera, v.X_OC) for v in around])
+    points, classes = semantic_point_cloud(fitted.model, obj.z, None, [(v.camera, v.X_OC) for v in around])
     cloud = PointCloud(len(points), Fields(BaseField.kXYZs | BaseField.kRGBs))
     cloud.mutable_xyzs()[:] = points.T
     # Meshcat's viewer treats vertex colours as linear and encodes them to sRGB: pass the
@@ -277,11 +417,13 @@ def object_html(fitted: FittedModel, obj: ExploredObject, view: View, path: Path
     linear = np.round(255.0 * (SEMANTIC_PALETTE / 255.0) ** 2.2).astype(np.uint8)
     cloud.mutable_rgbs()[:] = linear[classes].T
     grid = np.linspace(0.0, 1.0, TRAJECTORY_POINTS)
-    trajectory = KeypointTrajectory(fitted.category, grid, fitted.keypoint_names,
-                                    keypoint_trajectory(fitted.model, obj.z, grid), obj.q)
     meshcat = Meshcat()
     meshcat.SetObject("object/point_cloud", cloud, 0.01, Rgba(1.0, 1.0, 1.0, 1.0))
-    draw_keypoint_trajectory(meshcat, trajectory, "object/keypoints")
+    for part in object_parts(fitted, obj.z):
+        p_OK = keypoint_trajectory(fitted.model, obj.z, grid, part.slot)[:, part.indices]
+        trajectory = KeypointTrajectory(part.category, grid, part.names, p_OK, float(obj.qs[part.slot]))
+        draw_keypoint_trajectory(meshcat, trajectory, "object/keypoints" if fitted.num_slots == 1
+                                 else f"object/keypoints/part{part.slot}")
     frame_camera(meshcat, view.p_OT, view.X_OC[:3, 3])
     write_replay(meshcat, path)
     return len(points)
@@ -297,6 +439,42 @@ def _check_writable(out: Path) -> None:
         raise NfrDrakeError(f"{out}: cannot write there ({err.strerror or err})") from None
 
 
+def _parts_count(fitted: FittedModel, obj: ExploredObject) -> str:
+    """How many parts of each kind the keypoint head finds in an object, e.g. "1 door, 2 drawers"."""
+    kinds = [p.kind for p in object_parts(fitted, obj.z)]
+    return ", ".join(f"{kinds.count(k)} {k}{'s' if kinds.count(k) > 1 else ''}"
+                     for k in dict.fromkeys(kinds)) or "no parts"
+
+
+def _parts_text(fitted: FittedModel, obj: ExploredObject) -> str:
+    """The parts the keypoint head finds in an object, e.g. "0 drawer, 1 door" ("none")."""
+    return ", ".join(f"{p.slot} {p.kind}" for p in object_parts(fitted, obj.z)) or "none"
+
+
+def figure_view(fitted: FittedModel, size: int, objects: list[ExploredObject]) -> View:
+    """The camera (size x size pixels) of a figure of `objects`: a one-part model's one camera,
+    framing the mean object (`model_view`); for several slots one framing these objects: pieces
+    of furniture range from a low table to a wardrobe, which the mean code's framing would cut off
+    or show tiny."""
+    if fitted.num_slots == 1:
+        return model_view(fitted, size)
+    return model_view(fitted, size, z_objs=torch.stack([o.z_obj for o in objects]))
+
+
+def articulation_strips(fitted: FittedModel, obj: ExploredObject, steps: int,
+                        part: int | None = None) -> list[Strip]:
+    """The object at `steps` articulations q over [0, 1]: a one-part model's one strip; for several
+    slots one strip per part the keypoint head finds (or slot `part` alone), that slot swept, the
+    others held at the object's q."""
+    q_values = np.linspace(0.0, 1.0, steps)
+    if fitted.num_slots == 1:
+        return [Strip("", [obj.with_slot(0, float(q)) for q in q_values], {0})]
+    kinds = {p.slot: p.kind for p in object_parts(fitted, obj.z)}
+    slots = [part] if part is not None else list(kinds) or [0]
+    return [Strip(f"part {k}, {kinds.get(k, 'not found')}",
+                  [obj.with_slot(k, float(q)) for q in q_values], {k}) for k in slots]
+
+
 def explore_command(
     model: Annotated[Path, tyro.conf.Positional],
     out: Path = Path("out/explore"),
@@ -306,6 +484,7 @@ def explore_command(
     q_ends: tuple[float, float] = (0.0, 0.7),
     samples: int = 6,
     sample_q: tuple[float, ...] = (0.0, 0.5, 1.0),
+    part: int | None = None,
     size: int = 128,
     threads: int | None = None,
 ) -> None:
@@ -313,7 +492,8 @@ def explore_command(
     samples.png and object.html.
 
     Args:
-        model: model folder (model.safetensors + config.json).
+        model: model folder (model.safetensors + config.json); one part (closet, drawer) or several
+            part slots (furniture).
         out: folder for the figures.
         capture: up to two capture sets (repeat the option); their fitted codes are the ends of the
             interpolation, the first is the object of articulations.png and object.html. Missing
@@ -321,9 +501,12 @@ def explore_command(
             end in z_obj.
         seed: chooses the training object and the sampled codes.
         steps: columns of the interpolation and of the articulation sweep.
-        q_ends: articulations of training-code ends (first, second), in [0, 1].
+        q_ends: articulations of training-code ends (first, second), in [0, 1]; furniture: of every
+            part the keypoint head finds in the code.
         samples: new objects drawn from the Gaussian of the training codes.
         sample_q: articulations at which the new objects are rendered.
+        part: a model of several part slots: the one slot swept in articulations.png (default:
+            every part the keypoint head finds in the first object, one strip each).
         size: rendered image size, pixels (square).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
@@ -335,12 +518,11 @@ def explore_command(
         raise ConfigError("--q-ends and --sample-q must lie in [0, 1]")
     set_torch_threads(threads)
     fitted = FittedModel(model)
-    slots = fitted.model.config.num_slots
-    if slots > 1:
-        raise ConfigError(f"{model}: a model of {slots} part slots ({fitted.category}); explore draws the "
-                          "one-part models (models/closet, models/drawer); for a piece of furniture, "
-                          "`nfr-drake infer CAPTURE --model MODEL` lists every part with its keypoints "
-                          "and paths, and `nfr-drake eval --category furniture` draws them")
+    slots = fitted.num_slots
+    if part is not None and slots == 1:
+        raise ConfigError(f"--part is for models of several part slots (furniture); {model} has one")
+    if part is not None and not 0 <= part < slots:
+        raise ConfigError(f"--part {part}: {model} has {slots} part slots, 0 to {slots - 1}")
     for c in capture:
         fitted.check_capture(read_capture_set(c))
     _check_writable(out)
@@ -352,20 +534,31 @@ def explore_command(
     if len(ends) == 1:
         ends.append(training_object(fitted, farthest_code(fitted.codes, ends[0].z_obj), q_ends[1]))
     a, b = ends
-    view = model_view(fitted, size)
     cat = fitted.category
     path = interpolation_path(a, b, steps)
-    strip_figure(fitted, path, view, [f"{o.name}\nq = {o.q:.2f}" for o in path],
-                 f"{cat}: interpolation of z_obj and z_art; left: {a.describe()}, right: {b.describe()}",
+    each = ", every part slot at its own q" if slots > 1 else ""
+    strip_figure(fitted, [Strip("", path)], figure_view(fitted, size, [a, b]),
+                 [f"{o.name}\nq = {o.q:.2f}" if slots == 1 else o.name for o in path],
+                 f"{cat}: interpolation of z_obj and z_art{each}; "
+                 f"left: {a.describe()}, right: {b.describe()}",
                  out / "interpolation.png")
-    sweep = [ExploredObject(a.name, a.z_obj, float(q)) for q in np.linspace(0.0, 1.0, steps)]
-    strip_figure(fitted, sweep, view, [f"q = {o.q:.2f}" for o in sweep],
-                 f"{cat}: new articulations of {a.describe()}; "
-                 "lines: keypoint paths over q", out / "articulations.png")
-    nearest, typical = samples_figure(fitted, samples, seed, sample_q, view, out / "samples.png")
-    points = object_html(fitted, a, view, out / "object.html")
+    strips = articulation_strips(fitted, a, steps, part)
+    held = "one part at a time, the others held; " if slots > 1 else ""
+    view_a = figure_view(fitted, size, [a])
+    strip_figure(fitted, strips, view_a, [f"q = {q:.2f}" for q in np.linspace(0.0, 1.0, steps)],
+                 f"{cat}: new articulations of {a.describe()}; {held}lines: keypoint paths over q",
+                 out / "articulations.png")
+    drawn = [ExploredObject("sample", z, 0.0) for z in sampled_objects(fitted, samples, seed)[0]]
+    nearest, typical = samples_figure(fitted, samples, seed, sample_q, figure_view(fitted, size, drawn),
+                                      out / "samples.png")
+    points = object_html(fitted, a, view_a, out / "object.html")
     print(f"interpolation: {a.describe()} -> {b.describe()}, "
           f"z_obj distance {float((a.z_obj - b.z_obj).norm()):.2f}")
+    if slots > 1:
+        for end in (a, b):
+            listed = "" if end.fit_parts is None else f" (its fit lists {end.fit_parts})"
+            print(f"{end.name}: the keypoint head finds parts {_parts_text(fitted, end)}{listed}")
+        print(f"articulations: {'; '.join(s.name for s in strips)}: swept one at a time")
     print(f"samples: distance to the nearest training code {', '.join(f'{d:.2f}' for d in nearest)} "
           f"(a training code's to its nearest other: median {typical:.2f})")
     print(f"wrote {out / 'interpolation.png'}, {out / 'articulations.png'}, {out / 'samples.png'}, "

@@ -15,21 +15,26 @@ import torch
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.capture import CaptureFrame
 from nfr_drake.inference.fit import frame_ray_directions
-from nfr_drake.nfr.latent import q_to_z_art
+from nfr_drake.nfr.latent import ART_DIM, q_to_z_art, split_z
 from nfr_drake.nfr.model import NFRModel
 from nfr_drake.nfr.rays import Rays
 
 
-def code_at(z: torch.Tensor, q: float | np.ndarray) -> torch.Tensor:
-    """Codes (N, 2 + k) with z's object part and articulation(s) q (N,) (or one code for a float)."""
+def code_at(z: torch.Tensor, q: float | np.ndarray, num_slots: int = 1, slot: int = 0) -> torch.Tensor:
+    """Codes (N, 2 S + k) of z (2 S + k,) with slot `slot`'s articulation at q (N,) (one code for a
+    float), z's object part and its other slots' articulations held."""
     qs = torch.as_tensor(np.atleast_1d(q), dtype=z.dtype, device=z.device)
-    return torch.cat([q_to_z_art(qs), z[2:].expand(len(qs), -1)], dim=-1)
+    z_art, z_obj = split_z(z, num_slots)
+    art = z_art.view(num_slots, ART_DIM).expand(len(qs), num_slots, ART_DIM).clone()
+    art[:, slot] = q_to_z_art(qs)
+    return torch.cat([art.flatten(1), z_obj.expand(len(qs), -1)], dim=-1)
 
 
 @torch.no_grad()
-def keypoint_trajectory(model: NFRModel, z: torch.Tensor, q_grid: np.ndarray) -> np.ndarray:
-    """Keypoints (N, K, 3) in O for each q of q_grid (N,), z_obj fixed."""
-    return model.keypoints(code_at(z, q_grid)).double().cpu().numpy()
+def keypoint_trajectory(model: NFRModel, z: torch.Tensor, q_grid: np.ndarray, slot: int = 0) -> np.ndarray:
+    """Keypoints (N, K, 3) in O (all slots') for each q of q_grid (N,) of slot `slot`, z_obj and
+    the other slots' articulations fixed."""
+    return model.keypoints(code_at(z, q_grid, model.config.num_slots, slot)).double().cpu().numpy()
 
 
 @dataclass

@@ -42,6 +42,7 @@ from scipy.optimize import linear_sum_assignment
 from nfr_drake.data.slot_dataset import PART_TYPES, SLOT_KEYPOINTS, slot_part, slot_trajectory
 from nfr_drake.errors import ConfigError
 from nfr_drake.inference.fit import ObservedRays
+from nfr_drake.inference.forward import keypoint_trajectory
 from nfr_drake.nfr.latent import slots_q_to_z_art, split_z, z_art_to_q
 from nfr_drake.nfr.losses import latent_loss
 from nfr_drake.nfr.model import NFRModel
@@ -522,19 +523,12 @@ def right_halves_last(handles_O: np.ndarray, column: list[int], centred_m: float
     return [j for j in column if j not in halves] + halves
 
 
-@torch.no_grad()
 def part_trajectory(model: NFRModel, z: torch.Tensor, slot: int, q_grid: np.ndarray) -> np.ndarray:
     """Forward simulation of one part by the keypoint head: slot `slot`'s keypoints (N, 4, 3) in O
     as its q sweeps q_grid (N,), the other slots held at their q in z (what the fit gives:
     `slot_path`)."""
-    S = model.config.num_slots
-    z_art, z_obj = split_z(z, S)
-    art = z_art.view(S, 2).expand(len(q_grid), S, 2).clone()
-    qs = torch.as_tensor(np.asarray(q_grid), dtype=z.dtype, device=z.device)
-    art[:, slot] = slots_q_to_z_art(qs[:, None], 1)
-    codes = torch.cat([art.flatten(1), z_obj.expand(len(q_grid), -1)], -1)
-    kp = model.keypoints(codes).view(len(q_grid), S, len(SLOT_KEYPOINTS), 3)
-    return kp[:, slot].double().cpu().numpy()
+    path = keypoint_trajectory(model, z, q_grid, slot)
+    return path.reshape(len(path), model.config.num_slots, len(SLOT_KEYPOINTS), 3)[:, slot]
 
 
 def drawer_travel(model: NFRModel, z: torch.Tensor, slot: int) -> float:

@@ -2,7 +2,8 @@
 distribution of the training codes (the paper's interpolation and generation of new representations).
 
 An object is a point (z_obj, q): the code the networks see is z = [(cos(pi q), sin(pi q)), z_obj]
-(`nfr_drake.inference.forward.code_at`).
+(`nfr_drake.inference.forward.code_at`); with several part slots (furniture) q is one per slot
+and z_art one such pair per slot.
 """
 
 from __future__ import annotations
@@ -15,13 +16,14 @@ import torch
 from nfr_drake.errors import ConfigError
 
 
-def interpolate_codes(z_obj_a: torch.Tensor, q_a: float, z_obj_b: torch.Tensor, q_b: float,
-                      t: np.ndarray) -> tuple[torch.Tensor, np.ndarray]:
+def interpolate_codes(z_obj_a: torch.Tensor, q_a: float | np.ndarray, z_obj_b: torch.Tensor,
+                      q_b: float | np.ndarray, t: np.ndarray) -> tuple[torch.Tensor, np.ndarray]:
     """Codes along the path from object a to object b at fractions t (T,) in [0, 1].
 
     z_obj (k,) moves on the straight line; z_art moves on the unit circle at constant angular
-    speed (slerp). Both ends lie on the upper half circle, angle pi q, where the slerp's angle,
-    and so q, changes linearly. Returns z_obj (T, k) and q (T,); t = 0 gives exactly (z_obj_a,
+    speed (slerp), each part slot's on its own circle when q_a and q_b are one q per slot (S,).
+    Both ends lie on the upper half circle, angle pi q, where the slerp's angle, and so q, changes
+    linearly. Returns z_obj (T, k) and q (T,) (per slot: (T, S)); t = 0 gives exactly (z_obj_a,
     q_a), t = 1 exactly (z_obj_b, q_b).
     """
     t = np.asarray(t, float)
@@ -29,7 +31,11 @@ def interpolate_codes(z_obj_a: torch.Tensor, q_a: float, z_obj_b: torch.Tensor, 
         raise ConfigError("interpolation fractions must be a 1-D array in [0, 1]")
     w = torch.as_tensor(t, dtype=z_obj_a.dtype, device=z_obj_a.device)[:, None]
     z_obj = (1.0 - w) * z_obj_a + w * z_obj_b
-    return z_obj, (1.0 - t) * q_a + t * q_b
+    q_a, q_b = np.asarray(q_a, float), np.asarray(q_b, float)
+    if q_a.shape != q_b.shape:
+        raise ConfigError(f"interpolation ends of different slot counts: q {q_a.shape} and {q_b.shape}")
+    tq = t.reshape(-1, *[1] * q_a.ndim)
+    return z_obj, (1.0 - tq) * q_a + tq * q_b
 
 
 def farthest_code(codes: torch.Tensor, z_obj: torch.Tensor) -> int:
