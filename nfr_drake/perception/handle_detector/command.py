@@ -33,8 +33,7 @@ def train_detector_command(data: list[Path], out: Path,
         fronts: also learn the front outputs (furniture: door or drawer, face corners;
             `nfr_drake.perception.front_reading`).
         init: a trained detector folder of the same width to start from (e.g. a handle
-            detector to which --fronts adds the front outputs); with --tune handles it may be
-            narrower: its handle network is widened to --channels, computing the same at first.
+            detector to which --fronts adds the front outputs).
         tune: with --init, the network that trains, the other kept as it was: "fronts" or
             "handles" (the handle network trained further).
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).

@@ -111,23 +111,17 @@ class HandleDetector(nn.Module):
         return out[:, 0], out[:, 1:] * OFFSET_SCALE_PX
 
     def start_from(self, other: HandleDetector, tune: str = "fronts") -> None:
-        """Take another detector's handle network (same dilations; the same channels, or fewer
-        where the handle network trains on: widened, `_widen_from`) and, where both have front
-        outputs of the same width, its front network; `tune` names the one that goes
+        """Take another detector's handle network (same channels and dilations) and, where both
+        have front outputs of the same width, its front network; `tune` names the one that goes
         on training, the other is kept fixed: "fronts" (front outputs added to a trained handle
         detector, or trained further) or "handles" (the handle network trained further, the
         front network as it was)."""
         if tune not in TUNABLE:
             raise ConfigError(f"handle detector: tune is one of {TUNABLE}, not {tune!r}")
-        wider = tune == "handles" and other.config.channels < self.config.channels
-        if other.config.dilations != self.config.dilations or (
-                other.config.channels != self.config.channels and not wider):
+        if (other.config.channels, other.config.dilations) != (self.config.channels, self.config.dilations):
             raise ConfigError("handle detector: the detector to start from has another architecture "
                               f"({other.config.channels} channels, dilations {other.config.dilations})")
-        if wider:
-            self._widen_from(other)
-        else:
-            self.net.load_state_dict(other.net.state_dict())
+        self.net.load_state_dict(other.net.state_dict())
         if self.fronts is not None and other.fronts is not None:
             if other.config.front_channels != self.config.front_channels:
                 raise ConfigError("handle detector: the detector to start from has front outputs of "
@@ -139,20 +133,6 @@ class HandleDetector(nn.Module):
         self.net.requires_grad_(tune == "handles")
         if self.fronts is not None:
             self.fronts.requires_grad_(tune == "fronts")
-
-    @torch.no_grad()
-    def _widen_from(self, other: HandleDetector) -> None:
-        """This handle network as a wider copy of a narrower one's (same dilations) that computes
-        the same: each convolution holds the other's weights for the other's channels; the added
-        channels keep their fresh inputs, and their weights into the next layer are zero, so they
-        change nothing until they train."""
-        for mine, theirs in zip(self.net, other.net, strict=True):
-            if not isinstance(mine, nn.Conv2d):
-                continue
-            c_out, c_in = theirs.weight.shape[:2]
-            mine.weight[:, c_in:] = 0.0
-            mine.weight[:c_out, :c_in] = theirs.weight
-            mine.bias[:c_out] = theirs.bias
 
     @torch.no_grad()
     def detect(self, images: list[np.ndarray]) -> list[HandleMap]:
