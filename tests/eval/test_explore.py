@@ -5,6 +5,7 @@ at a time, every part's keypoints and trajectories."""
 
 import base64
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -44,11 +45,16 @@ def fitted(model_folder):
     return FittedModel(model_folder)
 
 
+def capture_sets(factory, category: str, n: int, **options) -> list[Path]:
+    """n capture sets of `category` made by `nfr-drake captures` (options: its keywords)."""
+    root = factory.mktemp(f"explore_{category}_caps")
+    captures_command(category, n=n, out=root, **options)
+    return [root / f"{category}_{i:03d}" for i in range(n)]
+
+
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory):
-    root = tmp_path_factory.mktemp("explore_caps")
-    captures_command("closet", n=1, out=root, views=3, size=32)
-    return root / "closet_000"
+    return capture_sets(tmp_path_factory, "closet", 1, views=3, size=32)[0]
 
 
 def test_interpolate_codes_moves_z_obj_on_a_line_and_q_along_the_circle():
@@ -180,9 +186,7 @@ def furniture(furniture_model_folder):
 
 @pytest.fixture(scope="module")
 def furniture_captures(tmp_path_factory):
-    root = tmp_path_factory.mktemp("explore_furniture_caps")
-    captures_command("furniture", n=2, out=root, views=2, size=24, seed=3)
-    return root / "furniture_000", root / "furniture_001"
+    return tuple(capture_sets(tmp_path_factory, "furniture", 2, views=2, size=24, seed=3))
 
 
 def test_interpolate_codes_moves_each_slot_on_its_own_circle():
