@@ -322,7 +322,7 @@ def _keypoint_marks(fitted: FittedModel, obj: ExploredObject, view: View,
     the slots in `swept` (None: every part), along the slot's q over [0, 1] with the other slots
     held ("path", (N, 2); (0, 2) for the others). Keyed by name; "SLOT/name" for several slots."""
     grid = np.linspace(0.0, 1.0, TRAJECTORY_POINTS)
-    now = keypoint_trajectory(fitted.model, obj.z, obj.qs[:1])[0]
+    now = keypoint_trajectory(fitted.model, obj.z, obj.qs[:1])[0]  # slot 0 at its own q: the code as it is
     marks = {}
     for part in object_parts(fitted, obj.z):
         path = (keypoint_trajectory(fitted.model, obj.z, grid, part.slot)[:, part.indices]
@@ -365,12 +365,13 @@ def strip_figure(fitted: FittedModel, strips: list[Strip], view: View, titles: l
 
 
 def samples_figure(fitted: FittedModel, count: int, seed: int, q_values: tuple[float, ...],
-                   view: View, path: Path) -> tuple[np.ndarray, float]:
+                   size: int, path: Path) -> tuple[np.ndarray, float]:
     """New objects (columns) at each q of q_values (an RGB and a segmentation row per q; several
-    slots: every part the keypoint head finds at q, `explored_at`); returns each sample's distance
-    to its nearest training code (count,) and, for comparison, the median distance of a training
-    code to its nearest other one."""
+    slots: every part the keypoint head finds at q, `explored_at`), size x size pixels
+    (`figure_view` of the samples); returns each sample's distance to its nearest training code
+    (count,) and, for comparison, the median distance of a training code to its nearest other one."""
     z_objs, nearest = sampled_objects(fitted, count, seed)
+    view = figure_view(fitted, size, [ExploredObject("sample", z, 0.0) for z in z_objs])
     rows, names = [], []
     with tqdm(total=count * len(q_values), desc=path.stem, unit="render") as bar:
         for q in q_values:
@@ -548,9 +549,7 @@ def explore_command(
     strip_figure(fitted, strips, view_a, [f"q = {q:.2f}" for q in np.linspace(0.0, 1.0, steps)],
                  f"{cat}: new articulations of {a.describe()}; {held}lines: keypoint paths over q",
                  out / "articulations.png")
-    drawn = [ExploredObject("sample", z, 0.0) for z in sampled_objects(fitted, samples, seed)[0]]
-    nearest, typical = samples_figure(fitted, samples, seed, sample_q, figure_view(fitted, size, drawn),
-                                      out / "samples.png")
+    nearest, typical = samples_figure(fitted, samples, seed, sample_q, size, out / "samples.png")
     points = object_html(fitted, a, view_a, out / "object.html")
     print(f"interpolation: {a.describe()} -> {b.describe()}, "
           f"z_obj distance {float((a.z_obj - b.z_obj).norm()):.2f}")
