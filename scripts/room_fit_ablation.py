@@ -34,6 +34,8 @@ Settings, each one fit (`infer`, the scenario's fit options) in the frame O of t
   ``pipeline_fronts_refined``: ``pipeline_region_refined`` with the pixels beyond the open fronts'
   reach all painted (`paint_off_object(..., painting="fronts")`; the pipeline fits its three
   paintings and keeps the most confident fit, docs/ROOMS.md, "Several paintings");
+  ``pipeline_paintings_refined``: the pipeline's fit: the three paintings, the most confident
+  fit kept, the pose refined (`infer_painted`);
   ``pipeline_region_reach``:
   that region grown toward the cameras by the fronts' reach (the carcass's larger side: a drawer
   pulls out by less than its depth, a door swings out by its width);
@@ -79,6 +81,7 @@ from nfr_drake.inference.fit import FitConfig
 from nfr_drake.inference.infer import (
     SURE_THRESHOLD,
     infer,
+    infer_painted,
     paint_background,
     paint_off_object,
     paint_thresholds,
@@ -87,6 +90,7 @@ from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.nfr.render import render_images
 from nfr_drake.perception.handle_triangulation import inside_masks, locate_handle
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
+from nfr_drake.perception.segmentation.refine import refine_masks as refined
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -95,7 +99,7 @@ SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet
             "pipeline", "pipeline_refined", "seg_mask_p90", "pipeline_p90", "seg_mask_blend",
             "seg_mask_blend_nodet",
             "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined",
-            "pipeline_fronts_refined")
+            "pipeline_fronts_refined", "pipeline_paintings_refined")
 VISIBLE_DEPTH_M = 0.02
 """A silhouette pixel is visible in the room when the room's depth there is within this of the
 object's alone."""
@@ -186,8 +190,11 @@ def outlined(image: np.ndarray, mask: np.ndarray, silhouette: np.ndarray) -> np.
 def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (0, 3, 8),
          settings: tuple[str, ...] = SETTINGS, segmenter: str = Scenario.segmenter,
          csv_path: Path | None = None, threads: int = 1, q_start: float = 0.0,
-         figure: Path | None = None, figure_views: tuple[int, ...] = (0, 3, 6, 9)) -> None:
+         figure: Path | None = None, figure_views: tuple[int, ...] = (0, 3, 6, 9),
+         refine_masks: bool = False) -> None:
     """`q_start`: the objects' articulation when photographed (0: shut, as in eval-pipeline).
+    `refine_masks`: the segmenter's masks refined by the photos' colours (`segmentation.refine`)
+    after the pose is estimated from them, for every setting that uses them.
     `figure`: a PNG of the first object, one row per view of `figure_views`: the room photo with
     the segmenter's mask (magenta, p > 0.5) and the true silhouette (green), then per setting the
     photo the fit gets and the fitted field rendered in the view."""
@@ -213,16 +220,18 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             seg, X_WO_hat, pose, _ = perception._looked(room, perception._room_looks(room))
         except ObjectPoseError:  # the pipeline plans nothing; its row is left out
             seg, X_WO_hat, pose = perception._masks(room), None, {"amodal": None}
+        if refine_masks:
+            seg = refined(room, seg)
         truth = KeypointTrajectory.from_articulated_object(obj, X_WO, scenario.q_start)
+        X_WCs = [X.GetAsMatrix4() for X in perception.camera_poses]
         handle_W = truth.point("handle", truth.q_current)
         sure = paint_background(room, seg, threshold=SURE_THRESHOLD)
         region = region_reach = fronts = None
         if X_WO_hat is not None:
             region = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=False)
             region_reach = painted_in_region(room, seg, X_WO_hat, pose["size"], perception, reach=True)
-            fronts, _ = paint_off_object(room, seg, [X.GetAsMatrix4() for X in perception.camera_poses],
-                                      perception.cameras, X_WO_hat.GetAsMatrix4(), np.asarray(pose["size"]),
-                                      painting="fronts")
+            fronts, _ = paint_off_object(room, seg, X_WCs, perception.cameras, X_WO_hat.GetAsMatrix4(),
+                                         np.asarray(pose["size"]), painting="fronts")
         runs = {"alone": (alone, None, X_WO, False, True), "alone_roomlight": (lit, None, X_WO, False, True),
                 "true_mask": (paint_background(room, visible), visible, X_WO, False, True),
                 "seg_mask": (paint_background(room, seg), seg, X_WO, False, True),
@@ -238,7 +247,8 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
                 "pipeline_region": (region, seg, X_WO_hat, False, True),
                 "pipeline_region_reach": (region_reach, seg, X_WO_hat, False, True),
                 "pipeline_region_refined": (region, seg, X_WO_hat, False, True),
-                "pipeline_fronts_refined": (fronts, seg, X_WO_hat, False, True)}
+                "pipeline_fronts_refined": (fronts, seg, X_WO_hat, False, True),
+                "pipeline_paintings_refined": (room, seg, X_WO_hat, False, True)}
         detector = fitted.handle_detector
         maps = detector.detect(room)
         fired = [m.probability > 0.5 for m in maps]
@@ -263,9 +273,17 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
             kept = [np.all(i == r, axis=-1) for i, r in zip(images, room, strict=True)] if painted else None
             t0 = time.perf_counter()
             config = replace(scenario.fit, handle_detector=use_detector)
-            result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
-                                    masked_loss=masked, room=masks is not None,
-                                    refine_pose=name.endswith("_refined"), kept=kept)
+            if name == "pipeline_paintings_refined":  # the masks already refined as `refine_masks` says
+                size = np.asarray(pose["size"])
+                result, outcome = infer_painted(fitted, cap, config, np.linspace(0, 1, 21), room, seg, X_WCs,
+                                                X_WO_hat.GetAsMatrix4(), size, refine_pose=True,
+                                                refine_masks=False)
+                images, kept = paint_off_object(room, seg, X_WCs, perception.cameras, X_WO_hat.GetAsMatrix4(),
+                                                size, painting=result.extra["paintings"]["chosen"])
+            else:
+                result, outcome = infer(fitted, cap, config, np.linspace(0, 1, 21), images, masks=masks,
+                                        masked_loss=masked, room=masks is not None,
+                                        refine_pose=name.endswith("_refined"), kept=kept)
             seconds = time.perf_counter() - t0
             if figure is not None and index == objects[0]:
                 if panels is None:

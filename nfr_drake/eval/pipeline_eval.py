@@ -228,6 +228,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           mask_crop: bool = True,
                           aimed_look: Literal["off-aim", "always", "never"] = "off-aim",
                           look_again: bool = True,
+                          refine_masks: bool = True,
                           objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           pull_on: bool = SimulationConfig.pull_on,
@@ -281,6 +282,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
         look_again: with `--mask-crop` and `--object-pose estimated`, a fit its confidence refuses
             is followed by one at the other look (aimed or whole photos), the more confident kept
             (`Scenario.look_again`).
+        refine_masks: with `--room-loss background`, the masks' pixels that the photo's colours
+            call background are taken off them before the painting (`Scenario.refine_masks`).
         guarded_pull: the constraint grasp's guarded pull to a drawer's stop goes on at most this
             far past the planned end, m (`SimulationConfig.guarded_pull`; 0: none, the pull ends
             at the plan's end).
@@ -303,7 +306,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                     min_confidence=min_confidence, task=task, grasp=grasp, object_pose=object_pose,
                     perceive=perceive, segmenter=str(segmenter), room_loss=room_loss,
                     paintings=list(paintings), mask_crop=mask_crop, aimed_look=aimed_look,
-                    look_again=look_again,
+                    look_again=look_again, refine_masks=refine_masks,
                     simulation=SimulationConfig(guarded_pull=guarded_pull, pull_on=pull_on, regrasps=regrasps,
                                                 second_turn_max_hinge_gap=turn_max_hinge_gap))
     if any(i < 0 for i in objects):

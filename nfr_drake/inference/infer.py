@@ -73,6 +73,7 @@ from nfr_drake.perception.object_pose import (
     box_silhouette,
     estimate_object_pose_carcass_first,
 )
+from nfr_drake.perception.segmentation.refine import refine_masks as refined_by_colour
 
 if TYPE_CHECKING:
     from nfr_drake.perception.segmentation.crop import RoomLooks
@@ -369,16 +370,19 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
                   images: list[np.ndarray], masks: list[np.ndarray], X_WCs: list[np.ndarray],
                   X_WO: np.ndarray, size: np.ndarray | None, paintings: tuple[Painting, ...] = PAINTINGS,
                   keypoint_source: KeypointSource = "head", room: bool = True, refine_pose: bool = False,
-                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB
-                  ) -> tuple[FitResult, FitOutcome]:
+                  background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
+                  refine_masks: bool = True) -> tuple[FitResult, FitOutcome]:
     """`infer` (`capture` in the object's frame O) on the photos `images` painted off the object's
     `masks` each way `paintings` says (`paint_off_object`: the cameras X_WCs (4, 4) and the
     estimated carcass X_WO (4, 4), `size` (3,) m or None, in one frame W; without a size "fronts"
     paints as "region"), the fit with the highest P(handle within 2 cm) kept (the first where
     none has a P); with more than one
     painting the result's `extra["paintings"]` says which was kept and each one's P (docs/ROOMS.md,
-    "Several paintings")."""
+    "Several paintings"). `refine_masks`: the masks' pixels the photo's colours call background
+    removed first (`perception.segmentation.refine`; docs/ROOMS.md, "Mask edges by the photo's
+    colours")."""
     cameras = [frame.camera for frame in capture.frames]
+    masks = refined_by_colour(images, masks) if refine_masks else masks
     fits = {}
     for name in checked_paintings("region" if size is None and p == "fronts" else p
                                   for p in checked_paintings(paintings)):
@@ -401,8 +405,8 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
 def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfig,
                    q_grid: np.ndarray, masks: list[np.ndarray], room_loss: RoomLoss = "background",
                    keypoint_source: KeypointSource = "head", room: bool = True,
-                   carcass: list[np.ndarray] | None = None, paintings: tuple[Painting, ...] = ("region",)
-                   ) -> tuple[FitResult, FitOutcome, CaptureSet]:
+                   carcass: list[np.ndarray] | None = None, paintings: tuple[Painting, ...] = ("region",),
+                   refine_masks: bool = True) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), or
     from the carcass's amodal masks `carcass` when given (`carcass_masks`: the box is the carcass;
@@ -410,7 +414,8 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     fit runs in that O (the pixels off the masks painted in the training background as each of
     `paintings` says, the most confident fit kept, `infer_painted`, or left out of the image loss,
     `room_loss`; `room`: the masks are a room segmenter's, the confidence's
-    silhouette, see `infer`; the pose then refined with the fitted field, `FitConfig.refine_pose`),
+    silhouette, see `infer`; with `refine_masks` the masks' edges by the photos' colours,
+    `infer_painted`; the pose then refined with the fitted field, `FitConfig.refine_pose`),
     and the result's positions are moved into W (`extra["object_pose"]`: X_WO, the estimate before
     the refinement X_WO_estimated, the refinement's report or None, the carcass size; a size outside
     the model's category joins `extra["warnings"]`). Returns the result, the fit and the capture
@@ -430,7 +435,8 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
     if room_loss == "background":
         result, outcome = infer_painted(fitted, in_O, fit_config, q_grid, images, masks,
                                         [f.X_OC for f in capture.frames], estimate.X_WO, estimate.size,
-                                        paintings, keypoint_source, room, refine_pose=True)
+                                        paintings, keypoint_source, room, refine_pose=True,
+                                        refine_masks=refine_masks)
     else:
         result, outcome = infer(fitted, in_O, fit_config, q_grid, images, keypoint_source, masks,
                                 masked_loss=True, room=room, refine_pose=True)
@@ -818,6 +824,7 @@ def infer_command(
     look_again: bool = True,
     room_loss: RoomLoss = "background",
     paintings: tuple[Painting, ...] = ("region",),
+    refine_masks: bool = True,
     part: int | None = None,
     furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
     threads: int | None = None,
@@ -858,6 +865,10 @@ def infer_command(
         paintings: with --room-loss background, how the photos are painted, one fit each, the
             most confident kept (`infer_painted`; "region" alone by default here, as tutorial 3
             was measured; `eval-pipeline` fits all three).
+        refine_masks: with --room-loss background and --masks segmenter, the masks' pixels that
+            the photo's colours call background (GrabCut started from the segmenter's
+            probabilities) are removed before the painting (docs/ROOMS.md, "Mask edges by the
+            photo's colours").
         part: a model with several parts (furniture): the part whose q, keypoints and trajectory
             are the result's single-part fields (default: the first part found); every part found
             is listed under `parts`.
@@ -905,13 +916,15 @@ def infer_command(
         else:
             views = object_masks(photos, segmenter if masks == "segmenter" else None)
             carcass = carcass_masks(photos, segmenter) if masks == "segmenter" else None
+        refine = refine_masks and masks == "segmenter"
         in_world = infer_in_world(fitted, cap, fit, q_grid, views, room_loss, keypoints,
-                                  room=masks == "segmenter", carcass=carcass, paintings=paintings)
+                                  room=masks == "segmenter", carcass=carcass, paintings=paintings,
+                                  refine_masks=refine)
         refused = refusal(in_world[0].confidence) if cropped and look_again else None
         if refused and (other := cropped_masks(photos, cap, segmenter, fitted.category, after=looks)):
             print(f"{refused}\nlooking again, at the {'aimed' if other[2].aimed else 'whole-photo'} look")
             again = infer_in_world(fitted, cap, fit, q_grid, other[0], room_loss, keypoints, room=True,
-                                   carcass=other[1], paintings=paintings)
+                                   carcass=other[1], paintings=paintings, refine_masks=refine)
             kept = more_confident_look(in_world[0], again[0], (looks.aimed, other[2].aimed))
             in_world = again if kept is again[0] else in_world
         result, outcome, cap = in_world

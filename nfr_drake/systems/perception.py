@@ -87,6 +87,7 @@ from nfr_drake.perception.segmentation.crop import (
     room_looks,
 )
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
+from nfr_drake.perception.segmentation.refine import refine_masks
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
 
@@ -137,8 +138,9 @@ class NfrPerceptionSystem(LeafSystem):
     where it gives one: the extra's `aimed`, and a warning; `aimed_look`, `crop.AimedLook`), and
     the fit sees the photos painted in `background_rgb` off them (`room_loss` "background", as
     each of `paintings` says: one fit per painting, the one with the highest P(handle within 2 cm)
-    kept, `infer_painted`; a model with several parts takes the first painting) or only the
-    pixels on them (`room_loss` "masked");
+    kept, `infer_painted`; a model with several parts takes the first painting; with
+    `refine_masks`, after the pixels the photo's colours call background are taken off the masks,
+    `perception.segmentation.refine`) or only the pixels on them (`room_loss` "masked");
     without, the pixels off `background_rgb` (the object alone), every pixel counting in the loss.
     X_WO None: the pose is estimated at each fit from the masks and refined with the fitted field
     (`FitConfig.refine_pose`), the result's `extra["object_pose"]` says how (X_WO, the estimate
@@ -170,7 +172,8 @@ class NfrPerceptionSystem(LeafSystem):
                  furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                  room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
                  aimed_look: AimedLook = "off-aim",
-                 paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True):
+                 paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True,
+                 refine_masks: bool = True):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -185,7 +188,7 @@ class NfrPerceptionSystem(LeafSystem):
         self._X_WO = X_WO
         self._hull_config, self._background_rgb = hull_config or HullConfig(), background_rgb
         self._segmenter, self._room_loss, self._mask_crop = segmenter, room_loss, mask_crop
-        self._aimed_look, self._look_again = aimed_look, look_again
+        self._aimed_look, self._look_again, self._refine_masks = aimed_look, look_again, refine_masks
         self._paintings = checked_paintings(paintings)
         self._q_grid = np.linspace(0.0, 1.0, trajectory_points)
         self._cloud_size = cloud_size
@@ -341,6 +344,7 @@ class NfrPerceptionSystem(LeafSystem):
         if self._model.num_slots > 1:
             kept = None
             if painting:
+                masks = refine_masks(images, masks) if self._refine_masks else masks
                 images, kept = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
                                                 pose.get("size"), self._background_rgb, self._paintings[0])
             result, _, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,
@@ -351,7 +355,8 @@ class NfrPerceptionSystem(LeafSystem):
                                                 masks, X_WCs, X_WO.GetAsMatrix4(), pose.get("size"),
                                                 self._paintings, self._keypoint_source,
                                                 refine_pose=self._X_WO is None,
-                                                background_rgb=self._background_rgb)
+                                                background_rgb=self._background_rgb,
+                                                refine_masks=self._refine_masks)
             else:
                 result, outcome = infer(self._model, capture, self._fit_config, self._q_grid, images,
                                         self._keypoint_source, masks=masks if self._segmenter else None,
@@ -437,8 +442,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      furniture_config: FurnitureFitConfig = FurnitureFitConfig(),
                      room_loss: RoomLoss = "background", mask_crop: bool = True,
                      aimed_look: AimedLook = "off-aim",
-                     paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True
-                     ) -> NfrPerceptionSystem:
+                     paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True,
+                     refine_masks: bool = True) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines
@@ -446,7 +451,8 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
     `Lighting()`); "room": they see every geometry under `lighting` (a room's lights in W,
     `RoomLighting.moved`), the `segmenter` model folder finds the object (`mask_crop`: with a second,
     close look; `aimed_look`: when at the crop around where the cameras aim; `look_again`: at the
-    other look when the first fit is refused) and `room_loss` says
+    other look when the first fit is refused; `refine_masks`: the masks' edges by the photos'
+    colours) and `room_loss` says
     how the fit treats the pixels off its mask
     (`NfrPerceptionSystem`). X_WO: the object's
     known pose, or None to estimate it from the views (`NfrPerceptionSystem`). A model with several
@@ -467,7 +473,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
         FittedModel(model_dir), [camera] * len(X_WCs), X_WCs, X_WO, fit_config,
         keypoint_source=keypoint_source, segmenter=net, part=part, furniture_config=furniture_config,
         room_loss=room_loss, mask_crop=mask_crop, paintings=paintings, aimed_look=aimed_look,
-        look_again=look_again))
+        look_again=look_again, refine_masks=refine_masks))
     for i, X_WC in enumerate(X_WCs):
         sensor = builder.AddNamedSystem(f"nfr_camera_{i}", RgbdSensor(
             parent_id=scene_graph.world_frame_id(), X_PB=X_WC,

@@ -186,7 +186,7 @@ def _with_perception(builder: DiagramBuilder, plant, scene_graph, model, scenari
                                   scenario.perceive, Path(scenario.segmenter), part,
                                   room_loss=scenario.room_loss, mask_crop=scenario.mask_crop,
                                   aimed_look=scenario.aimed_look, look_again=scenario.look_again,
-                                  paintings=tuple(scenario.paintings))
+                                  paintings=tuple(scenario.paintings), refine_masks=scenario.refine_masks)
     return Simulator(builder.Build()), perception
 
 

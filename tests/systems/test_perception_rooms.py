@@ -80,7 +80,7 @@ def test_a_room_placed_at_X_PW_is_the_same_room_moved():
 
 
 def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, paintings=("region",),
-                      aimed_look="off-aim", look_again=True):
+                      aimed_look="off-aim", look_again=True, refine_masks=True):
     obj = sample_object("closet", object_rng(SEED_DOMAIN_CAPTURE, 5, 1))
     scenario = Scenario(seed=5, index=1, object_xyz=list(X_WO.translation()),
                         object_yaw_deg=math.degrees(RollPitchYaw(X_WO.rotation()).yaw_angle()))
@@ -98,7 +98,8 @@ def _perception_scene(model_dir, scene, X_WO, known=True, fit=TINY_FIT, painting
     camera = PinholeCamera.from_fov(32, 32, math.radians(50))
     system = AddNfrPerception(builder, plant, scene_graph, model_dir, model, X_WO if known else None,
                               X_WCs, camera, fit, lighting, scene=scene, segmenter=SEGMENTER,
-                              paintings=paintings, aimed_look=aimed_look, look_again=look_again)
+                              paintings=paintings, aimed_look=aimed_look, look_again=look_again,
+                              refine_masks=refine_masks)
     return builder.Build(), system
 
 
@@ -190,6 +191,38 @@ def test_one_fit_per_painting_and_the_most_confident_kept(model_dir, monkeypatch
     diagram, system = _perception_scene(model_dir, "room", X_WO, paintings=("region", "fronts"))
     Simulator(diagram).Initialize()
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize("refine_masks", [True, False])
+def test_the_fit_gets_the_masks_refined_by_the_photos_colours(model_dir, monkeypatch, refine_masks):
+    """With `refine_masks` the segmenter's masks are refined once per fit (`segmentation.refine`)
+    before the painting, and the fit gets the refined masks, never above the segmenter's; without,
+    the segmenter's as they are."""
+    _needs_segmenter()
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.6), [1.0, 0.4, 0.0])
+    refined, fitted_on = [], []
+    real_refine, real_infer = infer_module.refined_by_colour, infer_module.infer
+
+    def refine_spy(images, masks):
+        out = real_refine(images, masks)
+        refined.append((masks, out))
+        return out
+
+    def infer_spy(*args, **kwargs):
+        fitted_on.append(kwargs["masks"])
+        return real_infer(*args, **kwargs)
+
+    monkeypatch.setattr(infer_module, "refined_by_colour", refine_spy)
+    monkeypatch.setattr(infer_module, "infer", infer_spy)
+    diagram, system = _perception_scene(model_dir, "room", X_WO, refine_masks=refine_masks)
+    Simulator(diagram).Initialize()
+    assert len(fitted_on) == 1 and len(refined) == (1 if refine_masks else 0)
+    if refine_masks:
+        (raw, out), = refined
+        assert all(a is b for a, b in zip(fitted_on[0], out, strict=True))
+        for before, after in zip(raw, out, strict=True):
+            assert after.shape == before.shape and np.all(after <= before)
+            assert np.all((after == before) | (after == 0.0))
 
 
 def test_crop_masks_that_give_no_pose_fall_back_to_the_first_look(model_dir, monkeypatch):

@@ -15,6 +15,7 @@ Modules, one role each:
 - `training`: the loss and the resumable training loop.
 - `crop`: the crop stage over posed views: a second, close look at the crop around the box of
   the object's pose from the first masks (`Segmenter.close_look` looks at one photo's crop).
+- `refine`: the masks' edges by the photo's colours (GrabCut started from the probabilities).
 - `evaluation`: mask IoU per dataset and the figure of predicted and true masks.
 - `command`: `nfr-drake train-segmenter` and `nfr-drake eval-segmenter`.
 """
