@@ -91,7 +91,7 @@ from nfr_drake.nfr.render import render_images
 from nfr_drake.perception.handle_triangulation import inside_masks, locate_handle
 from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
 from nfr_drake.perception.segmentation.refine import refine_masks as refined
-from nfr_drake.systems.pipeline import perception_simulator
+from nfr_drake.systems.pipeline import perception_simulator, visible_silhouettes
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.keypoints import KeypointTrajectory
 
@@ -100,11 +100,6 @@ SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet
             "seg_mask_blend_nodet",
             "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined",
             "pipeline_fronts_refined", "pipeline_paintings_refined")
-VISIBLE_DEPTH_M = 0.02
-"""A silhouette pixel is visible in the room when the room's depth there is within this of the
-object's alone."""
-
-
 def shots(scenario: Scenario, room_geometry: bool = True):
     """Colour (H, W, 3) uint8 and depth (H, W) m photos of the scenario's perception cameras, and
     its perception system; `room_geometry` False: the room's lights without its geometry."""
@@ -213,8 +208,7 @@ def main(category: str = "drawer", seed: int = 200, objects: tuple[int, ...] = (
         alone, alone_depth, _ = shots(replace(scenario, perceive="alone"))
         fitted = perception._model
         whole = [background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5 for image in alone]
-        visible = [(w & (np.abs(d_room - d_alone) < VISIBLE_DEPTH_M)).astype(np.float32)
-                   for w, d_room, d_alone in zip(whole, room_depth, alone_depth, strict=True)]
+        visible = [v.astype(np.float32) for v in visible_silhouettes(alone, alone_depth, room_depth)]
         X_WO = scenario.X_WO
         try:  # the pipeline's first look: its masks and the pose from them
             seg, X_WO_hat, pose, _ = perception._looked(room, perception._room_looks(room))

@@ -27,6 +27,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nfr_drake.data.camera import PinholeCamera
 from nfr_drake.data.camera_placement import CameraDistribution, resolve_framing
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
 from nfr_drake.data.rooms import Room, RoomDistribution, sample_room
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.inference.confidence import refusal
@@ -34,7 +35,7 @@ from nfr_drake.inference.infer import check_category
 from nfr_drake.nfr.checkpoint import read_model_config
 from nfr_drake.objects import ArticulatedObject
 from nfr_drake.objects.plant import add_articulated_object, set_articulation
-from nfr_drake.perception.object_pose import ObjectPoseError
+from nfr_drake.perception.object_pose import ObjectPoseError, background_mask
 from nfr_drake.planning.planner import grasp_planner
 from nfr_drake.systems.model_files import body_box, drawable_meshes
 from nfr_drake.systems.perception import AddNfrPerception, NfrPerceptionSystem
@@ -277,14 +278,39 @@ def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObjec
 def perception_photos(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray], list[PinholeCamera]]:
     """What the scenario's perception cameras see of its object (`perception_simulator`; nothing
     is fitted): uint8 RGB photos (H, W, 3), the cameras' poses X_WC (4, 4) in W and intrinsics."""
+    images, _, X_WCs, cameras = perception_photos_and_depths(scenario)
+    return images, X_WCs, cameras
+
+
+def perception_photos_and_depths(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray],
+                                                                list[np.ndarray], list[PinholeCamera]]:
+    """`perception_photos` with each camera's depth image (H, W) float32, m (inf where nothing is
+    within its range): photos, depths, X_WCs, intrinsics."""
     simulator, perception = perception_simulator(scenario, scenario.sample_object())
     diagram, context = simulator.get_system(), simulator.get_context()
-    images = []
+    images, depths = [], []
     for i in range(len(perception.cameras)):
         sensor = diagram.GetSubsystemByName(f"nfr_camera_{i}")
-        image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context))
-        images.append(image.data[..., :3].copy())
-    return images, [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras
+        sensor_context = sensor.GetMyContextFromRoot(context)
+        images.append(sensor.color_image_output_port().Eval(sensor_context).data[..., :3].copy())
+        depths.append(sensor.depth_image_32F_output_port().Eval(sensor_context).data[..., 0].copy())
+    return images, depths, [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras
+
+
+VISIBLE_DEPTH_M = 0.02
+"""A pixel of the object's silhouette is visible in the room when the room's depth there is within
+this of the object's depth alone."""
+
+
+def visible_silhouettes(alone: list[np.ndarray], alone_depths: list[np.ndarray],
+                        room_depths: list[np.ndarray]) -> list[np.ndarray]:
+    """The object's true visible mask (H, W) bool per view, from the same cameras' photos of it
+    alone (uint8 RGB before the training background) and their depths alone and in its room (m):
+    its silhouette (the pixels off that background) where nothing of the room (the arm, clutter)
+    lies in front of it."""
+    return [(background_mask(image, DEFAULT_BACKGROUND_RGB) > 0.5)
+            & (np.abs(d_room - d_alone) < VISIBLE_DEPTH_M)
+            for image, d_alone, d_room in zip(alone, alone_depths, room_depths, strict=True)]
 
 
 def perception_room(scenario: Scenario, obj: ArticulatedObject, X_WCs: list[RigidTransform]) -> Room:

@@ -26,7 +26,7 @@ from nfr_drake.perception.segmentation import crop as crop_module
 from nfr_drake.perception.segmentation.model import Segmenter, SegmenterConfig
 from nfr_drake.systems import perception as perception_module
 from nfr_drake.systems.perception import SEGMENTER_DIR, AddNfrPerception
-from nfr_drake.systems.pipeline import perception_room, run_scenario
+from nfr_drake.systems.pipeline import perception_room, run_scenario, visible_silhouettes
 from nfr_drake.systems.scenario import Scenario
 from tests.systems.conftest import TINY_FIT
 
@@ -474,3 +474,19 @@ def test_an_unknown_aimed_look_is_refused():
 def test_an_unknown_perception_scene_is_refused():
     with pytest.raises(ConfigError, match="perceive must be one of alone, room"):
         Scenario(perceive="kitchen")
+
+
+def test_visible_silhouettes_leave_out_what_the_room_hides():
+    """The true visible mask: the pixels off the training background alone, less those where the
+    room's depth is nearer than the object's (an arm in front), within `VISIBLE_DEPTH_M`."""
+    background = np.round(255 * np.array(DEFAULT_BACKGROUND_RGB)).astype(np.uint8)
+    alone = np.tile(background, (20, 30, 1))
+    alone[5:15, 5:25] = (120, 60, 30)
+    depth_alone = np.full((20, 30), np.inf, np.float32)
+    depth_alone[5:15, 5:25] = 1.5
+    depth_room = np.where(np.isinf(depth_alone), 3.0, depth_alone + 0.01).astype(np.float32)
+    depth_room[5:15, 20:25] = 0.9  # something of the room in front of the object's right end
+    (visible,) = visible_silhouettes([alone], [depth_alone], [depth_room])
+    expected = np.zeros((20, 30), bool)
+    expected[5:15, 5:20] = True
+    np.testing.assert_array_equal(visible, expected)
