@@ -14,7 +14,10 @@ refined (`segmentation.refine.refine_masks`). Per photo: IoU of the kept pixels 
 mask, spill (kept pixels off it, over its area) and missed (its pixels not kept, over its area).
 Prints medians and means over the photos (spill's mean is dominated by the few photos where the
 mask runs onto a neighbour) and the refinement's time per photo; `--csv-path` writes one row per
-photo, painting and method.
+photo, painting and method. `--figure`: a PNG of the objects `--figure-objects`, views
+`--figure-views`, one row per view: the photo, then the photo painted in the training background
+off the kept pixels of the "region" painting from the segmenter's masks and from the refined ones,
+the visible silhouette outlined in green.
 """
 
 from __future__ import annotations
@@ -25,9 +28,12 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import tyro
 
+from nfr_drake.data.render import DEFAULT_BACKGROUND_RGB
+from nfr_drake.data.visualize import image_grid
 from nfr_drake.inference.infer import PAINTINGS, painting_thresholds
 from nfr_drake.jsonio import write_rows_csv
 from nfr_drake.perception.object_pose import ObjectPoseError
@@ -48,10 +54,21 @@ def kept_stats(kept: np.ndarray, true: np.ndarray) -> tuple[float, float, float]
             float((kept & ~true).sum() / area), float((true & ~kept).sum() / area))
 
 
+def outlined(image: np.ndarray, kept: np.ndarray | None, true: np.ndarray) -> np.ndarray:
+    """The photo (H, W, 3) painted in the training background off `kept` (H, W) bool (None: as it
+    is), the true mask (H, W) bool outlined in green."""
+    out = image.copy()
+    if kept is not None:
+        out[~kept] = np.round(255 * np.asarray(DEFAULT_BACKGROUND_RGB)).astype(np.uint8)
+    contours, _ = cv2.findContours(true.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return cv2.drawContours(out, contours, -1, (0, 255, 0), 1)
+
+
 def main(category: str = "closet", n: int = 20, seed: int = 901, segmenter: Path = Path(Scenario.segmenter),
-         csv_path: Path | None = None) -> None:
+         csv_path: Path | None = None, figure: Path | None = None, figure_objects: tuple[int, ...] = (0,),
+         figure_views: tuple[int, ...] = (0, 3, 6, 9)) -> None:
     net, _ = load_segmenter(segmenter)
-    rows, seconds = [], []
+    rows, seconds, panels = [], [], []
     for index in range(n):
         scenario = Scenario(category=category, model=f"models/{category}", seed=seed, index=index,
                             object_pose="estimated", perceive="room", segmenter=str(segmenter))
@@ -70,6 +87,10 @@ def main(category: str = "closet", n: int = 20, seed: int = 901, segmenter: Path
         for painting in PAINTINGS:
             thresholds = painting_thresholds(painting, X_WCs, cameras, shapes, looks.estimate.X_WO,
                                              looks.estimate.size)
+            if painting == "region" and index in figure_objects:
+                panels += [[outlined(room[v], None, true[v]),
+                            *(outlined(room[v], masks[m][v] > thresholds[v], true[v]) for m in METHODS)]
+                           for v in figure_views]
             for method in METHODS:
                 for view, (m, t, truth) in enumerate(zip(masks[method], thresholds, true, strict=True)):
                     if truth.any():
@@ -93,6 +114,9 @@ def main(category: str = "closet", n: int = 20, seed: int = 901, segmenter: Path
     print(f"refinement: {1000 * np.median(seconds):.0f} ms per photo (median)")
     if csv_path is not None:
         write_rows_csv(csv_path, rows)
+    if figure is not None and panels:
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(figure), image_grid(panels, scale=2)[..., ::-1])
     print(f"{datetime.date.today()}, {os.cpu_count()}-core CPU, segmenter {segmenter}")
 
 

@@ -48,3 +48,14 @@ def test_refine_masks_each_view_and_shapes_checked():
         refine_mask(a[:50], masks[0])
     with pytest.raises(ValueError):
         refine_masks([a], masks)
+
+
+def test_a_refinement_that_would_take_most_of_the_mask_keeps_it():
+    """A patchy mask with no sure pixel, the object the colour of the floor around it: GrabCut's
+    models cannot tell them apart, and the mask is kept rather than emptied."""
+    rng = np.random.default_rng(3)
+    image = np.clip(rng.normal(120.0, 30.0, (64, 64, 3)), 0, 255).astype(np.uint8)
+    mask = np.zeros((64, 64), np.float32)
+    mask[20:44, 20:44] = 0.6 + 0.3 * rng.random((24, 24))
+    out = refine_mask(image, mask)
+    assert np.count_nonzero(out > 0.5) > 0.5 * np.count_nonzero(mask > 0.5)
