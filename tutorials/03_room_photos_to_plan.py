@@ -44,7 +44,6 @@ from nfr_drake.nfr.checkpoint import load_model
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.perception.charuco import CharucoBoardSpec
 from nfr_drake.perception.handle_triangulation import project
-from nfr_drake.perception.segmentation.refine import refine_masks
 from nfr_drake.perception.synthetic import (
     RoomSpec,
     SyntheticPhotoScene,
@@ -167,13 +166,12 @@ print(f"closet pose: {pose_cm:.1f} cm and {yaw_deg:+.1f} deg from the truth; fit
       "(true 0); keypoints from the truth: " + ", ".join(f"{k} {v:.1f} cm" for k, v in kp_cm.items()))
 
 # %% [markdown]
-# The masks (magenta) against the closet's true outline (green), with each photo's IoU: the
-# segmenter's, refined by the photo's colours as `infer` refines them before it paints the photo.
-# The segmenter was trained on rooms like this one but never on this closet or room.
+# The masks (magenta) against the closet's true outline (green), with each photo's IoU. The
+# segmenter was trained on rooms like this one but never on this closet or room.
 
 # %%
 images = capture.load_images()
-masks = refine_masks(images, object_masks(images, ROOT / "models" / "segmenter"))
+masks = object_masks(images, ROOT / "models" / "segmenter")
 panels = []
 for frame, image, mask in zip(capture.frames, images, masks, strict=True):
     X_OC_true = np.array(truth["X_OC"][report["frames"][f"images/{frame.image_path.name}"]])
