@@ -228,7 +228,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           mask_crop: bool = True,
                           aimed_look: Literal["off-aim", "always", "never"] = "off-aim",
                           look_again: bool = True,
-                          refine_masks: bool = True,
+                          refine_masks: bool = False,
                           objects: tuple[int, ...] = (),
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           pull_on: bool = SimulationConfig.pull_on,

@@ -371,7 +371,7 @@ def infer_painted(fitted: FittedModel, capture: CaptureSet, fit_config: FitConfi
                   X_WO: np.ndarray, size: np.ndarray | None, paintings: tuple[Painting, ...] = PAINTINGS,
                   keypoint_source: KeypointSource = "head", room: bool = True, refine_pose: bool = False,
                   background_rgb: tuple[float, float, float] = DEFAULT_BACKGROUND_RGB,
-                  refine_masks: bool = True) -> tuple[FitResult, FitOutcome]:
+                  refine_masks: bool = False) -> tuple[FitResult, FitOutcome]:
     """`infer` (`capture` in the object's frame O) on the photos `images` painted off the object's
     `masks` each way `paintings` says (`paint_off_object`: the cameras X_WCs (4, 4) and the
     estimated carcass X_WO (4, 4), `size` (3,) m or None, in one frame W; without a size "fronts"
@@ -406,7 +406,7 @@ def infer_in_world(fitted: FittedModel, capture: CaptureSet, fit_config: FitConf
                    q_grid: np.ndarray, masks: list[np.ndarray], room_loss: RoomLoss = "background",
                    keypoint_source: KeypointSource = "head", room: bool = True,
                    carcass: list[np.ndarray] | None = None, paintings: tuple[Painting, ...] = ("region",),
-                   refine_masks: bool = True) -> tuple[FitResult, FitOutcome, CaptureSet]:
+                   refine_masks: bool = False) -> tuple[FitResult, FitOutcome, CaptureSet]:
     """`infer` for a capture whose poses are in a floor frame W (z up, the floor at z = 0): the
     object's pose X_WO is estimated from the views' object `masks` (`estimate_object_pose`), or
     from the carcass's amodal masks `carcass` when given (`carcass_masks`: the box is the carcass;
@@ -824,7 +824,7 @@ def infer_command(
     look_again: bool = True,
     room_loss: RoomLoss = "background",
     paintings: tuple[Painting, ...] = ("region",),
-    refine_masks: bool = True,
+    refine_masks: bool = False,
     part: int | None = None,
     furniture_fit: FurnitureFitConfig = FurnitureFitConfig(),
     threads: int | None = None,

@@ -173,7 +173,7 @@ class NfrPerceptionSystem(LeafSystem):
                  room_loss: RoomLoss = "background", mask_crop: bool = True, cloud_size: int = 48,
                  aimed_look: AimedLook = "off-aim",
                  paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True,
-                 refine_masks: bool = True):
+                 refine_masks: bool = False):
         super().__init__()
         self._keypoint_source = keypoint_source
         if len(cameras) != len(X_WCs) or not cameras:
@@ -443,7 +443,7 @@ def AddNfrPerception(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph
                      room_loss: RoomLoss = "background", mask_crop: bool = True,
                      aimed_look: AimedLook = "off-aim",
                      paintings: tuple[Painting, ...] = PAINTINGS, look_again: bool = True,
-                     refine_masks: bool = True) -> NfrPerceptionSystem:
+                     refine_masks: bool = False) -> NfrPerceptionSystem:
     """Add perception cameras at X_WCs and an `NfrPerceptionSystem` fed by them.
 
     `plant` must be finalised and hold every geometry of the scene. `scene` "alone": render engines

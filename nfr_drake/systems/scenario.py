@@ -138,10 +138,11 @@ class Scenario:
     """Perceiving a room with `mask_crop` and an estimated pose: a fit its confidence refuses is
     followed by one at the other look (the aimed look after whole photos, or the reverse), the more
     confident kept (`NfrPerceptionSystem`)."""
-    refine_masks: bool = True
+    refine_masks: bool = False
     """Perceiving a room with `room_loss` "background": the pixels of the segmenter's masks that the
     photo's colours call background (GrabCut started from its probabilities) are taken off them
-    before the photos are painted (`perception.segmentation.refine`)."""
+    before the photos are painted (`perception.segmentation.refine`). Off by default: better masks
+    and closet poses, fewer objects opened (docs/ROOMS.md, "Mask edges by the photo's colours")."""
     part: int = -1
     """Furniture: the part to open (its index in canonical order, docs/FURNITURE.md), the others
     held shut; -1 draws one from the piece's own random stream after the piece, as the planning
