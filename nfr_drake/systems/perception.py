@@ -87,7 +87,7 @@ from nfr_drake.perception.segmentation.crop import (
     room_looks,
 )
 from nfr_drake.perception.segmentation.model import Segmenter, load_segmenter
-from nfr_drake.perception.segmentation.refine import refine_masks
+from nfr_drake.perception.segmentation.refine import refine_masks as refined_by_colour
 from nfr_drake.world.cloud import SemanticCloud
 from nfr_drake.world.keypoints import KeypointTrajectory
 
@@ -344,7 +344,7 @@ class NfrPerceptionSystem(LeafSystem):
         if self._model.num_slots > 1:
             kept = None
             if painting:
-                masks = refine_masks(images, masks) if self._refine_masks else masks
+                masks = refined_by_colour(images, masks) if self._refine_masks else masks
                 images, kept = paint_off_object(images, masks, X_WCs, self._cameras, X_WO.GetAsMatrix4(),
                                                 pose.get("size"), self._background_rgb, self._paintings[0])
             result, _, _ = infer_parts(self._model, capture, self._furniture_config, self._q_grid, images,

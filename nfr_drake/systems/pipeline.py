@@ -278,7 +278,7 @@ def model_file_perception_simulator(scenario: Scenario, scene_object: SceneObjec
 def perception_photos(scenario: Scenario) -> tuple[list[np.ndarray], list[np.ndarray], list[PinholeCamera]]:
     """What the scenario's perception cameras see of its object (`perception_simulator`; nothing
     is fitted): uint8 RGB photos (H, W, 3), the cameras' poses X_WC (4, 4) in W and intrinsics."""
-    images, _, X_WCs, cameras = perception_photos_and_depths(scenario)
+    images, _, X_WCs, cameras = _shots(scenario, depth=False)
     return images, X_WCs, cameras
 
 
@@ -286,6 +286,13 @@ def perception_photos_and_depths(scenario: Scenario) -> tuple[list[np.ndarray], 
                                                                 list[np.ndarray], list[PinholeCamera]]:
     """`perception_photos` with each camera's depth image (H, W) float32, m (inf where nothing is
     within its range): photos, depths, X_WCs, intrinsics."""
+    return _shots(scenario, depth=True)
+
+
+def _shots(scenario: Scenario, depth: bool) -> tuple[list[np.ndarray], list[np.ndarray],
+                                                     list[np.ndarray], list[PinholeCamera]]:
+    """Photos, depths (rendered only with `depth`, else an empty list), X_WCs and intrinsics of the
+    scenario's perception cameras."""
     simulator, perception = perception_simulator(scenario, scenario.sample_object())
     diagram, context = simulator.get_system(), simulator.get_context()
     images, depths = [], []
@@ -293,7 +300,8 @@ def perception_photos_and_depths(scenario: Scenario) -> tuple[list[np.ndarray], 
         sensor = diagram.GetSubsystemByName(f"nfr_camera_{i}")
         sensor_context = sensor.GetMyContextFromRoot(context)
         images.append(sensor.color_image_output_port().Eval(sensor_context).data[..., :3].copy())
-        depths.append(sensor.depth_image_32F_output_port().Eval(sensor_context).data[..., 0].copy())
+        if depth:
+            depths.append(sensor.depth_image_32F_output_port().Eval(sensor_context).data[..., 0].copy())
     return images, depths, [X.GetAsMatrix4() for X in perception.camera_poses], perception.cameras
 
 
