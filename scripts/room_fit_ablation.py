@@ -100,6 +100,8 @@ SETTINGS = ("alone", "alone_roomlight", "true_mask", "seg_mask", "seg_mask_nodet
             "seg_mask_blend_nodet",
             "pipeline_blend", "pipeline_region", "pipeline_region_reach", "pipeline_region_refined",
             "pipeline_fronts_refined", "pipeline_paintings_refined")
+
+
 def shots(scenario: Scenario, room_geometry: bool = True):
     """Colour (H, W, 3) uint8 and depth (H, W) m photos of the scenario's perception cameras, and
     its perception system; `room_geometry` False: the room's lights without its geometry."""
