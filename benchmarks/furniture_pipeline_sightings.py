@@ -178,6 +178,9 @@ def main() -> None:
                         help="without the views' bar segments: no upright bars the points leave unexplained "
                              "(`triangulate_bars`), and two points close in every view are one "
                              "handle whether or not they lie on one bar")
+    parser.add_argument("--no-bar-points", action="store_true",
+                        help="a bar's views are its segments' only, not the point sightings on it "
+                             "(`triangulate_bars`' points)")
     parser.add_argument("--bar-share", type=float, default=FURNITURE_BAR_SHARE,
                         help="triangulate_bars' min_share")
     parser.add_argument("--offset-log-odds", type=float, nargs="+",
@@ -207,7 +210,8 @@ def main() -> None:
         found = [s for i, m in enumerate(handle_maps) for s in sightings(m, i)]
         handles = locate_handles(handle_maps, frames, min_share=args.min_share, bars=not args.no_bars,
                                  loose=(args.loose_share, args.loose_rms_px), merged_px=args.merged_px,
-                                 bar_share=args.bar_share, behind_m=args.behind_m)
+                                 bar_share=args.bar_share, behind_m=args.behind_m,
+                                 bar_points=not args.no_bar_points)
         maps = detector.read_fronts(images)
         fronts = [read_front(h, maps, frames) for h in handles]
         points = np.array([h.p_O for h in handles]).reshape(-1, 3)

@@ -504,23 +504,67 @@ def _bar_agreement(frames: list[CaptureFrame], bars: list[BarSighting], toleranc
     return agree, inside
 
 
+def _points_on_bar(frames: list[CaptureFrame], bars: list[BarSighting], agree: list[int],
+                   points: list[HandleSighting], max_error_px: float, p: np.ndarray, u: np.ndarray
+                   ) -> dict[int, float]:
+    """The views without an agreeing segment (`agree`, indices into `bars`) where one of the point
+    sightings lies within `max_error_px` (scaled to a 128 px high image) of the bar through p (3,)
+    along unit u (3,) in O, as long as the longest agreeing segment shows it: per such view, the
+    largest such sighting's mass. A bar's votes land anywhere along it, and its pixels make a
+    segment in the views that see it whole: the others' sightings on it are its views too."""
+    half_m = 0.0
+    for k in agree:  # the bar's half length, m, from each agreeing segment's length
+        frame = frames[bars[k].frame]
+        uv, tip = project(frame, p), project(frame, p + 0.05 * u)
+        if uv is not None and tip is not None and np.linalg.norm(tip - uv) > 1e-9:
+            half_m = max(half_m, bars[k].half_length * 0.05 / float(np.linalg.norm(tip - uv)))
+    seen = {bars[k].frame for k in agree}
+    support: dict[int, float] = {}
+    for f, frame in enumerate(frames):
+        if f in seen:
+            continue
+        a, b = project(frame, p - half_m * u), project(frame, p + half_m * u)
+        if a is None or b is None:
+            continue
+        tolerance = max_error_px * frame.camera.height / _REFERENCE_HEIGHT_PX
+        length = float(np.linalg.norm(b - a))
+        axis = (b - a) / length if length > 1e-9 else np.zeros(2)
+        segment = BarSighting(f, (a + b) / 2, axis, length / 2, 0.0)
+        masses = [s.mass for s in points if s.frame == f and segment.distance_px(s.uv) <= tolerance]
+        if masses:
+            support[f] = max(masses)
+    return support
+
+
 def triangulate_bars(frames: list[CaptureFrame], bars: list[BarSighting],
                      handles: list[TriangulatedHandle], max_error_px: float = AGREE_PX,
-                     min_views: int = MIN_VIEWS, min_share: float = 0.0) -> list[TriangulatedHandle]:
+                     min_views: int = MIN_VIEWS, min_share: float = 0.0,
+                     points: list[HandleSighting] | None = None) -> list[TriangulatedHandle]:
     """Upright bars (within `BAR_UPRIGHT_DEG` of O's z) from the views' segments that none of the
     `handles` (points already triangulated) explains (projects within `max_error_px` of, scaled
     to a 128 px high image), strongest first: every two segments of two views whose planes cross
     at least 5 degrees apart propose their common line, the point on it nearest the rays
-    through their middles; the proposal whose agreeing segments (`_bar_agreement`) have the
-    largest summed mass, with at least `min_views` of them and `min_share` of the views it
-    projects into, is refitted on them (`_on_bar`) and its agreeing segments removed; again
-    until none is left. Each bar is returned as its middle as the agreeing views see it."""
+    through their middles; the proposal whose agreeing views have the largest summed mass, with
+    at least `min_views` agreeing segments and `min_share` of the views it projects into
+    agreeing, is refitted on its segments (`_on_bar`) and its agreeing segments removed; again
+    until none is left. A view agrees by a segment (`_bar_agreement`) or, given the views' point
+    sightings `points` (those no handle explains), by one lying on the bar (`_points_on_bar`):
+    those count toward the share only. Each bar is returned as its middle as the agreeing
+    segments see it, with the views of both kinds."""
     tolerance = np.array([max_error_px * frames[b.frame].camera.height / _REFERENCE_HEIGHT_PX for b in bars])
     planes = [b.plane(frames[b.frame]) for b in bars]
     middles = [ray(frames[b.frame], b.centre)[1] for b in bars]
-    explained = [any((uv := project(frames[b.frame], h.p_O)) is not None and b.distance_px(uv) <= tolerance[k]
-                     for h in handles) for k, b in enumerate(bars)]
-    left = ~np.array(explained, bool).reshape(-1)
+
+    def explained(frame: int, distance_px) -> bool:
+        """Whether a handle projects within the tolerance of a sighting in `frame` (distance_px:
+        from a pixel (2,) to the sighting)."""
+        return any((uv := project(frames[frame], h.p_O)) is not None
+                   and distance_px(uv) <= max_error_px * frames[frame].camera.height / _REFERENCE_HEIGHT_PX
+                   for h in handles)
+
+    left = ~np.array([explained(b.frame, b.distance_px) for b in bars], bool).reshape(-1)
+    loose = [s for s in points or []
+             if not explained(s.frame, lambda uv, s=s: float(np.linalg.norm(uv - s.uv)))]
     mass = np.array([b.mass for b in bars])
     upright, coincident = np.cos(np.radians(BAR_UPRIGHT_DEG)), np.cos(np.radians(5.0))
     found: list[TriangulatedHandle] = []
@@ -532,6 +576,16 @@ def triangulate_bars(frames: list[CaptureFrame], bars: list[BarSighting],
                     np.array([middles[k] for k in members]), mass[members])
         return p, u
 
+    def support(agree: list[int], p: np.ndarray, u: np.ndarray) -> dict[int, float]:
+        return _points_on_bar(frames, bars, agree, loose, max_error_px, p, u) if loose else {}
+
+    def agreement(p: np.ndarray, u: np.ndarray) -> tuple[list[int], dict[int, float], bool]:
+        """The agreeing segments, the views agreeing by a point and whether they are enough."""
+        agree, inside = _bar_agreement(frames, bars, tolerance, p, u, left)
+        by_point = support(agree, p, u)
+        views = len(agree) + len(by_point)
+        return agree, by_point, len(agree) >= min_views and views >= min_share * inside
+
     while left.sum() >= max(2, min_views):
         best: tuple[float, list[int]] | None = None
         for i, j in combinations(np.flatnonzero(left), 2):
@@ -540,27 +594,26 @@ def triangulate_bars(frames: list[CaptureFrame], bars: list[BarSighting],
             p, u = fit([i, j])
             if abs(u[2]) < upright:
                 continue
-            agree, inside = _bar_agreement(frames, bars, tolerance, p, u, left)
-            if len(agree) < min_views or len(agree) < min_share * inside:
-                continue
-            score = float(mass[agree].sum())
-            if best is None or score > best[0]:
+            agree, by_point, enough = agreement(p, u)
+            score = float(mass[agree].sum()) + sum(by_point.values())
+            if enough and (best is None or score > best[0]):
                 best = (score, agree)
         if best is None:
             break
         members = best[1]
         p, u = fit(members)
-        agree, inside = _bar_agreement(frames, bars, tolerance, p, u, left)
+        agree, _, enough = agreement(p, u)
         left[members] = False
-        if len(agree) < max(min_views, min_share * inside) or abs(u[2]) < upright:
+        if not enough or abs(u[2]) < upright:
             continue
         p, _ = fit(agree)
+        by_point = support(agree, p, u)
         left[agree] = False
         errors = [bars[k].distance_px(uv) if (uv := project(frames[bars[k].frame], p)) is not None else np.inf
                   for k in agree]
-        found.append(TriangulatedHandle(p, tuple(bars[k].frame for k in agree),
+        found.append(TriangulatedHandle(p, tuple(sorted([bars[k].frame for k in agree] + list(by_point))),
                                         float(np.sqrt(np.mean(np.square(errors)))),
-                                        len({b.frame for b in bars})))
+                                        len({b.frame for b in bars} | {s.frame for s in loose})))
     return found
 
 
@@ -606,6 +659,12 @@ part to open (87 of 100), 0.3 with two more fronts and one more point of no fron
 stricter was kept (docs/FURNITURE.md)."""
 
 
+FURNITURE_BAR_POINTS = True
+"""Whether `locate_handles` counts the views' point sightings that lie on an upright bar as the
+bar's views (`triangulate_bars`' points): where a bar is seen whole in a few views its votes
+land anywhere along it in the others (docs/FURNITURE.md, "Handle detector: several handles")."""
+
+
 def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[TriangulatedHandle]:
     """The handles (p_O in O, whose +x is the fronts' outward normal) but those more than
     `behind_m` behind every other one, where there are at least two others: a handle stands in
@@ -620,19 +679,21 @@ def in_front(handles: list[TriangulatedHandle], behind_m: float) -> list[Triangu
 def locate_handles(maps: list[HandleMap], frames: list[CaptureFrame],
                    min_share: float = FURNITURE_MIN_SHARE, bars: bool = FURNITURE_BARS,
                    loose: tuple[float, float] = FURNITURE_LOOSE, merged_px: float = FURNITURE_MERGED_PX,
-                   bar_share: float = FURNITURE_BAR_SHARE, behind_m: float = FURNITURE_BEHIND_M
-                   ) -> list[TriangulatedHandle]:
+                   bar_share: float = FURNITURE_BAR_SHARE, behind_m: float = FURNITURE_BEHIND_M,
+                   bar_points: bool = FURNITURE_BAR_POINTS) -> list[TriangulatedHandle]:
     """Every handle triangulated from per-frame handle maps, one per frame (furniture): the
     points of the votes (`triangulate_handles` with `min_share`, `loose` = (loose_share,
     loose_rms_px) and `merged_px`), then (`bars`) the upright bars they leave unexplained
-    (`triangulate_bars` with `bar_share`), those more than `behind_m` behind all the others left
+    (`triangulate_bars` with `bar_share`; with `bar_points`, the views' point sightings on a bar
+    count as its views), those more than `behind_m` behind all the others left
     out (`in_front`). The defaults are the fit's; a benchmark varies them."""
     segments = [b for i, m in enumerate(maps) for b in bar_sightings(m, i)] if bars else None
-    handles = triangulate_handles(frames, [s for i, m in enumerate(maps) for s in sightings(m, i)],
-                                  min_share=min_share, loose_share=loose[0], loose_rms_px=loose[1],
-                                  merged_px=merged_px, bars=segments)
+    points = [s for i, m in enumerate(maps) for s in sightings(m, i)]
+    handles = triangulate_handles(frames, points, min_share=min_share, loose_share=loose[0],
+                                  loose_rms_px=loose[1], merged_px=merged_px, bars=segments)
     if segments is not None:
-        handles = handles + triangulate_bars(frames, segments, handles, min_share=bar_share)
+        handles = handles + triangulate_bars(frames, segments, handles, min_share=bar_share,
+                                             points=points if bar_points else None)
     return in_front(handles, behind_m)
 
 

@@ -376,6 +376,38 @@ def test_a_bar_seen_in_too_few_views_is_dropped_with_min_share():
     assert triangulate_bars(frames, segments, [], min_share=0.5) == []
 
 
+def test_point_sightings_on_a_bar_count_as_its_views():
+    """An upright bar seen whole (a segment) in 3 of the 10 views and, in the other 7, only as a
+    point sighting somewhere along it (its votes off its middle by up to 15 cm): with min_share
+    0.5 no bar from the segments alone, and one within 1.5 cm of the bar's middle (three
+    segments' pixel ends place it), agreeing with all 10 views, with the points. Points beside
+    the bar (8 cm to its side) or past its ends add no view, a point a handle already explains
+    is not the bar's, and two segments with points in every other view make no bar (the points
+    count toward the share only)."""
+    frames = _frames(10, 128)
+    upright = (P_TRUE - [0, 0, 0.2], P_TRUE + [0, 0, 0.2])
+    whole = (1, 4, 8)
+    segments = [b for i, f in enumerate(frames) if i in whole
+                for b in bar_sightings(_bar_map(128, f, [upright], 0.0), i)]
+    along = np.linspace(-0.15, 0.15, 7)
+    others = [i for i in range(10) if i not in whole]
+    on_bar = [HandleSighting(i, _project(frames[i], P_TRUE + [0, 0, z]), 3.0)
+              for i, z in zip(others, along, strict=True)]
+    assert triangulate_bars(frames, segments, [], min_share=0.5) == []
+    (bar,) = triangulate_bars(frames, segments, [], min_share=0.5, points=on_bar)
+    assert np.linalg.norm(bar.p_O - P_TRUE) < 0.015 and bar.views == tuple(range(10))
+    beside = [HandleSighting(s.frame, _project(frames[s.frame], P_TRUE + [0, 0.08, z]), 3.0)
+              for s, z in zip(on_bar, along, strict=True)]
+    past = [HandleSighting(s.frame, _project(frames[s.frame], P_TRUE + [0, 0, 0.3 * np.sign(z or 1)]), 3.0)
+            for s, z in zip(on_bar, along, strict=True)]
+    assert triangulate_bars(frames, segments, [], min_share=0.5, points=beside + past) == []
+    knob = TriangulatedHandle(P_TRUE + [0, 0, 0.1], (0, 2, 3), 0.5, 10)
+    explained = [HandleSighting(s.frame, _project(frames[s.frame], knob.p_O), 3.0) for s in on_bar]
+    assert triangulate_bars(frames, segments, [knob], min_share=0.5, points=explained) == []
+    with_8 = on_bar + [HandleSighting(8, _project(frames[8], P_TRUE), 3.0)]
+    assert triangulate_bars(frames, segments[:2], [], min_share=0.5, points=with_8) == []
+
+
 def test_points_one_above_the_other_are_one_handle_only_where_one_bar_holds_both():
     """Two points 12 cm one above the other, 3-6 px apart in every view (cameras 4 m away): one
     handle by their projections alone (a bar whose votes split in two); given the views' bar
