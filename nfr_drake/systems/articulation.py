@@ -68,6 +68,7 @@ from nfr_drake.world.robot import (
     FINGER_OPEN,
     HAND_BODIES,
     NUM_ARM_JOINTS,
+    PEDESTAL_NAME,
     TOOL_FRAME,
     add_floor,
     add_panda,
@@ -779,7 +780,8 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                           keypoints: KeypointTrajectory | None = None) -> SimulationResult:
     """Run the plan on the true object and measure the outcome; records into `meshcat` if given.
     `keypoints`: those the plan was made from (a door's turn by what the hand swept compares with
-    their hinge's turn, `SimulationConfig.second_turn`; None: no turn)."""
+    their hinge's turn, `SimulationConfig.second_turn`; None: no turn). Raises
+    `StartsInsideObject` where the robot starts inside the object (`robot_inside`)."""
     config = config or SimulationConfig()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
@@ -867,6 +869,9 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     set_joint_value(plant, plant_context, joint, shut + obj.ground_truth.q_current * span)
     lock_shut(plant, plant_context, [plant.GetJointByName(name, model) for name in obj.locked_joints])
     plant.SetPositions(plant_context, robot, plan.trajectory.value(0.0).ravel())
+    inside = robot_inside(plant, scene_graph, context, robot, model)
+    if inside is not None:
+        raise StartsInsideObject(inside)
     for ids in constraint_ids:
         for cid in ids:
             plant.SetConstraintActiveStatus(plant_context, cid, False)
@@ -1000,6 +1005,45 @@ def rigid_hydroelastic(plant: MultibodyPlant, scene_graph, bodies) -> None:
         props = ProximityProperties(inspector.GetProximityProperties(g))
         AddRigidHydroelasticProperties(0.004, props)
         scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
+
+
+START_PENETRATION_M = 0.005
+"""`robot_inside`: the robot's start may touch the object this deep, m."""
+
+
+class StartsInsideObject(NfrDrakeError):
+    """The plan starts with the robot (its base column or a link) inside the true object: its
+    base was placed where the keypoints' boxes left room and the object is not. Such a start is
+    refused before simulating: a lift column welded to the world pressing into a locked part
+    (another front of a piece of furniture) made Drake 1.51's SAP solver crash the process."""
+
+
+def robot_inside(plant: MultibodyPlant, scene_graph, root_context, robot, model,
+                 tolerance: float = START_PENETRATION_M) -> str | None:
+    """Where the robot (model instance `robot` and the lift column, `add_pedestal`) penetrates the
+    object (model instance `model`) more than `tolerance` at the state in `root_context` (the
+    diagram's), the deepest pair in words; None when nowhere."""
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(root_context))
+    inspector = query.inspector()
+
+    def owner(geometry) -> object:
+        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry)).model_instance()
+
+    def name(geometry) -> str:
+        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry)).name() if owner(geometry) == robot \
+            else inspector.GetName(geometry)
+
+    deepest = None
+    for pair in query.ComputePointPairPenetration():
+        for ours, theirs in ((pair.id_A, pair.id_B), (pair.id_B, pair.id_A)):
+            robot_side = owner(ours) == robot or inspector.GetName(ours) == PEDESTAL_NAME
+            if robot_side and owner(theirs) == model and pair.depth > tolerance:
+                if deepest is None or pair.depth > deepest[0]:
+                    deepest = (pair.depth, name(ours), name(theirs))
+    if deepest is None:
+        return None
+    return (f"the robot starts inside the object ({deepest[1]} in {deepest[2]}): its base stands where "
+            "the keypoints' obstacle boxes left room and the object is not")
 
 
 def lock_shut(plant: MultibodyPlant, plant_context, joints) -> None:

@@ -61,6 +61,7 @@ from nfr_drake.systems.articulation import (
     SecondPull,
     SimulationConfig,
     SimulationResult,
+    StartsInsideObject,
     add_gravity_compensation,
     add_joint_friction,
     couple_fingers,
@@ -572,7 +573,11 @@ def run_place_task(obj: ArticulatedObject, X_WO: RigidTransform, q_start: float,
     seconds = time.perf_counter() - started
     meshcats = [Meshcat() if replay is not None else None for _ in range(2)]
     scene_object = SceneObject.from_articulated_object(obj, X_WO, q_start)
-    opening = simulate_articulation(scene_object, plan, q_target, meshcats[1], simulation_config.opening, kt)
+    try:
+        opening = simulate_articulation(scene_object, plan, q_target, meshcats[1],
+                                        simulation_config.opening, kt)
+    except StartsInsideObject as err:
+        return failed("; ".join([*errors, str(err)]), seconds)
     opening_replay = None if replay is None else write_replay(
         meshcats[1], replay.with_name(f"{replay.stem}_opening{replay.suffix}"))
     started_on = time.perf_counter()  # as `run_task`: the opening taken on from a second base

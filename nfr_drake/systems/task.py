@@ -19,6 +19,7 @@ from nfr_drake.planning.scene import build_planning_scene, reach_limit
 from nfr_drake.systems.articulation import (
     SimulationConfig,
     SimulationResult,
+    StartsInsideObject,
     simulate_articulation,
 )
 from nfr_drake.systems.corrections import door_turn, felt_door, planned_door_turn
@@ -144,7 +145,10 @@ def run_task(obj: SceneObject, q_target: float, keypoints: KeypointTrajectory | 
     if meshcat is not None:
         _show_plan(meshcat, kt, plan, q_target, obstacles, reference)
     config = simulation_config or SimulationConfig()
-    simulation = simulate_articulation(obj, plan, q_target, meshcat, config, keypoints=kt)
+    try:
+        simulation = simulate_articulation(obj, plan, q_target, meshcat, config, keypoints=kt)
+    except StartsInsideObject as err:
+        return TaskOutcome(q_target, kt, None, str(err), plan.seconds["total"], None, None)
     path = write_replay(meshcat, replay) if replay is not None else None
     pulled_on = (pull_on(obj, kt, plan, simulation, obstacles, planner_config or PlannerConfig(), config,
                          meshcat, replay)
@@ -260,7 +264,10 @@ def from_a_second_base(obj: SceneObject, kt: KeypointTrajectory, kt_on: Keypoint
     obj_on = replace(obj, ground_truth=obj.ground_truth.with_current(first.q_final))
     if meshcat is not None:
         _show_plan(meshcat, kt_on, plan_on, first.q_target, obstacles, None)
-    simulation = simulate_articulation(obj_on, plan_on, first.q_target, meshcat, config, keypoints=kt_on)
+    try:
+        simulation = simulate_articulation(obj_on, plan_on, first.q_target, meshcat, config, keypoints=kt_on)
+    except StartsInsideObject as err:
+        return PulledOn(reason, None, str(err), None, None)
     path = None
     if replay is not None and meshcat is not None:
         path = write_replay(meshcat, replay.with_name(f"{replay.stem}_pulled_on{replay.suffix}"))

@@ -66,6 +66,10 @@ def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:
     return model
 
 
+PEDESTAL_NAME = "pedestal"
+"""The lift column's geometry name (`add_pedestal`)."""
+
+
 def add_pedestal(plant: MultibodyPlant, X_WB: RigidTransform) -> None:
     """A lift column from the floor up to a raised base X_WB: a box of side 2 `PEDESTAL_HALF_WIDTH`
     on the world body (visual and collision), turned with the base; nothing for a base on the floor
@@ -75,6 +79,6 @@ def add_pedestal(plant: MultibodyPlant, X_WB: RigidTransform) -> None:
         return
     X_WP = RigidTransform(X_WB.rotation(), X_WB.translation() - [0.0, 0.0, height / 2])
     shape = Box(2 * PEDESTAL_HALF_WIDTH, 2 * PEDESTAL_HALF_WIDTH, height)
-    plant.RegisterCollisionGeometry(plant.world_body(), X_WP, shape, "pedestal", CoulombFriction(0.8, 0.6))
-    plant.RegisterVisualGeometry(plant.world_body(), X_WP, shape, "pedestal",
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WP, shape, PEDESTAL_NAME, CoulombFriction(0.8, 0.6))
+    plant.RegisterVisualGeometry(plant.world_body(), X_WP, shape, PEDESTAL_NAME,
                                  np.array([0.35, 0.35, 0.38, 1.0]))

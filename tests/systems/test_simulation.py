@@ -8,7 +8,13 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlannerConfig
-from nfr_drake.systems.articulation import CompliantCommand, SimulationConfig, grip_points
+from nfr_drake.systems.articulation import (
+    CompliantCommand,
+    SimulationConfig,
+    StartsInsideObject,
+    grip_points,
+    simulate_articulation,
+)
 from nfr_drake.systems.scene_objects import SceneObject
 from nfr_drake.systems.task import read_keypoints, run_task
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -271,3 +277,19 @@ def test_a_door_taken_for_a_drawer_is_turned_on_as_the_hand_felt_it_swing(drawer
     assert felt.joint_error < planned_only.joint_error - np.radians(10.0), felt.summary()
     drawer = run_task(drawer_object, 0.6).simulation
     assert drawer.success and drawer.turned == 0.0, drawer.summary()
+
+
+@pytest.mark.parametrize("height", [0.0, 0.3])  # on the floor; raised on its lift column
+def test_a_robot_that_starts_inside_the_object_is_refused_before_simulating(drawer_outcome, drawer_object,
+                                                                             height):
+    """The plan's base moved into the drawer's carcass (the goal keypoint's xy; raised 0.3 m, its
+    lift column there too): `StartsInsideObject` names the robot's body and the object's
+    geometry, before Drake simulates (a lift column pressing a locked part crashed its SAP
+    solver); at the planned base, nothing is refused."""
+    plan = drawer_outcome.plan
+    goal = read_keypoints(drawer_object).point("goal", 0.0)
+    inside = replace(plan, X_WB=RigidTransform(plan.X_WB.rotation(), [goal[0], goal[1], height]))
+    named = r"the robot starts inside the object \((panda_\w+|pedestal) in "
+    with pytest.raises(StartsInsideObject, match=named):
+        simulate_articulation(drawer_object, inside, 1.0)
+    assert drawer_outcome.simulation is not None and drawer_outcome.success
