@@ -3,7 +3,7 @@ shut furniture, in the order the fit pairs them with slots, against the true fro
 
 Usage: python benchmarks/furniture_pipeline_sightings.py [--seed 200] [--objects 0 1 ...]
        [--csv-path F] [--min-share 0.5] [--loose-share 0.6] [--loose-rms-px 1.2] [--merged-px 4]
-       [--behind-m 0.05] [--half-levels 0 0.03 0.1 0.15 0.2]
+       [--behind-m 0.05] [--half-levels 0 0.03 0.1 0.15 0.2] [--no-bars] [--no-bar-points]
 For each piece of `nfr-drake eval-pipeline --category furniture` (the same seed, piece and part
 to open, `object_scenario`), its perception cameras photograph it shut
 (`pipeline.perception_photos`), the model's detector sights the handles and reads their fronts
