@@ -1014,8 +1014,8 @@ START_PENETRATION_M = 0.005
 class StartsInsideObject(NfrDrakeError):
     """The plan starts with the robot (its base column or a link) inside the true object: its
     base was placed where the keypoints' boxes left room and the object is not. Such a start is
-    refused before simulating: a lift column welded to the world pressing into a locked part
-    (another front of a piece of furniture) made Drake 1.51's SAP solver crash the process."""
+    refused before simulating (a real robot could not stand there; simulated, a lift column in a
+    locked part crashed the process, `add_pedestal`)."""
 
 
 def robot_inside(plant: MultibodyPlant, scene_graph, root_context, robot, model,
@@ -1026,17 +1026,19 @@ def robot_inside(plant: MultibodyPlant, scene_graph, root_context, robot, model,
     query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(root_context))
     inspector = query.inspector()
 
+    def body(geometry):
+        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry))
+
     def owner(geometry) -> object:
-        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry)).model_instance()
+        return body(geometry).model_instance()
 
     def name(geometry) -> str:
-        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry)).name() if owner(geometry) == robot \
-            else inspector.GetName(geometry)
+        return body(geometry).name() if owner(geometry) == robot else inspector.GetName(geometry)
 
     deepest = None
     for pair in query.ComputePointPairPenetration():
         for ours, theirs in ((pair.id_A, pair.id_B), (pair.id_B, pair.id_A)):
-            robot_side = owner(ours) == robot or inspector.GetName(ours) == PEDESTAL_NAME
+            robot_side = owner(ours) == robot or body(ours).name() == PEDESTAL_NAME
             if robot_side and owner(theirs) == model and pair.depth > tolerance:
                 if deepest is None or pair.depth > deepest[0]:
                     deepest = (pair.depth, name(ours), name(theirs))

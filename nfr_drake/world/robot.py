@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia, default_model_instance
 
 from nfr_drake.parsing import make_parser
 
@@ -67,18 +67,25 @@ def add_floor(plant: MultibodyPlant) -> ModelInstanceIndex:
 
 
 PEDESTAL_NAME = "pedestal"
-"""The lift column's geometry name (`add_pedestal`)."""
+"""The lift column's body and geometry name (`add_pedestal`)."""
+PEDESTAL_MASS = 50.0  # kg; welded to the world, it never moves
 
 
 def add_pedestal(plant: MultibodyPlant, X_WB: RigidTransform) -> None:
     """A lift column from the floor up to a raised base X_WB: a box of side 2 `PEDESTAL_HALF_WIDTH`
-    on the world body (visual and collision), turned with the base; nothing for a base on the floor
-    (z = 0). Before Finalize()."""
+    (visual and collision) on a body welded to the world, turned with the base; nothing for a base
+    on the floor (z = 0). Before Finalize(). Its own body, not the world body's geometry: in Drake
+    1.51's SAP a geometry of the world body pressing into a body whose joints are locked (a
+    piece's other fronts, `lock_shut`) crashes the process, and one of a welded body does not."""
     height = float(X_WB.translation()[2])
     if height <= 1e-6:
         return
     X_WP = RigidTransform(X_WB.rotation(), X_WB.translation() - [0.0, 0.0, height / 2])
-    shape = Box(2 * PEDESTAL_HALF_WIDTH, 2 * PEDESTAL_HALF_WIDTH, height)
-    plant.RegisterCollisionGeometry(plant.world_body(), X_WP, shape, PEDESTAL_NAME, CoulombFriction(0.8, 0.6))
-    plant.RegisterVisualGeometry(plant.world_body(), X_WP, shape, PEDESTAL_NAME,
+    side = 2 * PEDESTAL_HALF_WIDTH
+    body = plant.AddRigidBody(PEDESTAL_NAME, default_model_instance(),
+                              SpatialInertia.SolidBoxWithMass(PEDESTAL_MASS, side, side, height))
+    plant.WeldFrames(plant.world_frame(), body.body_frame(), X_WP)
+    shape = Box(side, side, height)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), shape, PEDESTAL_NAME, CoulombFriction(0.8, 0.6))
+    plant.RegisterVisualGeometry(body, RigidTransform(), shape, PEDESTAL_NAME,
                                  np.array([0.35, 0.35, 0.38, 1.0]))

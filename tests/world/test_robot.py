@@ -1,10 +1,25 @@
-"""The Panda model in sdf/ against Franka's published kinematics (modified DH table) and poses."""
+"""The Panda model in sdf/ against Franka's published kinematics (modified DH table) and poses; the lift
+column under a raised base."""
 
 import numpy as np
 import pytest
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.geometry import Box
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import RevoluteJoint, SpatialInertia
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
 
-from nfr_drake.world.robot import FINGER_OPEN, Q_HOME, TOOL_FRAME, add_panda, arm_joint_limits
+from nfr_drake.world.robot import (
+    FINGER_OPEN,
+    PEDESTAL_HALF_WIDTH,
+    PEDESTAL_NAME,
+    Q_HOME,
+    TOOL_FRAME,
+    add_panda,
+    add_pedestal,
+    arm_joint_limits,
+)
 
 # Franka's published modified-DH (Craig) parameters: (a_{i-1}, d_i, alpha_{i-1}) of joints 1-7 and the
 # flange (joint 8, fixed), and the hand: rotated -pi/4 about z, tool point 0.1034 m along z.
@@ -76,3 +91,28 @@ def test_arm_joint_limits_are_frankas_published_ones():
     assert np.all((lower < Q_HOME) & (Q_HOME < upper))
     with pytest.raises(ValueError):
         lower[0] = 0.0  # the cached arrays are shared: read-only
+
+
+def test_a_locked_part_pressed_by_the_lift_column_simulates():
+    """A raised base's lift column is a body welded to the world: a door on a locked hinge whose
+    panel reaches 3 cm into it simulates (as a geometry of the world body it crashed Drake 1.51's
+    SAP solver with a segfault) and stays shut."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=0.002, discrete_contact_approximation="sap"), builder)
+    add_pedestal(plant, RigidTransform([0.0, 0.0, 0.4]))
+    door = plant.AddRigidBody("door", SpatialInertia.SolidBoxWithMass(5.0, 0.4, 0.02, 0.6))
+    near_edge = PEDESTAL_HALF_WIDTH - 0.03  # the panel spans x in [near_edge, near_edge + 0.4], hinged at 0
+    plant.RegisterCollisionGeometry(door, RigidTransform([near_edge + 0.2, 0.0, 0.3]), Box(0.4, 0.02, 0.6),
+                                    "door", CoulombFriction(0.8, 0.6))
+    hinge = plant.AddJoint(RevoluteJoint("hinge", plant.world_frame(), door.body_frame(), [0.0, 0.0, 1.0]))
+    plant.Finalize()
+    assert plant.GetBodyByName(PEDESTAL_NAME) in plant.GetBodiesWeldedTo(plant.world_body())
+    simulator = Simulator(builder.Build())
+    context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    query = scene_graph.get_query_output_port().Eval(
+        scene_graph.GetMyContextFromRoot(simulator.get_context()))
+    assert max(p.depth for p in query.ComputePointPairPenetration()) == pytest.approx(0.03, abs=1e-6)
+    hinge.Lock(context)
+    simulator.AdvanceTo(0.05)
+    assert hinge.get_angle(context) == pytest.approx(0.0, abs=1e-9)
