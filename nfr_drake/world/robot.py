@@ -76,7 +76,8 @@ def add_pedestal(plant: MultibodyPlant, X_WB: RigidTransform) -> None:
     (visual and collision) on a body welded to the world, turned with the base; nothing for a base
     on the floor (z = 0). Before Finalize(). Its own body, not the world body's geometry: in Drake
     1.51's SAP a geometry of the world body pressing into a body whose joints are locked (a
-    piece's other fronts, `lock_shut`) crashes the process, and one of a welded body does not."""
+    piece's other fronts, `lock_shut`) crashes the process (Drake issue #24773), and one of a
+    welded body does not."""
     height = float(X_WB.translation()[2])
     if height <= 1e-6:
         return
