@@ -1045,7 +1045,7 @@ def robot_inside(plant: MultibodyPlant, scene_graph, root_context, robot, model,
     if deepest is None:
         return None
     return (f"the robot starts inside the object ({deepest[1]} in {deepest[2]}): its base stands where "
-            "the keypoints' obstacle boxes left room and the object is not")
+            "the planner's obstacle boxes left room and the object is not")
 
 
 def lock_shut(plant: MultibodyPlant, plant_context, joints) -> None:
