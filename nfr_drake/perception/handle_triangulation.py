@@ -34,7 +34,7 @@ through each camera and its segment (`locate_handles`, `FURNITURE_BARS`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import combinations
 
 import cv2
@@ -291,9 +291,9 @@ is upright (so the test stays for points one above the other)."""
 
 
 STACKED_M = 0.10
-"""`triangulate_handles` with bar segments: two points close in every view and at least this far
-apart are two handles unless one bar holds both (`_on_one_bar`), m. Stacked fronts' pulls lie at
-least a front's height apart (a generated drawer front is at least 12 cm tall, as a kitchen's
+"""`triangulate_handles` with bar segments: two points close in every view are one handle only
+when nearer than this, m, or where one bar holds both (`_one_handle`). Stacked fronts' pulls lie
+at least a front's height apart (a generated drawer front is at least 12 cm tall, as a kitchen's
 is); nearer points are one handle that the detector's votes split."""
 
 
@@ -304,18 +304,42 @@ def _side_by_side(a: np.ndarray, b: np.ndarray, apart_m: float) -> bool:
     return horizontal > abs(float(a[2] - b[2])) and horizontal >= apart_m
 
 
+def _holding_bars(frames: list[CaptureFrame], bars: list[BarSighting], views: tuple[int, ...],
+                  a: np.ndarray, b: np.ndarray, max_error_px: float) -> list[BarSighting]:
+    """Of the `views`, each one's first bar segment that both points a, b (3,) in O project within
+    `max_error_px` (scaled to a 128 px high image) of."""
+    holding = []
+    for f in views:
+        uv_a, uv_b = project(frames[f], a), project(frames[f], b)
+        tolerance = max_error_px * frames[f].camera.height / _REFERENCE_HEIGHT_PX
+        if uv_a is not None and uv_b is not None:
+            holding += [bar for bar in bars if bar.frame == f and bar.distance_px(uv_a) <= tolerance
+                        and bar.distance_px(uv_b) <= tolerance][:1]
+    return holding
+
+
 def _on_one_bar(frames: list[CaptureFrame], bars: list[BarSighting], views: tuple[int, ...],
                 a: np.ndarray, b: np.ndarray, max_error_px: float) -> bool:
     """Whether points a, b (3,) in O both project within `max_error_px` (scaled to a 128 px high
     image) of one bar segment in at least half of the `views`."""
-    on_one = 0
-    for f in views:
-        uv_a, uv_b = project(frames[f], a), project(frames[f], b)
-        tolerance = max_error_px * frames[f].camera.height / _REFERENCE_HEIGHT_PX
-        on_one += uv_a is not None and uv_b is not None and any(
-            bar.frame == f and bar.distance_px(uv_a) <= tolerance and bar.distance_px(uv_b) <= tolerance
-            for bar in bars)
-    return 2 * on_one >= len(views)
+    return 2 * len(_holding_bars(frames, bars, views, a, b, max_error_px)) >= len(views)
+
+
+def _one_handle(frames: list[CaptureFrame], a: np.ndarray, b: np.ndarray, views: tuple[int, ...],
+                tolerance_px: np.ndarray, side_by_side_m: float, bars: list[BarSighting] | None,
+                max_error_px: float) -> str:
+    """How points a, b (3,) in O are one handle, seen in `views` with those views' agreement
+    tolerances (px): "votes" (a grip whose votes split: not side by side, projecting within twice
+    the tolerance of each other in every view and, given the views' `bars`, nearer than
+    `STACKED_M`), "bar" (not side by side and one bar segment holds both, `_on_one_bar`), or ""
+    (two handles)."""
+    if _side_by_side(a, b, side_by_side_m):
+        return ""
+    close = all(np.linalg.norm(_project_many(frames[f], a[None])[0] - _project_many(frames[f], b[None])[0])
+                <= 2 * t for f, t in zip(views, tolerance_px, strict=True))
+    if close and (bars is None or np.linalg.norm(a - b) < STACKED_M):
+        return "votes"
+    return "bar" if bars is not None and _on_one_bar(frames, bars, views, a, b, max_error_px) else ""
 
 
 def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
@@ -330,7 +354,11 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     vertically) and at least `side_by_side_m` apart: the handles of a pair of doors, near the
     edge where the doors meet (`SIDE_BY_SIDE_M`); with the views' `bars` (`bar_sightings`), two
     at least `STACKED_M` apart only where both lie on one bar segment in at least half its views
-    (a bar whose votes split in two, not two stacked drawers' pulls, `_on_one_bar`). A point must
+    (a bar whose votes split, not two stacked drawers' pulls, `_one_handle`), and two that one bar
+    holds are one handle even where they project further apart: a long bar's votes land along it,
+    and the handle is then its point nearest the bar's middle as the views' segments holding its
+    points see it (a segment can run on across the gap to a stacked front's bar, so the middle
+    itself can lie off the bar's). A point must
     agree with at least `min_share` of the views it projects into (sightings that agree by chance
     across a few views do not), and one that agrees with fewer than `loose_share` of them must
     agree within `loose_rms_px` RMS (scaled to a 128 px high image): edges that line up by chance
@@ -347,6 +375,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     view = np.array([s.frame for s in found])
     left = np.ones(len(found), bool)
     handles: list[TriangulatedHandle] = []
+    spans: list[list[np.ndarray]] = []  # each handle's points joined by a bar, `joins`
     while left.sum() >= max(2, min_views):
         earlier = np.array([h.p_O for h in handles]).reshape(-1, 3)
         i, j = np.triu_indices(len(found), 1)
@@ -388,15 +417,25 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         if len(inliers) < loose_share * inside_p[0] and rms_128 > loose_rms_px:
             continue
         frames_in = tuple(int(view[k]) for k in inliers)
-        same = any(not _side_by_side(h.p_O, p, side_by_side_m)
-                   and all(np.linalg.norm(_project_many(frames[f], h.p_O[None])[0]
-                                          - _project_many(frames[f], p[None])[0])
-                           <= 2 * tolerance[k] for f, k in zip(frames_in, inliers, strict=True))
-                   and (bars is None or np.linalg.norm(h.p_O - p) < STACKED_M
-                        or _on_one_bar(frames, bars, frames_in, h.p_O, p, max_error_px))
-                   for h in handles)
-        if not same:
+        how = [_one_handle(frames, h.p_O, p, frames_in, tolerance[inliers], side_by_side_m, bars,
+                           max_error_px) for h in handles]
+        k = next((k for k, j in enumerate(how) if j), None)
+        if k is None:
             handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))
+            spans.append([p])
+        elif how[k] == "bar":  # a long bar's votes land along it: of its points, the most central
+            spans[k].append(p)
+            views_k = tuple(sorted(set(handles[k].views) | set(frames_in)))
+            z = [q[2] for q in spans[k]]
+            low, high = spans[k][int(np.argmin(z))], spans[k][int(np.argmax(z))]
+            middle = 0.5 * (low + high)  # where fewer than two views' segments hold the span
+            holding = _holding_bars(frames, bars, views_k, low, high, max_error_px)
+            if len(holding) >= 2:
+                middle = _bar_through([b.plane(frames[b.frame]) for b in holding],
+                                      [ray(frames[b.frame], b.centre)[1] for b in holding],
+                                      np.array([b.mass for b in holding]))[0]
+            nearest = spans[k][int(np.argmin([np.linalg.norm(q - middle) for q in spans[k]]))]
+            handles[k] = replace(handles[k], p_O=nearest, views=views_k)
     return handles
 
 
@@ -479,6 +518,17 @@ def _on_bar(origins: np.ndarray, normals: np.ndarray, rays: np.ndarray, weights:
         A += w * P
         b += w * P @ o
     return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
+def _bar_through(planes: list[tuple[np.ndarray, np.ndarray]], middles: list[np.ndarray],
+                 weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bar (3D line) in the segments' planes (`BarSighting.plane`: a point, unit normal) of
+    two or more views: its middle as they see it (`_on_bar`, with the rays through the segments'
+    middles, unit (3,) each, and weights (n,)) and its unit direction (3,), both in O."""
+    normals = np.array([n for _, n in planes])
+    u = np.linalg.svd(normals)[2][-1]  # the direction in every plane
+    p = _on_bar(np.array([o for o, _ in planes]), normals, np.array(middles), np.asarray(weights, float))
+    return p, u
 
 
 def _bar_agreement(frames: list[CaptureFrame], bars: list[BarSighting], tolerance: np.ndarray,
@@ -570,11 +620,7 @@ def triangulate_bars(frames: list[CaptureFrame], bars: list[BarSighting],
     found: list[TriangulatedHandle] = []
 
     def fit(members: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        normals = np.array([planes[k][1] for k in members])
-        u = np.linalg.svd(normals)[2][-1]  # the direction in every plane
-        p = _on_bar(np.array([planes[k][0] for k in members]), normals,
-                    np.array([middles[k] for k in members]), mass[members])
-        return p, u
+        return _bar_through([planes[k] for k in members], [middles[k] for k in members], mass[members])
 
     def support(agree: list[int], p: np.ndarray, u: np.ndarray) -> dict[int, float]:
         return _points_on_bar(frames, bars, agree, loose, max_error_px, p, u) if loose else {}

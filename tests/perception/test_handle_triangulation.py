@@ -426,3 +426,20 @@ def test_points_one_above_the_other_are_one_handle_only_where_one_bar_holds_both
     found = [s for i, f in enumerate(frames)
              for s in sightings(_votes_map(128, [_project(f, p) for p in near], spread=1), i)]
     assert len(triangulate_handles(frames, found, bars=[])) == 1
+
+
+def test_points_along_one_bar_are_one_handle_at_the_one_nearest_its_middle():
+    """A door's 32 cm upright bar whose votes make three points 8 cm apart along its lower half,
+    6-7 px apart in some views (more than twice the agreement tolerance): three handles by the
+    projections alone; given the views' segments of the bar, one, at the point nearest the bar's
+    middle (8 cm above the middle of the points' span), with the views of all three."""
+    frames = _frames(8, 128)
+    along = [P_TRUE + np.array([0.0, 0.0, dz]) for dz in (-0.08, 0.0, 0.08)]
+    found = [s for i, f in enumerate(frames)
+             for s in sightings(_votes_map(128, [_project(f, p) for p in along], spread=1), i)]
+    assert len(triangulate_handles(frames, found, bars=[])) == 3
+    bar = (P_TRUE - [0.0, 0.0, 0.08], P_TRUE + [0.0, 0.0, 0.24])
+    segments = [b for i, f in enumerate(frames) for b in bar_sightings(_bar_map(128, f, [bar], 0.0), i)]
+    (handle,) = triangulate_handles(frames, found, bars=segments)
+    assert np.linalg.norm(handle.p_O - along[2]) < 0.01
+    assert handle.views == tuple(range(8))
