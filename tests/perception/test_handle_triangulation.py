@@ -15,6 +15,7 @@ from nfr_drake.perception.handle_triangulation import (
     TriangulatedHandle,
     bar_sightings,
     in_front,
+    in_most_images,
     inside_masks,
     locate_handles,
     sighting,
@@ -443,3 +444,15 @@ def test_points_along_one_bar_are_one_handle_at_the_one_nearest_its_middle():
     (handle,) = triangulate_handles(frames, found, bars=segments)
     assert np.linalg.norm(handle.p_O - along[2]) < 0.01
     assert handle.views == tuple(range(8))
+
+
+def test_a_point_near_the_cameras_inside_few_images_is_no_handle():
+    """Every view looks at the object: a handle on it is inside all images and kept; a point
+    near the first camera, in front of it, is inside few of the others and left out at a share
+    of one half."""
+    frames = _frames(8, 128)
+    eye = frames[0].X_OC[:3, 3]
+    near = eye + 0.3 * (np.array([0.0, 0.0, 0.5]) - eye) / np.linalg.norm(np.array([0.0, 0.0, 0.5]) - eye)
+    on, off = TriangulatedHandle(P_TRUE, (0, 1, 2), 0.5, 8), TriangulatedHandle(near, (0, 1, 2), 0.5, 8)
+    assert in_most_images([on, off], frames, 0.5) == [on]
+    assert in_most_images([on, off], frames, 0.0) == [on, off]
