@@ -292,8 +292,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             short is taken on from a second base too (`SimulationConfig.pull_on`); the CSV's
             pulled_on says why.
         regrasps: how many times the hand tries again after its fingers closed on nothing, 2 cm
-            further along the approach, then 2 cm short of the planned grasp, then 3.5 cm to
-            either side (`SimulationConfig.regrasps`; 0: one close).
+            further along the approach, then 2 cm short of the planned grasp
+            (`SimulationConfig.regrasps`; 0: one close).
         turn_max_hinge_gap: a door is turned by what the hand swept only when the hinge it felt
             lies within this of the keypoints' hinge, m (`SimulationConfig.second_turn_max_hinge_gap`;
             inf: always); the CSV's hinge_gap_cm holds the gap.

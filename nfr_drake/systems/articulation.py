@@ -13,8 +13,8 @@ stretch (`SceneObject.grip_half_length`), so grip points are laid along it every
 a knob has one. All are inactive until the hand rests on the handle; then the grip point nearest
 the tool origin is switched on through the context, only if it lies inside the open gripper
 (`capture_half_extents`, in the tool frame); after a miss the hand opens and tries again
-further along the approach, then short of the planned grasp, then to either side
-(`SimulationConfig.regrasps`, `try_offset`, `PlanTries`).
+further along the approach, then short of the planned grasp (`SimulationConfig.regrasps`,
+`try_steps`, `PlanTries`).
 `SimulationConfig.grasp = "contact"` instead closes the fingers on the handle with a set force and
 lets friction hold it (compliant hydroelastic pads on a rigid hydroelastic handle), the arm stiff
 throughout, as on a real robot. A drawer's pull
@@ -55,7 +55,7 @@ from nfr_drake.systems.corrections import (
     door_turn_offset,
     felt_door_turn_offset,
     felt_line,
-    regrasp_steps,
+    regrasp_step,
     tool_pose_and_jacobian,
     tool_step,
 )
@@ -190,23 +190,18 @@ class SimulationConfig:
     """The door is turned only when the hinge its hand felt (the circle's axis) lies within this
     of the keypoints' hinge line (`hinge_gap`), m; inf: always. `SimulationResult.hinge_gap`
     records the gap either way."""
-    regrasps: int = 4
+    regrasps: int = 2
     """How many times the robot tries again when its fingers close on nothing (a gripper senses
     it from their closed width; here the grip point outside `capture_half_extents` at the close):
-    it opens them (`regrasp_open`), moves the tool (`regrasp_move`) and closes them again, first
-    `regrasp_step` further along the approach than the planned grasp, then as far short of it,
-    then `regrasp_side_step` to either side along the tool's x, then twice as far each way
-    (`try_offset`); the rest of the plan follows shifted by that joint step. 0: one close only.
-    The handle of a fit in a room lay 1.6-3.2 cm off, mostly beyond the predicted point along the
-    approach; furniture fits also leave it short of the point, the hand then stopped beyond the
-    bar, or beside a knob (docs/SIMULATION.md, "Trying again after a miss")."""
+    it opens them (`regrasp_open`), moves the tool along the approach (`regrasp_move`) and closes
+    them again, first `regrasp_step` further than the planned grasp, then as far short of it, then
+    twice as far each way (`try_steps`); the rest of the plan follows shifted by that joint step.
+    0: one close only. The handle of a fit in a room lay 1.6-3.2 cm off, mostly beyond the
+    predicted point along the approach; furniture fits also leave it short of the point, the hand
+    then stopped beyond the bar (docs/SIMULATION.md, "Trying again after a miss")."""
     regrasp_step: float = 0.02
     """How far along the approach each new try moves, m: the fingers' pads catch a bar within
     about 2 cm either side of the tool point along the approach."""
-    regrasp_side_step: float = 0.035
-    """How far along the tool's x (across the fingers' closing axis: beside a knob, along a bar)
-    the sideways tries move, m: the grasp holds within 2 cm of the tool there
-    (`capture_half_extents`), so the planned close and these cover 5.5 cm either side."""
     regrasp_open: float = 0.3
     """Time the fingers take to open after a miss, s."""
     regrasp_move: float = 0.5
@@ -227,10 +222,9 @@ class SimulationConfig:
         if self.guarded_pull < 0.0 or self.guarded_pull_speed <= 0.0 or self.guarded_pull_force <= 0.0:
             raise NfrDrakeError("simulation: need guarded_pull >= 0, guarded_pull_speed > 0 and "
                                 "guarded_pull_force > 0")
-        if self.regrasps < 0 or min(self.regrasp_step, self.regrasp_side_step, self.regrasp_open,
-                                    self.regrasp_move) <= 0.0:
-            raise NfrDrakeError("simulation: need regrasps >= 0, and regrasp_step, regrasp_side_step, "
-                                "regrasp_open and regrasp_move > 0")
+        if self.regrasps < 0 or self.regrasp_step <= 0.0 or min(self.regrasp_open, self.regrasp_move) <= 0.0:
+            raise NfrDrakeError("simulation: need regrasps >= 0, and regrasp_step, regrasp_open and "
+                                "regrasp_move > 0")
 
     @property
     def contact(self) -> bool:
@@ -706,25 +700,20 @@ class PullToStop(LeafSystem):
         output.SetFromVector(command)
 
 
-def try_offset(tries: int, along: np.ndarray, across: np.ndarray) -> np.ndarray:
-    """The arm joints' offset (NUM_ARM_JOINTS,) from the planned grasp of the `tries`-th close after
-    the first, given the joint steps `along` the approach and `across` it (`regrasp_steps`): 0,
-    then one step along, one back, one across, one across the other way, then two of each, ..."""
-    if tries == 0:
-        return np.zeros_like(along)
-    size, kind = (tries - 1) // 4 + 1, (tries - 1) % 4
-    return size * (1 if kind % 2 == 0 else -1) * (along if kind < 2 else across)
+def try_steps(tries: int) -> int:
+    """How many `regrasp_step`s along the approach the `tries`-th close after the first lies from
+    the planned grasp: 0, then 1 further, 1 back, 2 further, 2 back, ..."""
+    return (tries + 1) // 2 * (1 if tries % 2 else -1)
 
 
 def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: float = 0.0,
-                              misses: int = 0, dq_miss: tuple[np.ndarray, np.ndarray] | None = None
-                              ) -> PiecewisePolynomial:
+                              misses: int = 0, dq_miss: np.ndarray | None = None) -> PiecewisePolynomial:
     """The plan with a dwell at the grasp and the fingers closing during it, held `hold` s longer
     at its end; [q; v], 9 + 9 values. With `misses` > 0 the grasp is first missed that many times:
     each time the fingers close (`dwell`), open (`regrasp_open`) and the arm moves over
-    `regrasp_move` to the next try, `try_offset` from the planned grasp with the joint steps
-    `dq_miss` (along, across: NUM_ARM_JOINTS, each, `regrasp_steps`); the rest of the plan follows
-    `misses * config.regrasp_time` s later, shifted by the last try's offset."""
+    `regrasp_move` to the next try, `try_steps` joint steps `dq_miss` (NUM_ARM_JOINTS,;
+    `regrasp_step`) from the planned grasp; the rest of the plan follows `misses *
+    config.regrasp_time` s later, shifted by the last try's steps."""
     traj, t_g, dwell = plan.trajectory, plan.t_grasp, config.dwell
     period, opened = config.regrasp_time, config.dwell + config.regrasp_open
     velocity = traj.MakeDerivative()
@@ -732,7 +721,7 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: 
     end = plan.duration + dwell + config.settle + hold + misses * period
     missed = [t_g + j * period + d for j in range(misses) for d in (0.0, dwell, opened)]
     times = np.unique(np.r_[np.arange(0.0, end, 0.01), missed, t_last, t_last + dwell, end])
-    along, across = (np.zeros(NUM_ARM_JOINTS),) * 2 if dq_miss is None else dq_miss
+    dq = np.zeros(NUM_ARM_JOINTS) if dq_miss is None else dq_miss
 
     def plan_time(t):
         return t if t <= t_g else max(t_g, t - dwell) if t < t_g + dwell else min(t - dwell, plan.duration)
@@ -745,9 +734,9 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: 
             a_dot = 0.5 * np.pi / config.regrasp_move * np.sin(np.pi * a) if 0.0 < a < 1.0 else 0.0
             q = traj.value(t_g).ravel().copy()
             v = np.zeros_like(q)
-            here, on = try_offset(int(j), along, across), try_offset(int(j) + 1, along, across)
-            q[:NUM_ARM_JOINTS] += here + (on - here) * (0.5 - 0.5 * np.cos(np.pi * a))
-            v[:NUM_ARM_JOINTS] = (on - here) * a_dot
+            here, on = try_steps(int(j)), try_steps(int(j) + 1)
+            q[:NUM_ARM_JOINTS] += (here + (on - here) * (0.5 - 0.5 * np.cos(np.pi * a))) * dq
+            v[:NUM_ARM_JOINTS] = (on - here) * a_dot * dq
             closing = min(s / dwell, 1.0) if s <= dwell else max(0.0, 1.0 - (s - dwell) / config.regrasp_open)
         else:
             shift = misses * period if t >= t_last else 0.0
@@ -755,8 +744,7 @@ def _desired_state_trajectory(plan: PlanResult, config: SimulationConfig, hold: 
             q = traj.value(tp).ravel().copy()
             moving = (t <= t_g or t >= t_last + dwell) and tp < plan.duration
             v = velocity.value(tp).ravel().copy() if moving else np.zeros_like(q)
-            if t >= t_last:
-                q[:NUM_ARM_JOINTS] += try_offset(misses, along, across)
+            q[:NUM_ARM_JOINTS] += (try_steps(misses) if t >= t_last else 0) * dq
             closing = np.clip((t - t_last) / dwell, 0.0, 1.0)
         q[NUM_ARM_JOINTS:] = FINGER_OPEN + closing * (config.finger_closed - FINGER_OPEN)
         v[NUM_ARM_JOINTS:] = 0.0
@@ -848,8 +836,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     feels = config.feels_for_a_door(plan)
     again = config.second_pull_time if config.pulls_again(plan) or turns or feels else 0.0
     to_stop = config.guarded_pull_time() if config.pulls_to_stop(plan) else 0.0
-    dq_miss = regrasp_steps(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(),
-                            config.regrasp_step, config.regrasp_side_step)
+    dq_miss = regrasp_step(controller_plant, plan.trajectory.value(plan.t_grasp).ravel(), config.regrasp_step)
     desired = builder.AddNamedSystem("plan", PlanTries(
         [_desired_state_trajectory(plan, fingers, again + to_stop, misses, dq_miss)
          for misses in range(config.regrasps + 1)]))
@@ -919,7 +906,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             q_grasp = plant.GetPositions(plant_context, robot)
         if t in (t_pulled, t_held):
             q_end = plan.trajectory.value(plan.trajectory.end_time()).ravel()
-            q_end[:NUM_ARM_JOINTS] += try_offset(misses, *dq_miss)  # the plan's last command
+            q_end[:NUM_ARM_JOINTS] += try_steps(misses) * dq_miss  # the plan's last command
         if t == t_pulled:
             q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
         if t == t_pulled and again and grasped:  # the robot measures its turn or its pull, goes on

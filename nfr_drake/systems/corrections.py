@@ -67,15 +67,11 @@ def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarra
     return bounded_step(robot_plant, q, J, np.r_[np.zeros(3), translation])
 
 
-def regrasp_steps(robot_plant: MultibodyPlant, q_grasp: np.ndarray, along: float, across: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """The arm joints' steps (NUM_ARM_JOINTS,) each that move the tool from `q_grasp`, where the
-    fingers missed, `along` m further along its approach (its z axis) and `across` m along its x
-    axis (across the fingers' closing axis: a knob's side, a bar's length)."""
+def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
+    """The arm joints' step that moves the tool `step` m further along its approach (its z axis)
+    from `q_grasp`, where the fingers missed."""
     X_WT, _ = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
-    R = X_WT.rotation()
-    return (tool_step(robot_plant, q_grasp, along * R.col(2)),
-            tool_step(robot_plant, q_grasp, across * R.col(0)))
+    return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
 
 
 FELT_LINE_MIN = 0.05
