@@ -707,8 +707,8 @@ stricter was kept (docs/FURNITURE.md)."""
 
 FURNITURE_IN_IMAGES = 0.5
 """`in_most_images`' share in `locate_handles`: the furniture evaluation's unseen cameras (35 degrees
-field of view, `furniture_ood_fov35`) made a point 1 m in front of piece 12, inside 4 of its 10
-images (docs/FURNITURE.md, "Handle detector: several handles")."""
+field of view, `furniture_ood_fov35`) made a point of piece 12 nearer the cameras than the piece,
+inside few of its images (docs/FURNITURE.md, "Handle detector: several handles")."""
 
 
 FURNITURE_BAR_POINTS = True
