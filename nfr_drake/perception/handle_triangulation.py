@@ -375,7 +375,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
     view = np.array([s.frame for s in found])
     left = np.ones(len(found), bool)
     handles: list[TriangulatedHandle] = []
-    spans: list[list[np.ndarray]] = []  # each handle's points joined by a bar, `joins`
+    spans: list[list[np.ndarray]] = []  # each handle's points, with those one bar joined to it
     while left.sum() >= max(2, min_views):
         earlier = np.array([h.p_O for h in handles]).reshape(-1, 3)
         i, j = np.triu_indices(len(found), 1)
@@ -419,7 +419,7 @@ def triangulate_handles(frames: list[CaptureFrame], found: list[HandleSighting],
         frames_in = tuple(int(view[k]) for k in inliers)
         how = [_one_handle(frames, h.p_O, p, frames_in, tolerance[inliers], side_by_side_m, bars,
                            max_error_px) for h in handles]
-        k = next((k for k, j in enumerate(how) if j), None)
+        k = next((k for k, kind in enumerate(how) if kind), None)
         if k is None:
             handles.append(TriangulatedHandle(p, frames_in, rms_px, len(set(view.tolist()))))
             spans.append([p])
