@@ -80,7 +80,6 @@ _OVER_LIMIT = 0.75  # the highest a carried item's bottom is lifted over boxes, 
 WRIST_DIAMETER = 0.10
 """The Panda's wrist (link 7, a 5 cm capsule about the approach, 8-21 cm behind the tool) across,
 m: a side-held item goes under a shelf over the goal only with the wrist under it too."""
-_EXTRA_SEEDS = 6  # perturbed seeds tried after q_prev and the home posture (SNOPT is local)
 
 
 @dataclass
@@ -140,6 +139,14 @@ class PlaceConfig:
     collision_step: float = 0.03
     """Largest joint move between collision samples (as far as the sample count allows), rad:
     a forearm half a metre out sweeps 1.5 cm, less than a door's thickness."""
+    ik_seeds: int = 6
+    """Perturbed home postures each knot's IK tries as seeds after the last knot, the home posture
+    and the planar postures (`_seeds`; SNOPT is local)."""
+    retry_ik_seeds: int = 18
+    """Where no base plans with any of the `fallback_configs`, the search runs again with this many
+    (a knot's IK can fail from every seed on every base for a door measured a fraction of a
+    degree off: closet 81 of capture seed 200 planned with the door at 0.610 of its range and on
+    no base at 0.6075)."""
     num_control_points: int = 10
     velocity_scale: float = 0.5
     acceleration_scale: float = 0.3
@@ -401,11 +408,12 @@ def _planar_seeds(sc: PlanningScene, p_W: np.ndarray, approach_W: np.ndarray | N
     return [postures[i] + np.r_[yaw, np.zeros(6)] for i in np.argsort(cost)[:count]]
 
 
-def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray):
+def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray, perturbed: int):
     """IK seeds: q_prev, then the home posture turned about the base axis to face the stage's
     point, postures of the arm in that vertical plane nearest the point and the stage's approach
     (`_planar_seeds`, joint 7 also turned a quarter turn either way), then the home posture
-    perturbed (a fixed random stream: plans are repeatable); fingers of q_prev."""
+    `perturbed` times perturbed (a fixed random stream: plans are repeatable, and more seeds
+    start with the same ones); fingers of q_prev."""
     yield q_prev
     fingers = q_prev[NUM_ARM_JOINTS:]
     p_B = sc.X_WB.inverse() @ stage.p_W
@@ -415,7 +423,7 @@ def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray):
         for turn in (0.0, np.pi / 2, -np.pi / 2):
             yield np.r_[q[:6], q[6] + turn, fingers]
     rng = np.random.default_rng(0)
-    for _ in range(_EXTRA_SEEDS):
+    for _ in range(perturbed):
         yield facing + np.r_[rng.normal(0.0, 0.5, NUM_ARM_JOINTS), np.zeros(len(q_prev) - NUM_ARM_JOINTS)]
 
 
@@ -436,7 +444,7 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
         ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
         ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
         ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
-        for seed in _seeds(sc, stage, q_prev):
+        for seed in _seeds(sc, stage, q_prev, cfg.ik_seeds):
             try:
                 result = SnoptSolver().Solve(ik.prog(), seed, options)
             except RuntimeError:  # FCL's distance query can fail on a degenerate pair: the next seed
@@ -629,20 +637,25 @@ def _retreat(X_WGplace: RigidTransform, pb: PlaceProblem, cfg: PlaceConfig) -> l
 class PlaceUnreachable(PlanningError):
     """The place fails from this base whatever the fallback config: `plan_place` failed before the
     retreat for every hand flip (no room under a shelf over the goal, no IK for a knot up to the
-    place), or the base has no opening or table. The `fallback_configs` change only the back-off
-    off the item and the release's tilt, whose IK the first config already tries, so on the same
-    base they fail the same: callers skip that base for them."""
+    place), or the base has no opening or table. The `fallback_configs` of the same `ik_seeds`
+    change only the back-off off the item and the release's tilt, whose IK the first config
+    already tries, so on the same base they fail the same: callers skip that base for them (and
+    try it again with more seeds)."""
 
 
 def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
     """The place's configs to plan with in turn, each on every base before the next: cfg; without
     the back-off off the item (`PlaceConfig.back_off`); and that with the item released within
     the carry's `upright_tolerance_deg` wherever it plans (not only where the level release finds
-    no IK: a level release can leave the pieces between the knots no trajectory)."""
+    no IK: a level release can leave the pieces between the knots no trajectory); then, where
+    `retry_ik_seeds` exceeds `ik_seeds`, the three again with that many IK seeds. A place that
+    plans with the first three plans as it would without the rest."""
     free = replace(cfg, back_off=False)
     loose = replace(free, release_upright_deg=max(cfg.release_upright_deg, cfg.upright_tolerance_deg))
+    more = [replace(c, ik_seeds=cfg.retry_ik_seeds) for c in (cfg, free, loose)
+            if cfg.retry_ik_seeds > cfg.ik_seeds]
     configs = []
-    for c in (cfg, free, loose):
+    for c in (cfg, free, loose, *more):
         if c not in configs:
             configs.append(c)
     return configs

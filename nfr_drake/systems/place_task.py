@@ -427,18 +427,18 @@ def _first_that_plans(place_config: PlaceConfig, candidates: list, attempt: Call
                       failed: str = "") -> tuple:
     """`attempt(cfg, candidate)` with each of the place's `fallback_configs` on every candidate (a
     base, or a reach) before the next config; the first result. A candidate where it raised
-    `PlaceUnreachable` is not tried again: the fallbacks change only the back-off off the item and
-    the release's tilt, and would fail there the same. Raises PlanningError: `failed`, then each
-    failure after `label(candidate)`."""
+    `PlaceUnreachable` is not tried again with the same IK seeds (`PlaceConfig.ik_seeds`): the
+    fallbacks change only the back-off off the item and the release's tilt, and would fail there
+    the same. Raises PlanningError: `failed`, then each failure after `label(candidate)`."""
     errors, unreachable = [], set()
     for cfg in fallback_configs(place_config):
         for k, candidate in enumerate(candidates):
-            if k in unreachable:
+            if (cfg.ik_seeds, k) in unreachable:
                 continue
             try:
                 return attempt(cfg, candidate)
             except PlaceUnreachable as err:
-                unreachable.add(k)
+                unreachable.add((cfg.ik_seeds, k))
                 errors.append(f"{label(candidate)}{err}")
             except PlanningError as err:
                 errors.append(f"{label(candidate)}{err}")
@@ -449,17 +449,22 @@ def _one_base(kt: KeypointTrajectory, q_target: float, item: Item, obstacles, co
               place_config: PlaceConfig) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
     """The opening and the place from one base, sought nearest the goal first (`PLACE_REACH`,
     `_first_that_plans`; the opening planned once per base: what it must reach,
-    `place_reach_points`, is the same for every config; a base without an opening or a table is
-    not tried again)."""
-    openings = {}
+    `place_reach_points`, is the same for every config, and so is a base without one or without
+    a table: it is not tried again)."""
+    openings: dict[float, PlanResult | PlanningError] = {}
 
     def attempt(cfg: PlaceConfig, reach: float) -> tuple[PlanResult, PlacePlan, ObstacleBox]:
         try:
             if reach not in openings:
-                openings[reach] = plan_articulation(
-                    kt, q_target, config=replace(config, place_reach=reach),
-                    must_reach=place_reach_points(kt, q_target, item, place_config))
+                try:
+                    openings[reach] = plan_articulation(
+                        kt, q_target, config=replace(config, place_reach=reach),
+                        must_reach=place_reach_points(kt, q_target, item, place_config))
+                except PlanningError as err:
+                    openings[reach] = err
             plan = openings[reach]
+            if isinstance(plan, PlanningError):
+                raise plan
             table, X_WI = table_beside(plan.X_WB, [*obstacles[0], *obstacles[1]],
                                        ITEM_REACH[GRASP_OF[kt.category]])
             problem = place_problem(kt, q_target, item, X_WI, table, obstacles, cfg)

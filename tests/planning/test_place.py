@@ -272,13 +272,17 @@ def test_the_item_is_released_level_and_the_fingers_back_straight_off_it():
     assert backed[-1] > item.depth / 2 + 0.01 + cfg.back_off_clearance - 0.005
 
 
-def test_the_fallback_configs_give_up_the_back_off_then_the_level_release():
+def test_the_fallback_configs_give_up_the_back_off_then_the_level_release_then_try_more_seeds():
     cfg = PlaceConfig()
     configs = fallback_configs(cfg)
-    assert [(c.back_off, c.release_upright_deg) for c in configs] == [
-        (True, cfg.release_upright_deg), (False, cfg.release_upright_deg), (False, cfg.upright_tolerance_deg)]
-    assert all(replace(c, back_off=True, release_upright_deg=cfg.release_upright_deg) == cfg for c in configs)
+    first = [(True, cfg.release_upright_deg), (False, cfg.release_upright_deg),
+             (False, cfg.upright_tolerance_deg)]
+    assert [(c.back_off, c.release_upright_deg) for c in configs] == first + first
+    assert [c.ik_seeds for c in configs] == [cfg.ik_seeds] * 3 + [cfg.retry_ik_seeds] * 3
+    assert all(replace(c, back_off=True, release_upright_deg=cfg.release_upright_deg,
+                       ik_seeds=cfg.ik_seeds) == cfg for c in configs)
     assert fallback_configs(configs[-1]) == [configs[-1]]
+    assert len(fallback_configs(replace(cfg, retry_ik_seeds=cfg.ik_seeds))) == 3
 
 
 @pytest.mark.slow
