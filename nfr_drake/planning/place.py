@@ -145,8 +145,7 @@ class PlaceConfig:
     retry_ik_seeds: int = 18
     """Where no base plans with any of the `fallback_configs`, the search runs again with this many
     (a knot's IK can fail from every seed on every base for a door measured a fraction of a
-    degree off: closet 81 of capture seed 200 planned with the door at 0.610 of its range and on
-    no base at 0.6075)."""
+    degree off: closet 81 of capture seed 200, docs/PLACE.md "Results")."""
     num_control_points: int = 10
     velocity_scale: float = 0.5
     acceleration_scale: float = 0.3
