@@ -26,8 +26,9 @@ open in the plan; the simulation closes them.
 
 from __future__ import annotations
 
+import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,7 +52,7 @@ from nfr_drake.world.items import Item
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.obstacles import distance_to_box
 from nfr_drake.world.plan import HandleWaypoint, ObstacleBox
-from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME
+from nfr_drake.world.robot import FINGER_OPEN, NUM_ARM_JOINTS, Q_HOME, arm_joint_limits
 
 _Z = np.array([0.0, 0.0, 1.0])
 _IK_ITERATIONS = 80
@@ -146,6 +147,16 @@ class PlaceConfig:
     """Where no base plans with any of the `fallback_configs`, the search runs again with this many
     (a knot's IK can fail from every seed on every base for a door measured a fraction of a
     degree off: closet 81 of capture seed 200, docs/PLACE.md "Results")."""
+    deep_seeds: int = 0
+    """0: the carry's knots are solved in turn from the pick. Else from the place out
+    (`_solve_deepest_first`): the place knot from this many postures drawn across the joint
+    ranges too ..."""
+    deep_tries: int = 8
+    """... and from each of at most this many of its solutions, the way in backwards."""
+    retry_deep_seeds: int = 150
+    """The `deep_seeds` of the search's last round (`fallback_configs`): where no base plans
+    otherwise (low compartments whose goal the arm reaches only on a branch that a chain solved
+    from the pick never settles on: closet 74 of capture seed 200, docs/PLACE.md "Results")."""
     num_control_points: int = 10
     velocity_scale: float = 0.5
     acceleration_scale: float = 0.3
@@ -426,35 +437,81 @@ def _seeds(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray, perturbed: int)
         yield facing + np.r_[rng.normal(0.0, 0.5, NUM_ARM_JOINTS), np.zeros(len(q_prev) - NUM_ARM_JOINTS)]
 
 
-def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray,
-                 cfg: PlaceConfig) -> tuple[list[np.ndarray] | None, str]:
-    """IK of each stage in turn, seeded by and kept close to the last; fingers fixed. A seed whose
-    solve raises (FCL's distance query inside SNOPT, on a degenerate pair of capsules: closet 18
-    of capture seed 200 stopped an evaluation so) counts as one that failed."""
+def _knot_solutions(sc: PlanningScene, stage: _Stage, q_prev: np.ndarray, seeds: Iterable[np.ndarray],
+                    cfg: PlaceConfig) -> Iterator[np.ndarray]:
+    """Each IK solution (9,) of the stage from the seeds in turn: its constraints, the knots'
+    clearance, kept close to q_prev, the fingers fixed at q_prev's. A seed whose solve raises
+    (FCL's distance query inside SNOPT, on a degenerate pair of capsules: closet 18 of capture
+    seed 200 stopped an evaluation so) counts as one that failed."""
     options = SolverOptions()
     options.SetOption(SnoptSolver.id(), "Major iterations limit", _IK_ITERATIONS)
+    ik = InverseKinematics(sc.plant, sc.plant_context)
+    q = ik.q()
+    for c in stage.constraints(sc):
+        ik.prog().AddConstraint(c, q)
+    ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
+    fingers = q_prev[NUM_ARM_JOINTS:]
+    ik.prog().AddBoundingBoxConstraint(fingers, fingers, q[NUM_ARM_JOINTS:])
+    ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
+    for seed in seeds:
+        try:
+            result = SnoptSolver().Solve(ik.prog(), seed, options)
+        except RuntimeError:  # FCL's distance query can fail on a degenerate pair: the next seed
+            continue
+        if result.is_success():
+            yield result.GetSolution(q)
+
+
+def _nearby(q: np.ndarray, count: int = 4, spread: float = 0.1) -> Iterator[np.ndarray]:
+    """q (9,), then `count` postures around it: its arm joints perturbed by `spread` rad (a fixed
+    random stream)."""
+    yield q
+    rng = np.random.default_rng(0)
+    for _ in range(count):
+        yield q + np.r_[rng.normal(0.0, spread, NUM_ARM_JOINTS), np.zeros(len(q) - NUM_ARM_JOINTS)]
+
+
+def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray,
+                 cfg: PlaceConfig, on_branch: bool = False) -> tuple[list[np.ndarray] | None, str]:
+    """IK of each stage in turn (`_knot_solutions`), seeded by and kept close to the last; fingers
+    fixed: (the solutions, "") or (None, the stage that failed). Seeds: `_seeds`; `on_branch`:
+    only the last knot's posture and postures near it (`_nearby`), so the arm stays on its branch."""
     q_prev, sols = q0, []
     for stage in stages:
         sc = scenes[stage.scene]
-        ik = InverseKinematics(sc.plant, sc.plant_context)
-        q = ik.q()
-        for c in stage.constraints(sc):
-            ik.prog().AddConstraint(c, q)
-        ik.AddMinimumDistanceLowerBoundConstraint(cfg.min_distance + _KNOT_SLACK, 0.05)
-        ik.prog().AddBoundingBoxConstraint(q0[NUM_ARM_JOINTS:], q0[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:])
-        ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q_prev, q)
-        for seed in _seeds(sc, stage, q_prev, cfg.ik_seeds):
-            try:
-                result = SnoptSolver().Solve(ik.prog(), seed, options)
-            except RuntimeError:  # FCL's distance query can fail on a degenerate pair: the next seed
-                continue
-            if result.is_success():
-                break
-        else:
+        seeds = _nearby(q_prev) if on_branch else _seeds(sc, stage, q_prev, cfg.ik_seeds)
+        q_prev = next(_knot_solutions(sc, stage, q_prev, seeds, cfg), None)
+        if q_prev is None:
             return None, stage.name
-        q_prev = result.GetSolution(q)
         sols.append(q_prev)
     return sols, ""
+
+
+def _solve_deepest_first(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray, line: int,
+                         cfg: PlaceConfig) -> tuple[list[np.ndarray] | None, str]:
+    """IK of a chain from its deepest knot out: the stages before its last `line` in turn from q0
+    (`_solve_chain`); the last stage from its usual seeds and `cfg.deep_seeds` postures drawn
+    across the joint ranges (a fixed stream), and from each solution found (at most
+    `cfg.deep_tries`) the other stages of the line backwards, each seeded by and kept close to the
+    one after it, on its branch (`_solve_chain`'s `on_branch`). A chain solved from the pick
+    settles on a branch of the arm that may not reach a low compartment's goal (closet 74 of
+    capture seed 200: the goal 19 cm behind the front, 18 cm under the shelf, docs/PLACE.md)."""
+    head, tail = stages[:-line], stages[-line:]
+    sols, failed = _solve_chain(scenes, head, q0, cfg)
+    if sols is None:
+        return None, failed
+    q_head = sols[-1] if sols else q0
+    last = tail[-1]
+    sc = scenes[last.scene]
+    lower, upper = arm_joint_limits()
+    rng = np.random.default_rng(1)
+    spread = (np.r_[rng.uniform(lower, upper), q_head[NUM_ARM_JOINTS:]] for _ in range(cfg.deep_seeds))
+    seeds = itertools.chain(_seeds(sc, last, q_head, cfg.ik_seeds), spread)
+    for q_last in itertools.islice(_knot_solutions(sc, last, q_head, seeds, cfg), cfg.deep_tries):
+        back, failed = _solve_chain(scenes, tail[-2::-1], q_last, cfg, on_branch=True)
+        if back is not None:
+            return [*sols, *back[::-1], q_last], ""
+    return None, failed or last.name
 
 
 def _on_axis(sc: PlanningScene, ahead: np.ndarray, behind: np.ndarray, cfg: PlaceConfig, tol: float
@@ -639,7 +696,7 @@ class PlaceUnreachable(PlanningError):
     place), or the base has no opening or table. The `fallback_configs` of the same `ik_seeds`
     change only the back-off off the item and the release's tilt, whose IK the first config
     already tries, so on the same base they fail the same: callers skip that base for them (and
-    try it again with more seeds)."""
+    try it again with more seeds, and from the place out)."""
 
 
 def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
@@ -647,14 +704,17 @@ def fallback_configs(cfg: PlaceConfig) -> list[PlaceConfig]:
     the back-off off the item (`PlaceConfig.back_off`); and that with the item released within
     the carry's `upright_tolerance_deg` wherever it plans (not only where the level release finds
     no IK: a level release can leave the pieces between the knots no trajectory); then, where
-    `retry_ik_seeds` exceeds `ik_seeds`, the three again with that many IK seeds. A place that
-    plans with the first three plans as it would without the rest."""
+    `retry_ik_seeds` exceeds `ik_seeds`, the three again with that many IK seeds; then, where
+    `retry_deep_seeds` exceeds `deep_seeds`, the three solved from the place out with those. A
+    place that plans with the first three plans as it would without the rest."""
     free = replace(cfg, back_off=False)
     loose = replace(free, release_upright_deg=max(cfg.release_upright_deg, cfg.upright_tolerance_deg))
     more = [replace(c, ik_seeds=cfg.retry_ik_seeds) for c in (cfg, free, loose)
             if cfg.retry_ik_seeds > cfg.ik_seeds]
+    deep = [replace(c, ik_seeds=max(cfg.ik_seeds, cfg.retry_ik_seeds), deep_seeds=cfg.retry_deep_seeds)
+            for c in (cfg, free, loose) if cfg.retry_deep_seeds > cfg.deep_seeds]
     configs = []
-    for c in (cfg, free, loose, *more):
+    for c in (cfg, free, loose, *more, *deep):
         if c not in configs:
             configs.append(c)
     return configs
@@ -733,7 +793,8 @@ def plan_place(X_WB: RigidTransform, q0: np.ndarray, problem: PlaceProblem, conf
                              _item_at(points[k], X_GI, pb.entry, side, cfg,
                                       release if names[k] == "place" else None),
                              pb.entry if side else -_Z) for k in keep]
-            sols_b, failed = _solve_chain(scenes, carry, sols_a[-1], cfg)
+            sols_b, failed = (_solve_deepest_first(scenes, carry, sols_a[-1], len(carry) - 1, cfg)
+                              if cfg.deep_seeds else _solve_chain(scenes, carry, sols_a[-1], cfg))
             if sols_b is not None:
                 break
         if sols_b is None:

@@ -427,18 +427,19 @@ def _first_that_plans(place_config: PlaceConfig, candidates: list, attempt: Call
                       failed: str = "") -> tuple:
     """`attempt(cfg, candidate)` with each of the place's `fallback_configs` on every candidate (a
     base, or a reach) before the next config; the first result. A candidate where it raised
-    `PlaceUnreachable` is not tried again with the same IK seeds (`PlaceConfig.ik_seeds`): the
-    fallbacks change only the back-off off the item and the release's tilt, and would fail there
-    the same. Raises PlanningError: `failed`, then each failure after `label(candidate)`."""
+    `PlaceUnreachable` is not tried again with the same IK seeds (`PlaceConfig.ik_seeds`,
+    `deep_seeds`): the fallbacks change only the back-off off the item and the release's tilt,
+    and would fail there the same. Raises PlanningError: `failed`, then each failure after
+    `label(candidate)`."""
     errors, unreachable = [], set()
     for cfg in fallback_configs(place_config):
         for k, candidate in enumerate(candidates):
-            if (cfg.ik_seeds, k) in unreachable:
+            if (cfg.ik_seeds, cfg.deep_seeds, k) in unreachable:
                 continue
             try:
                 return attempt(cfg, candidate)
             except PlaceUnreachable as err:
-                unreachable.add((cfg.ik_seeds, k))
+                unreachable.add((cfg.ik_seeds, cfg.deep_seeds, k))
                 errors.append(f"{label(candidate)}{err}")
             except PlanningError as err:
                 errors.append(f"{label(candidate)}{err}")
