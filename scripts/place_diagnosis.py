@@ -4,7 +4,7 @@ contact grasp; docs/PLACE.md, "Results").
     python scripts/place_diagnosis.py door INDEX         # closet INDEX of seed 200: who pushes the door
     python scripts/place_diagnosis.py item INDEX T0 T1   # the item's and the hand's contacts, T0-T1 s
     python scripts/place_diagnosis.py carry INDEX        # the planned carry's clearance, densely
-    python scripts/place_diagnosis.py fitted INDEX [SEED] # the item at the goal, neural-field keypoints
+    python scripts/place_diagnosis.py fitted INDEX [SEED] [RADIUS] # the item near the goal, field keypoints
 
 `door`: the opening alone, simulated; at each sample where the force on the door exceeds 150 N
 (and every 25th), the contact forces on it by body pair, N. `item`: the whole task; between T0 and
@@ -14,8 +14,9 @@ held item's nearest distance to the true compartment at 3000 times along the car
 smallest. `fitted`: closet INDEX of capture SEED (default 200) through the whole pipeline as
 `eval-pipeline --task open-and-place --grasp contact` runs it (ten photos, the field's keypoints):
 the fitted keypoints' errors at the target, cm; the item's planned pose at the release (its tilt,
-degrees); every 0.1 s while the item lies within 15 cm of the true goal (horizontally), its
-position and the tool's (m) and the item's contact forces by body pair, N.
+degrees); every 0.1 s while the item lies within RADIUS m (default 0.15) of the true goal
+(horizontally), its position and the tool's (m) and the item's contact forces by body pair, N
+(RADIUS 10: all along the place, where the item was lost on its way).
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ def carry(index: int) -> None:
     print(f"smallest: {100 * d:.2f} cm at {t:.2f} s into the carry, {a} - {b}")
 
 
-def fitted(index: int, seed: int) -> None:
+def fitted(index: int, seed: int, radius: float) -> None:
     from nfr_drake.eval.pipeline_eval import object_scenario
     from nfr_drake.systems.pipeline import run_scenario
 
@@ -145,7 +146,7 @@ def fitted(index: int, seed: int) -> None:
             if round(100 * t) % 10 == 0 and plant.HasBodyNamed("item"):
                 context = plant.GetMyContextFromRoot(self.get_context())
                 p = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName("item")).translation()
-                if np.linalg.norm((p - goal)[:2]) < 0.15:
+                if np.linalg.norm((p - goal)[:2]) < radius:
                     tool = plant.GetFrameByName("panda_tool").CalcPoseInWorld(context).translation()
                     pairs = {k: round(v, 1) for k, v in contact_forces(plant, context).items() if v > 0.2}
                     print(f"t {t:.2f} s, item {np.round(p, 3)}, tool {np.round(tool, 3)} m: {pairs}")
@@ -175,4 +176,5 @@ if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     {"door": lambda: door(int(args[0])), "item": lambda: item(int(args[0]), float(args[1]), float(args[2])),
      "carry": lambda: carry(int(args[0])),
-     "fitted": lambda: fitted(int(args[0]), int(args[1]) if len(args) > 1 else 200)}[mode]()
+     "fitted": lambda: fitted(int(args[0]), int(args[1]) if len(args) > 1 else 200,
+                              float(args[2]) if len(args) > 2 else 0.15)}[mode]()
