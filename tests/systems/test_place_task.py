@@ -191,8 +191,8 @@ def test_the_place_avoids_the_door_where_it_was_measured_and_either_side():
 def test_a_base_no_fallback_can_mend_is_not_tried_again(monkeypatch):
     """`_place_in_front` tries the place's fallback configs on every base in turn, but a base where
     the place failed up to the release (`PlaceUnreachable`) only with the first of each number of
-    IK seeds: the fallbacks change only the back-off and the release's tilt, and would fail there
-    the same; more seeds may not."""
+    IK seeds (and of the round from the place out): the fallbacks change only the back-off and the
+    release's tilt, and would fail there the same; more seeds, or the other way of solving, may not."""
     from nfr_drake.planning.place import PlaceUnreachable, fallback_configs
     from nfr_drake.planning.planner import PlanningError
     from nfr_drake.systems import place_task
@@ -215,10 +215,10 @@ def test_a_base_no_fallback_can_mend_is_not_tried_again(monkeypatch):
     with pytest.raises(PlanningError, match="IK of pre-place; trajectory optimisation to place"):
         place_task._place_in_front(SimpleNamespace(category="closet"), 0.6, None, ([], []),
                                    place_task.PlaceConfig())
-    assert len(configs) == 6  # three, then the three with more IK seeds
-    assert [base for base, _ in tried] == [0, 1, 1, 1, 0, 1, 1, 1]
+    assert len(configs) == 9  # three, the three with more IK seeds, the three from the place out
+    assert [base for base, _ in tried] == [0, 1, 1, 1] * 3
     assert [cfg for base, cfg in tried if base == 1] == configs
-    assert [cfg for base, cfg in tried if base == 0] == [configs[0], configs[3]]
+    assert [cfg for base, cfg in tried if base == 0] == [configs[0], configs[3], configs[6]]
 
 
 @pytest.mark.slow
