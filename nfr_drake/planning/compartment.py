@@ -159,6 +159,14 @@ def _door_normal(kt: KeypointTrajectory) -> np.ndarray:
     return np.sqrt(1.0 - sin ** 2) * (t - (t @ _Z) * _Z) + sin * r / np.linalg.norm(r)
 
 
+def closet_half_width(kt: KeypointTrajectory, q: float) -> float:
+    """Half a closet's width as its keypoints give it, m: the hinge line's distance from the goal
+    at articulation q across the shut door's normal (`compartment_obstacles` builds the carcass
+    that wide either side of the goal)."""
+    _, lat, _ = _frame(_door_normal(kt))
+    return float(abs((kt.point("hinge_bottom", 0.0) - kt.point("goal", q)) @ lat))
+
+
 def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: SemanticCloud | None
             ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
     """A closet's hollow carcass and its open door; its top panel spans from a wall under the
@@ -168,7 +176,7 @@ def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: 
     goal = kt.point("goal", q)
     front = kt.point("handle", 0.0) @ n - CARCASS_SETBACK
     back = goal @ n - max(front - goal @ n, 0.05)
-    half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
+    half = closet_half_width(kt, q)
     y0, floor, top = goal @ lat, goal[2], kt.point("hinge_top", 0.0)[2]
     measured = None if cloud is None else part_top(cloud.static())
     underside = top if measured is None else min(top, measured)
@@ -226,7 +234,7 @@ def compartment_entry(kt: KeypointTrajectory, q: float, toward: np.ndarray | Non
     opening = float(kt.point("handle", 0.0) @ n - CARCASS_SETBACK - goal @ n)
     if toward is None:
         return -n, opening
-    half = abs((kt.point("hinge_bottom", 0.0) - goal) @ lat)
+    half = closet_half_width(kt, q)
     widest = np.arctan2(max(half - ENTRY_SIDE_CLEARANCE, 0.0), max(opening, 1e-3))
     d = (np.asarray(toward) - goal) * [1.0, 1.0, 0.0]
     angle = float(np.clip(np.arctan2(d @ lat, d @ n), -widest, widest))
