@@ -487,16 +487,16 @@ def _solve_chain(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.
     return sols, ""
 
 
-def _solve_deepest_first(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray, line: int,
+def _solve_deepest_first(scenes: dict[str, PlanningScene], stages: list[_Stage], q0: np.ndarray, deep: int,
                          cfg: PlaceConfig) -> tuple[list[np.ndarray] | None, str]:
-    """IK of a chain from its deepest knot out: the stages before its last `line` in turn from q0
+    """IK of a chain from its deepest knot out: the stages before its last `deep` in turn from q0
     (`_solve_chain`); the last stage from its usual seeds and `cfg.deep_seeds` postures drawn
     across the joint ranges (a fixed stream), and from each solution found (at most
-    `cfg.deep_tries`) the other stages of the line backwards, each seeded by and kept close to the
+    `cfg.deep_tries`) the rest of the last `deep` backwards, each seeded by and kept close to the
     one after it, on its branch (`_solve_chain`'s `on_branch`). A chain solved from the pick
     settles on a branch of the arm that may not reach a low compartment's goal (closet 74 of
-    capture seed 200: the goal 19 cm behind the front, 18 cm under the shelf, docs/PLACE.md)."""
-    head, tail = stages[:-line], stages[-line:]
+    capture seed 200: the goal 18.8 cm behind the front, 18 cm under the shelf, docs/PLACE.md)."""
+    head, tail = stages[:-deep], stages[-deep:]
     sols, failed = _solve_chain(scenes, head, q0, cfg)
     if sols is None:
         return None, failed

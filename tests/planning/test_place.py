@@ -288,7 +288,7 @@ def test_the_fallback_configs_give_up_the_back_off_then_the_level_release_then_t
 
 
 def test_a_low_compartments_goal_is_reached_from_the_place_out():
-    """Closet 74 of capture seed 200 (true compartment, door at 0.6: the goal 19 cm behind the
+    """Closet 74 of capture seed 200 (true compartment, door at 0.6: the goal 18.8 cm behind the
     front, 18 cm under the shelf), from one base in front of it: the carry's knots solved in turn
     from the pick find no plan; solved from the place out (`PlaceConfig.deep_seeds`) they do, the
     item released within 1 cm of the goal and the arm on one branch along the way in (no joint
