@@ -4,8 +4,7 @@ at the `goal` keypoint).
 The keypoints give the front plane, the hinge line, the goal (a closet's inner floor centre, a
 drawer's inner floor centre that moves with it) and the handle; the rest comes from the categories'
 layouts (`nfr_drake.objects.closet`, `nfr_drake.objects.drawer`), on the side of caution:
-- a closet is a hollow box (bottom, top, sides, back, `_WALL` thick, its outside
-  `_CLOSET_WIDTH_MARGIN` wider each side than its inside) spanning the carcass box of
+- a closet is a hollow box (bottom, top, sides, back, `_WALL` thick) spanning the carcass box of
   `grasp.carcass_box`, with a shelf at the lowest height a closet of that height can have (two
   shelves: a third of the way up) and its floor at the goal's height or, where a look into the
   opened closet measured them (`InteriorLook`, `nfr_drake.systems.interior`), the shelf's
@@ -36,11 +35,6 @@ from nfr_drake.world.plan import ObstacleBox
 
 _Z = np.array([0.0, 0.0, 1.0])
 _WALL = 0.02  # thickness of the estimated panels, m
-_CLOSET_WIDTH_MARGIN = 0.015
-"""How far a closet's estimated carcass reaches outside the keypoints' width each side, m (its
-inner faces stay where the keypoints put them): on the dev closets the keypoints' half width fell
-up to 1.7 cm short of the true (`scripts/fitted_widths.py`), and an item carried round the front
-corner then met the side panel's outer face; with the planner's clearance the arm keeps 8 mm off it."""
 _DRAWER_MIN_HALF_WIDTH = 0.145  # half the narrowest drawer box's inside, m (0.35 m wide, 2.5 cm panels)
 _DRAWER_FRONT_OVERLAY = 0.045
 """How far a drawer box's inside lies in from its front's edge, m: the carcass's side panel, the
@@ -190,13 +184,12 @@ def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: 
     top = top if measured is None else max(top, measured + TOP_MARGIN)
     if look is not None:
         floor, shelf = (floor if look.floor is None else look.floor), look.ceiling
-    outer = half + _CLOSET_WIDTH_MARGIN
     boxes = [
-        _box("compartment_bottom", R, axes, [back, y0 - outer, 0.0], [front, y0 + outer, floor]),
-        _box("compartment_top", R, axes, [back, y0 - outer, underside - _WALL], [front, y0 + outer, top]),
-        _box("compartment_back", R, axes, [back - _WALL, y0 - outer, 0.0], [back, y0 + outer, top]),
-        _box("compartment_side_a", R, axes, [back, y0 - outer, 0.0], [front, y0 - half + _WALL, top]),
-        _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + outer, top]),
+        _box("compartment_bottom", R, axes, [back, y0 - half, 0.0], [front, y0 + half, floor]),
+        _box("compartment_top", R, axes, [back, y0 - half, underside - _WALL], [front, y0 + half, top]),
+        _box("compartment_back", R, axes, [back - _WALL, y0 - half, 0.0], [back, y0 + half, top]),
+        _box("compartment_side_a", R, axes, [back, y0 - half, 0.0], [front, y0 - half + _WALL, top]),
+        _box("compartment_side_b", R, axes, [back, y0 + half - _WALL, 0.0], [front, y0 + half, top]),
     ]
     if shelf < underside - _WALL:
         boxes.append(_box("compartment_shelf", R, axes, [back, y0 - half, shelf],

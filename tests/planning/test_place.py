@@ -492,24 +492,3 @@ def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_high
     assert low_moving[0].top == pytest.approx(plain_moving[0].top)
     assert plain_moving[0].top == pytest.approx(hinge_top, abs=1e-6)
     assert [b.top for b in low_fixed] == pytest.approx([b.top for b in plain_fixed])
-
-
-def test_a_closets_sides_reach_outside_the_keypoints_width_and_keep_its_inside():
-    """A closet's estimated side panels reach 1.5 cm outside the carcass the keypoints give (an
-    item carried round the front corner stays clear of a side the keypoints place too far in) and
-    keep their inner faces a wall's thickness inside it."""
-    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
-    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
-    fixed, _ = compartment_obstacles(kt, 0.6)
-    sides = [b for b in fixed if b.name.startswith("compartment_side")]
-    goal = kt.point("goal", 0.6) + [0.0, 0.0, 0.1]
-    lateral = np.cross([0.0, 0.0, 1.0], front_normal(kt, 0.6))
-    half = obj.params["width"] / 2
-
-    def clear(offset: float) -> float:
-        points = goal + np.outer([-offset, offset], lateral)
-        return min(min(distance_to_box(b, points[[i]])[0] for b in sides) for i in range(2))
-
-    assert clear(half + 0.014) == pytest.approx(0.0, abs=2e-3)
-    assert clear(half + 0.025) == pytest.approx(0.01, abs=2e-3)
-    assert clear(half - 0.03) == pytest.approx(0.01, abs=2e-3)
