@@ -9,9 +9,10 @@ what to change (`SceneObject.from_model_file` composes these).
   (`--closed-at`); overruled when the handle is clearly nearer the rest of the model at the other.
 - Massless moving parts (`massless_parts`): a door or drawer whose bodies have no mass gets
   `MASSLESS_DENSITY` over its geometry's boxes (Drake's solver needs a positive mass matrix).
-- The handle (`handle_grip`, `handle_notes`, `check_handle_stands_out`): the centre of its
-  geometry's bounding box in its body frame, and its bar axis when the geometry is elongated; a
-  flush pull refused.
+- The handle (`handle_grip`, `handle_notes`, `check_handle_stands_out`): the centre of its grip
+  (its geometry's bounding box's middle across, half its thickness in from its outermost face:
+  a bar's axis, not the middle of the bar and its posts), and its bar axis when the geometry is
+  elongated; a flush pull refused.
 - Sliding doors (`slide_front_normal`): a prismatic joint whose handle stands out of its part
   across the slide axis slides sideways: the hand comes from the front.
 - Placement (`check_placement`): height, up axis (the joint's axis), floor; a refusal suggests the
@@ -269,20 +270,46 @@ def massless_parts(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_
     return added
 
 
-def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector,
+def handle_grip(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
                 body) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """The handle in its body's frame B: centre p_BH of its geometry's bounding box (the body's
-    origin when it has none), m, (3,); the unit bar axis (3,) when the box's longest side is at
-    least twice the next (else None); half that side, m."""
+    """The handle in its body's frame B: its grip centre p_BH, m, (3,) (`grip_centre`; the body's
+    origin when it has no geometry); the unit bar axis (3,) when its geometry's box in B has a
+    longest side at least twice the next (else None); half that side, m."""
     box = body_box(plant, inspector, body, required=True)
     if box is None:
         return np.zeros(3), None, 0.0
     lo, hi = box
+    p_BH = grip_centre(plant, inspector, plant_context, joint, body, (lo + hi) / 2)
     extent = hi - lo
     order = np.argsort(extent)[::-1]
     if extent[order[0]] < 2.0 * extent[order[1]]:
-        return (lo + hi) / 2, None, 0.0
-    return (lo + hi) / 2, np.eye(3)[order[0]], float(extent[order[0]] / 2)
+        return p_BH, None, 0.0
+    return p_BH, np.eye(3)[order[0]], float(extent[order[0]] / 2)
+
+
+def grip_centre(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint, body,
+                p_BH: np.ndarray) -> np.ndarray:
+    """Where a hand closes on the handle, in its body's frame B, m, (3,): in the joint's child
+    frame C, the middle of the handle's box across the direction it stands out of its part most,
+    and along that direction its outermost face less half its thickness (the smaller of the box's
+    two other sides: a bar's or a knob's diameter), no deeper than the box's middle. A bar on
+    posts has its box's middle between the bar and the door, where the fingers would close on the
+    posts' ends; this is the bar's axis. p_BH (the box's middle) is kept where the part has no
+    geometry but the handle."""
+    boxes = _part_frame_boxes(plant, inspector, plant_context, joint, body)
+    if boxes is None:
+        return p_BH
+    (lo, hi), (h_lo, h_hi), X_WC = boxes
+    reach = np.concatenate([h_hi - hi, lo - h_lo])  # how far the handle stands out, per face of the part
+    face = int(np.argmax(reach))
+    axis, sign = face % 3, (1.0 if face < 3 else -1.0)
+    across = [a for a in range(3) if a != axis]
+    half = min(h_hi[a] - h_lo[a] for a in across) / 2
+    p_CH = (h_lo + h_hi) / 2
+    outer = h_hi[axis] if sign > 0 else h_lo[axis]
+    p_CH[axis] = outer - sign * min(half, abs(outer - p_CH[axis]))
+    X_BC = plant.EvalBodyPoseInWorld(plant_context, body).inverse() @ X_WC
+    return X_BC @ p_CH
 
 
 def handle_notes(plant: MultibodyPlant, inspector: SceneGraphInspector, body) -> list[str]:

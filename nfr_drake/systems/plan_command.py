@@ -11,7 +11,8 @@ from pydrake.math import RigidTransform
 
 from nfr_drake.errors import NfrDrakeError
 from nfr_drake.jsonio import read_json
-from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
+from nfr_drake.planning.planner import PlannerConfig, PlanningError, grasp_planner, plan_articulation
+from nfr_drake.systems.articulation import SimulationConfig
 from nfr_drake.systems.scene_objects import SceneObject, object_pose, sampled_part
 from nfr_drake.systems.task import replay_plan, run_task, task_span
 from nfr_drake.world.keypoints import KeypointTrajectory
@@ -43,6 +44,7 @@ def plan_command(
     replay: Path = Path("out/plan/replay.html"),
     live: bool = False,
     keypoints: Path | None = None,
+    grasp: Literal["constraint", "contact"] = "constraint",
 ) -> int:
     """Plan grasping the handle and opening (or closing) an object, simulate it, write a replay.
 
@@ -74,12 +76,16 @@ def plan_command(
             the true one the motion is simulated on, shown in the replay beside the fitted
             keypoints with its own ("keypoints_true"). Without --object or --category (photos of
             a real object, no model of it) the motion is planned and replayed, not simulated.
+        grasp: how the simulated hand holds the handle: "constraint" (a ball constraint switched
+            on as the fingers close, the arm compliant while it pulls) or "contact" (the fingers
+            squeeze the handle and friction holds it, the arm stiff; docs/SIMULATION.md).
 
     Returns 0 on success, 1 if the simulated motion failed; a planning failure exits 2.
     """
     X_WO = object_pose(object_xyz, object_yaw_deg, object_rpy_deg)
     if object is None and category is None and keypoints is not None:
-        return _plan_only(fitted_keypoints(keypoints, X_WO), keypoints, task, start_q, target_q, replay)
+        return _plan_only(fitted_keypoints(keypoints, X_WO), keypoints, task, start_q, target_q, replay,
+                          grasp_planner(PlannerConfig(), grasp))
     if (object is None) == (category is None):
         raise NfrDrakeError("give either --object FILE --joint NAME --handle-body NAME or --category "
                             "(or --keypoints alone, to plan without simulating)")
@@ -117,6 +123,8 @@ def plan_command(
     meshcat = Meshcat()
     print(f"live view: {meshcat.web_url()}")
     outcome = run_task(scene_object, q1, keypoints=planned, meshcat=meshcat, replay=replay,
+                       planner_config=grasp_planner(PlannerConfig(), grasp),
+                       simulation_config=SimulationConfig(grasp=grasp),
                        reference=None if planned is None else scene_object.ground_truth)
     if outcome.plan is None:
         shorter = f" (a shorter motion, --target-q between {q0:g} and {q1:g}, may be reachable)" \
@@ -130,12 +138,12 @@ def plan_command(
 
 
 def _plan_only(planned: KeypointTrajectory, source: Path, task: str, start_q: float | None,
-               target_q: float | None, replay: Path) -> int:
+               target_q: float | None, replay: Path, config: PlannerConfig) -> int:
     """Plan with fitted keypoints alone (no model of the object to simulate on) and write the
     planned motion's replay. Returns 0; a planning failure raises PlanningError (exit 2)."""
     q0, q1 = task_span(planned.category, task, planned.q_current if start_q is None else start_q, target_q)
     planned = planned.with_current(q0)
-    plan = plan_articulation(planned, q1, config=PlannerConfig())
+    plan = plan_articulation(planned, q1, config=config)
     path = replay_plan(planned, plan, q1, replay)
     p = plan.X_WB.translation()
     yaw = np.degrees(np.arctan2(plan.X_WB.rotation().matrix()[1, 0], plan.X_WB.rotation().matrix()[0, 0]))

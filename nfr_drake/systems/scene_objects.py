@@ -143,6 +143,8 @@ class SceneObject:
         joint_range: the joint's values (rad or m) at q = 0 (shut) and q = 1 (open); None: its
             lower and upper limits (a loaded model may be shut at its upper limit).
         notes: what loading a model file found unusual but plannable, one line each.
+        handle_middle_W: a model file's handle geometry's box middle in W, shut, m, (3,): what the
+            cameras frame (`category_frame`); None: the grip centre (a sampled object's handle).
     """
 
     category: str
@@ -157,6 +159,7 @@ class SceneObject:
     obstacles: tuple[ObstacleBox, ...] | None = None
     joint_range: tuple[float, float] | None = None
     notes: tuple[str, ...] = ()
+    handle_middle_W: np.ndarray | None = None
 
     def shut_and_open(self, joint) -> tuple[float, float]:
         """The joint's values at q = 0 and q = 1 (rad or m): `joint_range`, else its limits."""
@@ -180,13 +183,15 @@ class SceneObject:
         its bounds in O (min and max corners (3,), m): O's origin lies under the centre of the
         footprint of what the joint does not move (the smallest rectangle about its collision
         boxes, the carcass), at their lowest point; +x points out of the rectangle's side the shut
-        handle stands furthest out of; +z is W's. The bounds hold those boxes and the shut
-        handle. NfrDrakeError when nothing but the moving part has collision geometry."""
+        handle (`handle_middle_W`, else its grip centre) stands furthest out of; +z is W's. The
+        bounds hold those boxes and that handle point. NfrDrakeError when nothing but the moving
+        part has collision geometry."""
         if not self.obstacles:
             raise NfrDrakeError("the model has no collision geometry besides its moving part: the "
                                 "cameras and the neural field's frame need the carcass's")
         corners = np.concatenate([box_corners(b.X_WB, b.size) for b in self.obstacles])
-        handle = self.ground_truth.point("handle", 0.0)
+        handle = (self.handle_middle_W if self.handle_middle_W is not None
+                  else self.ground_truth.point("handle", 0.0))
         turns = np.radians(np.arange(0.0, 90.0, 0.25))
         axes = np.stack([np.cos(turns), np.sin(turns)], -1)  # (T, 2): the rectangle's first axis
         along = corners[:, :2] @ axes.T, corners[:, :2] @ np.stack([-axes[:, 1], axes[:, 0]], -1).T
@@ -239,7 +244,7 @@ class SceneObject:
         "upper" or None for the rule there), the other joints held shut, massless parts given a
         mass; or a one-line NfrDrakeError saying what to change.
 
-        The handle point is the centre of the handle body's geometry (its bounding box); an
+        The handle point is the centre of the handle body's grip (`model_files.grip_centre`); an
         elongated handle gives the bar axis (`GRIP_AXIS_KEYPOINT`), a sliding door the approach
         from its front (`APPROACH_KEYPOINT`). The obstacles are the boxes of every collision
         geometry the joint does not move, at the shut pose (none: the keypoint-derived box).
@@ -287,7 +292,7 @@ class SceneObject:
         if body.index() not in moving:
             raise NfrDrakeError(f"the handle body {handle_body_name!r} does not move with joint "
                                 f"{joint_name!r}; give --handle-body a body on the moving part")
-        p_BH, grip_B, grip_half = handle_grip(plant, inspector, body)
+        p_BH, grip_B, grip_half = handle_grip(plant, inspector, context, joint, body)
         notes += handle_notes(plant, inspector, body)
         bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
 
@@ -314,6 +319,8 @@ class SceneObject:
         axis_W = X_WJ.rotation() @ (joint.revolute_axis() if revolute else joint.translation_axis())
         notes += check_placement(np.concatenate(corners), X_WO, axis_W, revolute)
         X_WB = plant.EvalBodyPoseInWorld(context, body)
+        handle_box = body_box(plant, inspector, body)
+        handle_middle_W = X_WB @ (p_BH if handle_box is None else (handle_box[0] + handle_box[1]) / 2)
         notes += mesh_problems(plant, inspector, context, model, moving, X_WB @ p_BH)
         check_handle_stands_out(plant, inspector, context, joint, body)
         front_W = None if revolute else slide_front_normal(plant, inspector, context, joint, body, axis_W)
@@ -336,4 +343,4 @@ class SceneObject:
             joint_name, handle_body_name, p_BH, grip_B, kt,
             grip_half_length=max(0.0, grip_half - GRIP_END_MARGIN),
             locked_joints=tuple(j.name() for j in others), obstacles=tuple(obstacles) or None,
-            joint_range=(shut, opened), notes=tuple(notes))
+            joint_range=(shut, opened), notes=tuple(notes), handle_middle_W=handle_middle_W)

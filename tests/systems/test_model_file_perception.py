@@ -31,7 +31,8 @@ def scenario_of(user_model, **kw) -> Scenario:
 def test_the_frame_of_a_model_file_faces_out_of_its_front_at_its_footprints_centre(models, yaw_deg):
     """The base cabinet's carcass spans x -0.3..0.3, y -0.3..0.3 of its file's frame, its door and
     handle in front at +x; placed anywhere, O's +x points out of that front and its origin lies
-    under the carcass's centre, on the floor."""
+    under the carcass's centre, on the floor. The bounds hold the handle's middle, which the cameras
+    frame; the hand's grip (the bar's axis) stands further out."""
     model = models["base_cabinet_door_on_floor"]
     xyz = [0.4, -0.7, 0.0]
     obj = scenario_of(model, object_xyz=xyz, object_yaw_deg=yaw_deg).model_file_object()
@@ -42,8 +43,10 @@ def test_the_frame_of_a_model_file_faces_out_of_its_front_at_its_footprints_cent
     carcass = np.concatenate([b.X_WB.translation()[None] for b in obj.obstacles])
     np.testing.assert_allclose(X_WO.translation()[:2], xyz[:2], atol=0.03)
     assert abs(X_WO.translation()[2]) < 1e-3 and carcass[:, 2].min() > 0.0
-    handle_O = X_WO.inverse() @ obj.ground_truth.point("handle", 0.0)
+    handle_O = X_WO.inverse() @ obj.handle_middle_W
     assert handle_O[0] > 0.25 and np.all(handle_O >= lo - 1e-9) and np.all(handle_O <= hi + 1e-9)
+    grip_O = X_WO.inverse() @ obj.ground_truth.point("handle", 0.0)
+    assert grip_O[0] - handle_O[0] == pytest.approx(0.0145, abs=1e-6)  # the bar 4 cm out, 1.1 cm thick
 
 
 def test_fitted_door_keypoints_are_told_in_the_models_joint_range(models):

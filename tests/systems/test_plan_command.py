@@ -42,14 +42,16 @@ def _write(tmp_path, geometry='<cylinder radius="0.01" length="0.12"/>'):
     return path
 
 
-def test_plans_user_model(tmp_path, capsys):
+@pytest.mark.parametrize("grasp", ["constraint", "contact"])
+def test_plans_user_model(tmp_path, capsys, grasp):
     replay = tmp_path / "replay.html"
     status = main(["plan", "--object", str(_write(tmp_path)), "--joint", "hinge", "--handle-body", "handle",
-                   "--object-xyz", "0.1", "0.0", "0.0", "--replay", str(replay)])
+                   "--object-xyz", "0.1", "0.0", "0.0", "--replay", str(replay), "--grasp", grasp])
     out = capsys.readouterr().out
     assert status == 0, out
     reached = re.search(r"SUCCESS: articulation (\d\.\d+) \(target 0\.600", out)
     assert reached and abs(float(reached.group(1)) - 0.6) * 90.0 <= 5.0, out  # within 5 deg of 54
+    assert f"{grasp} grasp" in out, out
     assert "planning" in out and str(replay) in out
     assert replay.stat().st_size > 100_000
 

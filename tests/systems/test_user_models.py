@@ -38,14 +38,15 @@ def test_a_model_that_cannot_be_planned_on_is_refused_in_one_line(models, name, 
     assert model.expect in err and len(err.splitlines()) == 1, err
 
 
-def test_the_handle_is_the_centre_of_its_geometry(models):
+def test_the_handle_is_the_centre_of_its_grip(models):
     """The wardrobe's handle link has its frame at the hinge; its mesh is 35 cm away."""
     obj = load(models["wardrobe_handle_mesh_off_frame"])
     # The U-shaped mesh's bounding box: x 0 to 0.045 (standoff 0.035 plus half the 2 cm bar), y
-    # -0.35 +- 0.01, z +- 0.07 about the link frame.
-    np.testing.assert_allclose(obj.p_BH, [0.0225, -0.35, 0.0], atol=1e-6)
+    # -0.35 +- 0.01, z +- 0.07 about the link frame. The grip is the bar's axis, half the bar's 2 cm
+    # in from the outermost face (x 0.035), not the box's middle (x 0.0225, between bar and door).
+    np.testing.assert_allclose(obj.p_BH, [0.035, -0.35, 0.0], atol=1e-6)
     # The link frame sits on the door's face, 1 m up, at the hinge (x 0.275 + 0.018, y 0.225).
-    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3155, -0.125, 1.0], atol=1e-6)
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.328, -0.125, 1.0], atol=1e-6)
     assert any("u_handle.obj" in note and "concave" in note for note in obj.notes)
 
 
@@ -53,9 +54,9 @@ def test_a_joint_shut_at_its_upper_limit_starts_shut(models):
     fridge = models["fridge_shut_at_upper_limit"]
     obj = load(fridge)
     assert obj.joint_range == (0.0, -1.9)
-    # Shut, where the file draws it: the centre of the handle's box (bar of radius 1.1 cm 4 cm out,
-    # on posts) 2.55 cm in front of the door's face at x = 0.33.
-    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3555, 0.25, 1.1], atol=1e-6)
+    # Shut, where the file draws it: the grip, the axis of the bar (radius 1.1 cm, on posts) 4 cm in
+    # front of the door's face at x = 0.33.
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.37, 0.25, 1.1], atol=1e-6)
     opened = obj.ground_truth.point("handle", 1.0)
     assert opened[0] > 0.5  # swung out
     with pytest.raises(NfrDrakeError, match="from -1.9 towards 0"):  # --closed-at is taken at its word:
@@ -68,7 +69,7 @@ def test_a_model_drawn_open_is_shut_where_its_handle_meets_the_rest(models):
     obj = load(model)
     assert obj.joint_range == pytest.approx((-np.pi / 2, 0.0), abs=1e-5)
     assert any("taken as shut at -1.57" in note for note in obj.notes)
-    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3235, 0.24, 0.6], atol=1e-5)
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.338, 0.24, 0.6], atol=1e-5)
     with pytest.raises(NfrDrakeError, match="from 0 towards -1.57"):  # the user's word stands
         load(model, closed_at="upper")
 
@@ -90,11 +91,11 @@ def test_a_continuous_joint_is_refused_with_what_to_change(tmp_path):
 
 
 def test_an_exported_model_with_turned_frames_and_a_visual_only_handle(models):
-    """The handle's mesh (no collision geometry) gives its centre; the door's joint frame is turned."""
+    """The handle's mesh (no collision geometry) gives its grip; the door's joint frame is turned."""
     obj = load(models["exported_cabinet"])
-    # The U handle's box centre, 2.25 cm out of the door's face (x = 0.298), 6 cm from the free edge
-    # (to 10 um: the file's angles have 6 digits).
-    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.3205, 0.24, 0.6], atol=1e-5)
+    # The U handle's bar axis, 3.5 cm out of the door's face (x = 0.298; its box reaches 4.5 cm, the
+    # bar 2 cm thick), 6 cm from the free edge (to 10 um: the file's angles have 6 digits).
+    np.testing.assert_allclose(obj.ground_truth.point("handle", 0.0), [0.333, 0.24, 0.6], atol=1e-5)
     assert len(obj.obstacles) == 5  # one box per convex collision piece of the carcass
 
 
