@@ -794,6 +794,10 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
     couple_fingers(plant, robot)
     hand = plant.GetBodyByName("panda_hand", robot)
     handle_body = plant.GetBodyByName(obj.handle_body_name, model)
+    if config.contact and not plant.GetCollisionGeometriesForBody(handle_body):
+        raise NfrDrakeError(f"the handle body {obj.handle_body_name!r} has no collision geometry: fingers "
+                            "closing on it by contact pass through it; give it a <collision> element, or "
+                            "use the constraint grasp (--grasp constraint)")
     X_HT = plant.GetFrameByName(TOOL_FRAME, robot).GetFixedPoseInBodyFrame()
     bar_B = obj.bar_B / np.linalg.norm(obj.bar_B)
     grips_B = grip_points(obj.p_BH, bar_B, obj.grip_half_length, config.grip_spacing)

@@ -255,3 +255,12 @@ def test_a_door_that_would_open_into_its_cabinet_is_refused(models, tmp_path):
     path.write_text(text)
     with pytest.raises(NfrDrakeError, match="moves its handle into the model as it opens"):
         SceneObject.from_model_file(path, "hinge", "handle", RigidTransform(), 0.0)
+
+
+def test_a_handle_without_collision_geometry_is_refused_for_a_grasp_by_contact(models, capsys, tmp_path):
+    """The exported cabinet's handle is a visual mesh only: the constraint grasp holds it (the
+    fixture opens), fingers closing by contact would pass through it."""
+    model = models["exported_cabinet"]
+    assert main([*model.plan_args(), "--replay", str(tmp_path / "r.html"), "--grasp", "contact"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "has no collision geometry" in err and "--grasp constraint" in err and len(err.splitlines()) == 1, err
