@@ -267,6 +267,17 @@ not turned), and the doors the furniture pipeline took for drawers swung 27-42 d
 before the arm's pull ended (docs/SIMULATION.md, "A door taken for a drawer")."""
 
 
+def path_bow(points: np.ndarray) -> float:
+    """How far `points` (N, 3) stray from the line through the first and the last, at most, over
+    the distance between those two (0 for a straight path; an arc of angle a bows tan(a / 4) / 2);
+    inf where the two coincide."""
+    chord = points[-1] - points[0]
+    length = float(np.linalg.norm(chord))
+    if length == 0.0:
+        return float("inf")
+    return float(np.linalg.norm(np.cross(points - points[0], chord / length), axis=1).max() / length)
+
+
 def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, target: float,
                           q_now: np.ndarray, q_command: np.ndarray, smallest: float, largest: float
                           ) -> tuple[np.ndarray, float]:
@@ -276,9 +287,12 @@ def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, ta
     circle through its path (the hinge as the hand felt it, `arc_angle`) until it has swept
     `target` rad, clipped to +-`largest` (a turn in one joint step strains the hinge more the
     larger it is), and that angle; no offset and angle 0 where the path has under 3 points or
-    sweeps under `FELT_ARC_MIN` (a drawer), or the turn is under `smallest`."""
+    sweeps under `FELT_ARC_MIN` (a drawer), or bows off the line between its ends less than an arc
+    of that angle would (`path_bow`: a circle fitted to a nearly straight path is any circle, and a
+    sliding door pulled 45 cm straight to its stop read as a 25-degree arc), or the turn is under
+    `smallest`."""
     none = np.zeros(NUM_ARM_JOINTS), 0.0
-    if len(tool_path) < 3:
+    if len(tool_path) < 3 or path_bow(tool_path) < np.tan(FELT_ARC_MIN / 4.0) / 2.0:
         return none
     swept, centre, axis = arc_angle(tool_path)
     if abs(swept) < FELT_ARC_MIN:

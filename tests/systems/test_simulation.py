@@ -196,6 +196,21 @@ def test_arc_angle_finds_the_circle_and_the_signed_angle():
     assert np.degrees(angle * (axis @ R[:, 2])) == pytest.approx(54.0, abs=1e-6)
 
 
+def test_a_straight_pull_with_a_wobble_is_no_arc():
+    """A hand pulled 45 cm along a line that wobbles 0.5 mm (a sliding door to its stop) bows far
+    less than a 10-degree arc: no door turn is felt, whatever circle fits its points; a door's
+    27-degree arc bows more than that and is."""
+    from nfr_drake.systems.corrections import FELT_ARC_MIN, path_bow
+
+    rng = np.random.default_rng(0)
+    straight = np.c_[np.zeros(40), np.linspace(0.0, 0.45, 40), np.zeros(40)] + rng.normal(0.0, 5e-4, (40, 3))
+    assert path_bow(straight) < np.tan(FELT_ARC_MIN / 4.0) / 2.0
+    angles = np.radians(np.linspace(0.0, 27.0, 20))
+    arc = 0.5 * np.c_[np.cos(angles), np.sin(angles), np.zeros(20)]
+    assert path_bow(arc) == pytest.approx(np.tan(np.radians(27.0) / 4.0) / 2.0, rel=0.02)
+    assert path_bow(arc) > np.tan(FELT_ARC_MIN / 4.0) / 2.0
+
+
 def test_grip_points_lie_on_the_bar():
     p, bar = np.array([0.1, 0.2, 0.3]), np.array([0.0, 1.0, 0.0])
     points = grip_points(p, bar, 0.04, 0.005)
