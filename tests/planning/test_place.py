@@ -27,7 +27,7 @@ from nfr_drake.planning.place import (
     plan_place,
     ready_posture,
 )
-from nfr_drake.planning.planner import PlannerConfig, PlanningError, plan_articulation
+from nfr_drake.planning.planner import PlannerConfig, plan_articulation
 from nfr_drake.planning.scene import build_planning_scene
 from nfr_drake.systems.place_task import ITEM_REACH, table_beside
 from nfr_drake.world.cloud import SemanticCloud
@@ -289,11 +289,13 @@ def test_the_fallback_configs_give_up_the_back_off_then_the_level_release_then_t
 
 def test_a_low_compartments_goal_is_reached_from_the_place_out():
     """Closet 74 of capture seed 200 (true compartment, door at 0.6: the goal 18.8 cm behind the
-    front, 18 cm under the shelf), from one base in front of it: the carry's knots solved in turn
-    from the pick find no plan; solved from the place out (`PlaceConfig.deep_seeds`) they do, the
-    item released within 1 cm of the goal and the arm on one branch along the way in (no joint
-    turns more than 1 rad on any of its straight pieces: the chains solved from the place out but
-    not held to its branch jumped 2.5 rad in joint 1 from one knot to the next)."""
+    front, 18 cm under the shelf), from one base in front of it: solved from the place out
+    (`PlaceConfig.deep_seeds`) the carry's knots plan, the item released within 1 cm of the goal
+    and the arm on one branch along the way in (no joint turns more than 1 rad on any of its
+    straight pieces: the chains solved from the place out but not held to its branch jumped 2.5
+    rad in joint 1 from one knot to the next). Whether the knots solved in turn from the pick also
+    plan here depends on the solver's numerics (none did with the environment of 2026-12-06, one
+    does with that of 2026-12-07), so it is not asserted."""
     from nfr_drake.systems.place_task import true_compartment
     from nfr_drake.systems.scenario import Scenario
 
@@ -306,8 +308,6 @@ def test_a_low_compartments_goal_is_reached_from_the_place_out():
     table, X_WI = table_beside(X_WB, [*fixed, *moving], ITEM_REACH["side"])
     problem = place_problem(kt, 0.6, item, X_WI, table, (fixed, moving), toward=X_WB.translation())
     q0 = ready_posture(X_WB, X_WI.translation())
-    with pytest.raises(PlanningError):
-        plan_place(X_WB, q0, problem, PlaceConfig())
     plan = plan_place(X_WB, q0, problem, PlaceConfig(deep_seeds=150))
     assert plan.place_error() < 0.01
     carry = plan.segments[1]
