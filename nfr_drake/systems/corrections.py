@@ -289,7 +289,7 @@ def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, ta
     larger it is), and that angle; no offset and angle 0 where the path has under 3 points or
     sweeps under `FELT_ARC_MIN` (a drawer), or bows off the line between its ends less than an arc
     of that angle would (`path_bow`: a circle fitted to a nearly straight path is any circle, and a
-    sliding door pulled 45 cm straight to its stop read as a 25-degree arc), or the turn is under
+    sliding door pulled 45 cm straight to its stop was turned on as a door), or the turn is under
     `smallest`."""
     none = np.zeros(NUM_ARM_JOINTS), 0.0
     if len(tool_path) < 3 or path_bow(tool_path) < np.tan(FELT_ARC_MIN / 4.0) / 2.0:

@@ -299,9 +299,8 @@ def grip_centre(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_con
     boxes = _part_frame_boxes(plant, inspector, plant_context, joint, body)
     if boxes is None:
         return p_BH
-    (lo, hi), (h_lo, h_hi), X_WC = boxes
-    reach = np.concatenate([h_hi - hi, lo - h_lo])  # how far the handle stands out, per face of the part
-    face = int(np.argmax(reach))
+    part, (h_lo, h_hi), X_WC = boxes
+    face = int(np.argmax(_reach_per_face(part, (h_lo, h_hi))))
     axis, sign = face % 3, (1.0 if face < 3 else -1.0)
     across = [a for a in range(3) if a != axis]
     half = min(h_hi[a] - h_lo[a] for a in across) / 2
@@ -340,6 +339,13 @@ def _part_frame_boxes(plant: MultibodyPlant, inspector: SceneGraphInspector, pla
     return part, handle, plant.EvalBodyPoseInWorld(plant_context, child)
 
 
+def _reach_per_face(part: tuple[np.ndarray, np.ndarray], handle: tuple[np.ndarray, np.ndarray]
+                    ) -> np.ndarray:
+    """How far the handle's box (lo, hi) stands out past each face of the part's box (lo, hi), one
+    frame, m, (6,): the +x, +y, +z faces, then -x, -y, -z (negative: inside)."""
+    return np.concatenate([handle[1] - part[1], part[0] - handle[0]])
+
+
 def check_handle_stands_out(plant: MultibodyPlant, inspector: SceneGraphInspector, plant_context, joint,
                             handle_body) -> None:
     """Refuse a handle whose geometry reaches less than `MIN_HANDLE_REACH` out of the box of the
@@ -347,8 +353,8 @@ def check_handle_stands_out(plant: MultibodyPlant, inspector: SceneGraphInspecto
     boxes = _part_frame_boxes(plant, inspector, plant_context, joint, handle_body)
     if boxes is None:
         return
-    (lo, hi), (h_lo, h_hi), _ = boxes
-    reach = float(np.max(np.maximum(h_hi - hi, lo - h_lo)))
+    part, handle, _ = boxes
+    reach = float(np.max(_reach_per_face(part, handle)))
     if reach < MIN_HANDLE_REACH:
         raise NfrDrakeError(
             f"the handle body {handle_body.name()!r} reaches {max(reach, 0.0) * 100:.1f} cm out of its part "
