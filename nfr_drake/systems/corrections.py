@@ -10,8 +10,10 @@ from dataclasses import replace
 import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.solvers import Solve
 
 from nfr_drake.world.keypoints import KeypointTrajectory
 from nfr_drake.world.robot import NUM_ARM_JOINTS, TOOL_FRAME
@@ -59,12 +61,54 @@ def bounded_step(robot_plant: MultibodyPlant, q: np.ndarray, J: np.ndarray, erro
     return dq
 
 
+STEP_STRAY = 0.25
+"""A tool step's first-order solution is kept where forward kinematics puts the tool within this
+share of the asked translation (plus 1 mm) of its target and turns the hand by at most
+`STEP_TURN_DEG`; else the step is solved by inverse kinematics (`tool_step`)."""
+STEP_TURN_DEG = 3.0
+
+
 def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """The arm joints' least-squares step at q that moves the tool frame's origin by `translation`
-    ((3,), m), the hand's orientation kept (first order), within the joint limits (`bounded_step`);
-    `robot_plant` is the arm alone."""
-    _, J = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q)
-    return bounded_step(robot_plant, q, J, np.r_[np.zeros(3), translation])
+    """The arm joints' step (NUM_ARM_JOINTS,) at q (9,) that moves the tool frame's origin by
+    `translation` ((3,), W, m), the hand's orientation kept, within the joint limits;
+    `robot_plant` is the arm alone. First the least-squares step (`bounded_step`); where forward
+    kinematics shows it strays (`STEP_STRAY`: with a joint held at its limit the others can be
+    near a singularity, and a 4.5 cm pull of a sliding door's handle, solved so, swung the tool
+    22 cm down and dragged the door 20 cm back), the step nearest q that inverse kinematics finds
+    for the tool's pose within 2 mm along each axis and `STEP_TURN_DEG`, within the limits less
+    `LIMIT_MARGIN`; no step where it finds none."""
+    context = robot_plant.CreateDefaultContext()
+    X_WT, J = tool_pose_and_jacobian(robot_plant, context, q)
+    dq = bounded_step(robot_plant, q, J, np.r_[np.zeros(3), translation])
+    target = RigidTransform(X_WT.rotation(), X_WT.translation() + translation)
+    stepped = np.r_[q[:NUM_ARM_JOINTS] + dq, q[NUM_ARM_JOINTS:]]
+    reached, _ = tool_pose_and_jacobian(robot_plant, context, stepped)
+    strays = np.linalg.norm(reached.translation() - target.translation())
+    turns = reached.rotation().InvertAndCompose(target.rotation()).ToAngleAxis().angle()
+    if strays <= STEP_STRAY * np.linalg.norm(translation) + 1e-3 and np.degrees(turns) <= STEP_TURN_DEG:
+        return dq
+    return _tool_step_by_ik(robot_plant, q, target)
+
+
+def _tool_step_by_ik(robot_plant: MultibodyPlant, q: np.ndarray, target: RigidTransform) -> np.ndarray:
+    """The arm joints' step (NUM_ARM_JOINTS,) nearest q (9,) that puts the tool at `target` (W)
+    within 2 mm along each axis and `STEP_TURN_DEG`, the arm within its limits less `LIMIT_MARGIN` and the
+    fingers where they are; zeros where the solver finds none."""
+    ik = InverseKinematics(robot_plant)
+    world, tool = robot_plant.world_frame(), robot_plant.GetFrameByName(TOOL_FRAME)
+    p = target.translation()
+    ik.AddPositionConstraint(tool, np.zeros(3), world, p - 2e-3, p + 2e-3)
+    ik.AddOrientationConstraint(world, target.rotation(), tool, RotationMatrix(), np.radians(STEP_TURN_DEG))
+    x = ik.q()
+    lower = robot_plant.GetPositionLowerLimits()[:NUM_ARM_JOINTS] + LIMIT_MARGIN
+    upper = robot_plant.GetPositionUpperLimits()[:NUM_ARM_JOINTS] - LIMIT_MARGIN
+    ik.prog().AddBoundingBoxConstraint(lower, upper, x[:NUM_ARM_JOINTS])
+    ik.prog().AddBoundingBoxConstraint(q[NUM_ARM_JOINTS:], q[NUM_ARM_JOINTS:], x[NUM_ARM_JOINTS:])
+    ik.prog().AddQuadraticErrorCost(np.eye(len(q)), q, x)
+    result = Solve(ik.prog(), np.clip(q, np.r_[lower, q[NUM_ARM_JOINTS:]], np.r_[upper, q[NUM_ARM_JOINTS:]]))
+    if not result.is_success():
+        return np.zeros(NUM_ARM_JOINTS)
+    return result.GetSolution(x)[:NUM_ARM_JOINTS] - q[:NUM_ARM_JOINTS]
 
 
 def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) -> np.ndarray:
@@ -91,21 +135,23 @@ def felt_line(tool_path: np.ndarray, planned: np.ndarray) -> np.ndarray:
     return travel / length
 
 
-def arc_angle(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """The circle through `points` (N, 3; N >= 3, not on a line): the signed angle swept to the
-    last point from the point furthest back against the way the path went (first to last; rad,
-    within +-pi), its centre (3,) and unit axis (3,), the angle positive about the axis. Plane by
-    SVD, circle by linear least squares in it. From the furthest point back, not from the first:
+def arc_angle(points: np.ndarray, fit: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """The circle through `points` (N, 3; N >= 3, not on a line), or through `fit` (M, 3; M >= 3)
+    where given: the signed angle `points` sweep about it to the last point from the point
+    furthest back against the way the path went (first to last; rad, within +-pi), its centre
+    (3,) and unit axis (3,), the angle positive about the axis. Plane by SVD, circle by linear
+    least squares in it. From the furthest point back, not from the first:
     a grasp can jolt a door open and let it swing back before the pull, so the path's first
     point can lie ahead of where the door was held shut (pipeline door 46 of seed 200 was
     thrown 30 degrees open and back as the hand took it, and its turn measured from there came
     out 19 degrees short of its swept 51)."""
-    mean = points.mean(axis=0)
-    e1, e2 = np.linalg.svd(points - mean)[2][:2]
+    fit = points if fit is None else fit
+    mean = fit.mean(axis=0)
+    e1, e2 = np.linalg.svd(fit - mean)[2][:2]
     axis = np.cross(e1, e2)
-    uv = (points - mean) @ np.c_[e1, e2]
+    uv = (fit - mean) @ np.c_[e1, e2]
     centre_uv = np.linalg.lstsq(np.c_[2.0 * uv, np.ones(len(uv))], (uv ** 2).sum(axis=1), rcond=None)[0][:2]
-    rel = uv - centre_uv
+    rel = (points - mean) @ np.c_[e1, e2] - centre_uv
     turned = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))  # each point's angle, continuous along the path
     way = np.sign(turned[-1] - turned[0]) or 1.0
     swept = float(turned[-1] - (turned.min() if way > 0 else turned.max()))
@@ -261,7 +307,7 @@ def _turn_offset(robot_plant: MultibodyPlant, q_now: np.ndarray, q_command: np.n
 
 FELT_ARC_MIN = float(np.radians(10.0))
 """The least angle (rad) the held hand must sweep about the circle through its path, on a pull
-planned along a line, for the robot to take the part for a door (`felt_door_turn_offset`): a
+planned along a line, for the robot to take the part for a door (`felt_arc`): a
 drawer's slide guides the hand along a line (the drawer of the simulation tests pulled to 0.6 is
 not turned), and the doors the furniture pipeline took for drawers swung 27-42 degrees open
 before the arm's pull ended (docs/SIMULATION.md, "A door taken for a drawer")."""
@@ -278,27 +324,54 @@ def path_bow(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.cross(points - points[0], chord / length), axis=1).max() / length)
 
 
+FELT_JOLT = 0.02
+"""The held hand's path within this of either of its ends (m) is left out where the robot judges
+whether a straight pull swept an arc (`felt_arc`): as the pull takes the load and as
+the part meets its stop, fingers that hold a bar by friction let it jump across them by up to a
+centimetre, which bows a straight path like an arc (docs/SIMULATION.md, "A door taken for a
+drawer")."""
+
+
+def inner_path(points: np.ndarray, margin: float) -> np.ndarray:
+    """The points of a path (N, 3) farther than `margin` (m) from both its first and its last
+    point, in order."""
+    far = (np.linalg.norm(points - points[0], axis=1) > margin) & \
+        (np.linalg.norm(points - points[-1], axis=1) > margin)
+    return points[far]
+
+
+def felt_arc(tool_path: np.ndarray) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """The arc a held hand swept on a pull planned along a line (`tool_path` (N, 3), forward
+    kinematics since the fingers closed): the angle (rad, > 0), the centre (3,) and the unit axis
+    (3,) about which it is positive of the circle through the path (`arc_angle`); None where it
+    swept none, a drawer's line. The path's shape is judged, and its circle fitted, without its
+    ends' jolts (`inner_path`, `FELT_JOLT`); the angle is the whole path's. None where the inner
+    path has under 3 points or bows off the line between its ends less than an arc of
+    `FELT_ARC_MIN` would (`path_bow`: a circle fitted to a nearly straight path is any circle, and
+    a sliding door pulled 45 cm straight to its stop was turned on as a door), or where the path
+    sweeps under `FELT_ARC_MIN`."""
+    inner = inner_path(tool_path, FELT_JOLT)
+    if len(inner) < 3 or path_bow(inner) < np.tan(FELT_ARC_MIN / 4.0) / 2.0:
+        return None
+    swept, centre, axis = arc_angle(tool_path, fit=inner)
+    if abs(swept) < FELT_ARC_MIN:
+        return None
+    return (swept, centre, axis) if swept > 0.0 else (-swept, centre, -axis)
+
+
 def felt_door_turn_offset(robot_plant: MultibodyPlant, tool_path: np.ndarray, target: float,
                           q_now: np.ndarray, q_command: np.ndarray, smallest: float, largest: float
                           ) -> tuple[np.ndarray, float]:
     """A pull planned along a line whose held hand swept an arc (`tool_path` (N, 3), forward
-    kinematics since the fingers closed): a door taken for a drawer. The offset to add to the
-    arm's command `q_command` (the plan's last) that turns the hand, now at `q_now`, on about the
-    circle through its path (the hinge as the hand felt it, `arc_angle`) until it has swept
-    `target` rad, clipped to +-`largest` (a turn in one joint step strains the hinge more the
-    larger it is), and that angle; no offset and angle 0 where the path has under 3 points or
-    sweeps under `FELT_ARC_MIN` (a drawer), or bows off the line between its ends less than an arc
-    of that angle would (`path_bow`: a circle fitted to a nearly straight path is any circle, and a
-    sliding door pulled 45 cm straight to its stop was turned on as a door), or the turn is under
+    kinematics since the fingers closed; `felt_arc`): a door taken for a drawer. The offset to
+    add to the arm's command `q_command` (the plan's last) that turns the hand, now at `q_now`, on
+    about that arc's circle (the hinge as the hand felt it) until it has swept `target` rad,
+    clipped to +-`largest` (a turn in one joint step strains the hinge more the larger it is), and
+    that angle; no offset and angle 0 where the hand swept no arc or the turn is under
     `smallest`."""
     none = np.zeros(NUM_ARM_JOINTS), 0.0
-    if len(tool_path) < 3 or path_bow(tool_path) < np.tan(FELT_ARC_MIN / 4.0) / 2.0:
+    arc = felt_arc(tool_path)
+    if arc is None or abs(target - arc[0]) < smallest:
         return none
-    swept, centre, axis = arc_angle(tool_path)
-    if abs(swept) < FELT_ARC_MIN:
-        return none
-    if swept < 0.0:  # the way the door opened, about the circle's axis
-        swept, axis = -swept, -axis
-    if abs(target - swept) < smallest:
-        return none
+    swept, centre, axis = arc
     return _turn_offset(robot_plant, q_now, q_command, centre, axis, target - swept, largest)

@@ -211,6 +211,31 @@ def test_a_straight_pull_with_a_wobble_is_no_arc():
     assert path_bow(arc) > np.tan(FELT_ARC_MIN / 4.0) / 2.0
 
 
+def test_jolts_at_a_straight_pulls_ends_are_no_arc():
+    """Fingers that hold a bar by friction let it jump across them as the pull takes the load and
+    as the part meets its stop: a hand pulled 38 cm along a line, 1 cm across at its first
+    sample and 0.8 cm at its last, bows like an arc of over 10 degrees, yet sweeps none without
+    its ends (`felt_arc`); a door's 30-degree arc with the same jolts is felt, its angle within a
+    degree."""
+    from nfr_drake.systems.corrections import FELT_ARC_MIN, felt_arc, path_bow
+
+    def jolted(path):
+        path = path.copy()
+        path[0, 1] -= 0.01
+        path[-1, 1] += 0.008
+        return path
+
+    line = jolted(np.c_[np.linspace(0.0, 0.38, 60), np.zeros(60), np.zeros(60)])
+    assert path_bow(line) > np.tan(FELT_ARC_MIN / 4.0) / 2.0
+    assert felt_arc(line) is None
+    angles = np.radians(np.linspace(0.0, 30.0, 60))
+    arc = jolted(0.45 * np.c_[np.sin(angles), 1.0 - np.cos(angles), np.zeros(60)])
+    swept, centre, axis = felt_arc(arc)
+    assert np.degrees(swept) == pytest.approx(30.0, abs=1.0)
+    np.testing.assert_allclose(centre, [0.0, 0.45, 0.0], atol=0.01)
+    assert abs(axis[2]) == pytest.approx(1.0)
+
+
 def test_grip_points_lie_on_the_bar():
     p, bar = np.array([0.1, 0.2, 0.3]), np.array([0.0, 1.0, 0.0])
     points = grip_points(p, bar, 0.04, 0.005)
