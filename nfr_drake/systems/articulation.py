@@ -55,6 +55,7 @@ from nfr_drake.systems.corrections import (
     door_turn_offset,
     felt_door_turn_offset,
     felt_line,
+    fingers_hold,
     regrasp_step,
     tool_pose_and_jacobian,
     tool_step,
@@ -899,7 +900,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
 
     misses = 0
     t_activate, t_pull, t_pulled, t_held, samples = timeline(misses)
-    grasped, grasp_offset, shortfall = False, float("nan"), float("nan")
+    grasped, grasp_offset, shortfall, holding = False, float("nan"), float("nan"), False
     turned = q_pulled = gap = float("nan")
     pull_line = np.full(3, np.nan)
     times, q_obj, p_tool, p_handle, p_held, forces = [], [], [], [], [], []
@@ -913,7 +914,10 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
             q_end[:NUM_ARM_JOINTS] += try_steps(misses) * dq_miss  # the plan's last command
         if t == t_pulled:
             q_pulled = (joint.GetOnePosition(plant_context) - shut) / span
-        if t == t_pulled and again and grasped:  # the robot measures its turn or its pull, goes on
+            # a hand that let go of the handle makes no correction (its fingers closed on nothing)
+            holding = grasped and (not config.contact
+                                   or fingers_hold(plant.GetPositions(plant_context, robot)))
+        if t == t_pulled and again and holding:  # the robot measures its turn or its pull, goes on
             felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics
             q_now = plant.GetPositions(plant_context, robot)
             dq = None
@@ -928,7 +932,7 @@ def simulate_articulation(obj: SceneObject, plan: PlanResult, q_target: float,
                 second_pull.set(context, dq, t, 0.4 * config.second_pull_time, t_soft=t)
             elif not turns and config.pulls_again(plan):  # pulled again by the shortfall
                 shortfall = second_pull.pull(context, controller_plant, plan, q_grasp, q_now, config, t)
-        if t == t_held and again and grasped:
+        if t == t_held and again and holding:
             second_pull.hold(context, plant.GetPositions(plant_context, robot), q_end)
         if t == t_pulled and to_stop and grasped:  # the guarded pull to the drawer's stop
             felt = np.array(p_tool)[np.array(times) >= t_pull]  # the tool's path by forward kinematics

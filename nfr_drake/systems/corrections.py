@@ -1,5 +1,6 @@
 """Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
-a joint step for a tool move, a missed close tried again deeper, a door turned on by the angle
+a joint step for a tool move, a missed close tried again deeper, whether the fingers still hold
+a handle, a door turned on by the angle
 its hand swept short of the keypoints' turn, a door taken for a drawer turned on as the hand felt
 it swing (docs/SIMULATION.md). All in the world frame W,
 metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the
@@ -116,6 +117,19 @@ def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) 
     from `q_grasp`, where the fingers missed."""
     X_WT, _ = tool_pose_and_jacobian(robot_plant, robot_plant.CreateDefaultContext(), q_grasp)
     return tool_step(robot_plant, q_grasp, step * X_WT.rotation().col(2))
+
+
+FINGERS_EMPTY = 0.002
+"""Fingers closed to under this opening (m, the two together) hold nothing (`fingers_hold`):
+empty, the squeeze closes them to their stop at 0; on a 1.4 cm bar a 40 N squeeze sinks each
+pad about 1 mm, so a handle under about 5 mm thick would read as lost."""
+
+
+def fingers_hold(q_now: np.ndarray) -> bool:
+    """Whether fingers closed on a handle still hold it, by their opening as a gripper senses it:
+    the robot's positions (9,), the two fingers' last. A handle lost from between them lets the
+    squeeze close them on nothing (`FINGERS_EMPTY`)."""
+    return float(np.sum(q_now[NUM_ARM_JOINTS:])) >= FINGERS_EMPTY
 
 
 FELT_LINE_MIN = 0.05

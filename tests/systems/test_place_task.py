@@ -16,6 +16,7 @@ from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.objects.plant import add_articulated_object
 from nfr_drake.planning.planner import PlannerConfig, grasp_planner
 from nfr_drake.systems.articulation import SimulationConfig, add_joint_friction, rigid_hydroelastic
+from nfr_drake.systems.corrections import fingers_hold
 from nfr_drake.systems.place_task import (
     DOOR_MARGIN,
     PlaceSimulationConfig,
@@ -29,6 +30,7 @@ from nfr_drake.systems.scene_objects import SceneObject, sampled_part
 from nfr_drake.systems.task import OPEN_TARGET, run_task
 from nfr_drake.world.items import Item, sample_item
 from nfr_drake.world.keypoints import KeypointTrajectory
+from nfr_drake.world.robot import NUM_ARM_JOINTS
 
 
 @pytest.mark.parametrize("grasp", ["constraint", pytest.param("contact", marks=pytest.mark.slow)])
@@ -78,7 +80,9 @@ def test_open_and_place_a_closet_from_a_moved_base(tmp_path):
 
 def test_contact_grasp_holds_a_handle_under_the_pull():
     """The fingers squeeze the door's bar and friction alone opens the door, the arm stiff: the
-    hand stays on the handle (drift under 2 cm) and the door reaches its target."""
+    hand stays on the handle (drift under 2 cm) and the door reaches its target; the fingers'
+    opening tells that they hold it (`fingers_hold`: closed on nothing they would not), so the
+    robot measured its turn."""
     obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
     scene_object = SceneObject.from_articulated_object(obj, RigidTransform(), 0.0)
     outcome = run_task(scene_object, 0.6, planner_config=grasp_planner(PlannerConfig(), "contact"),
@@ -87,6 +91,8 @@ def test_contact_grasp_holds_a_handle_under_the_pull():
     assert sim.success, sim.summary()
     assert sim.max_drift < 0.02 and sim.q_object[-1] > 0.55
     assert sim.summary().endswith("contact grasp, 1 close")
+    assert fingers_hold(sim.q_robot) and not np.isnan(sim.turned)
+    assert not fingers_hold(np.r_[sim.q_robot[:NUM_ARM_JOINTS], 0.0, 0.0])
 
 
 @pytest.mark.parametrize("category,index", [("closet", 5), ("drawer", 17)])
