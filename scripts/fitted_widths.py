@@ -12,7 +12,8 @@ carcass's width), m. For a closet also the open door's top edge, as the keypoint
 (`hinge_top`) and as the fitted field's points of the moving part give it (`part_top`: their
 0.98 quantile of height), against the true door's top, and the carcass's top from its points, cm
 from the truth (docs/PLACE.md, "The tops from the fitted field"); and the half width the
-keypoints give the carcass (`closet_half_width`) less the true one, cm.
+keypoints give the carcass (`closet_half_width`) and its points (`carcass_half_width`) less the
+true one, cm.
 """
 
 from __future__ import annotations
@@ -21,7 +22,13 @@ import argparse
 import time
 
 from nfr_drake.cpu import set_torch_threads
-from nfr_drake.planning.compartment import closet_half_width, door_width, drawer_half_width, part_top
+from nfr_drake.planning.compartment import (
+    carcass_half_width,
+    closet_half_width,
+    door_width,
+    drawer_half_width,
+    part_top,
+)
 from nfr_drake.systems.pipeline import perception_simulator
 from nfr_drake.systems.scenario import Scenario
 from nfr_drake.world.obstacles import object_obstacles
@@ -35,7 +42,8 @@ def main() -> None:
     args = parser.parse_args()
     set_torch_threads(1)
     drawer = args.category == "drawer"
-    closet_columns = "  door_top_m  keypoints_cm  points_cm  carcass_top_m  points_cm  half_width_cm"
+    closet_columns = ("  door_top_m  keypoints_cm  points_cm  carcass_top_m  points_cm  half_width_cm"
+                      "  points_cm")
     print("index  points  moving  render_s  width_m  true_width_m  difference_cm"
           + ("" if drawer else closet_columns))
     for index in args.objects:
@@ -61,7 +69,8 @@ def main() -> None:
             seen = [part_top(p) for p in (cloud.moving(), cloud.static())]
             line += (f"  {door:10.3f}  {100 * (kt.point('hinge_top', cloud.q)[2] - door):12.1f}"
                      f"  {100 * (seen[0] - door):9.1f}  {carcass:13.3f}  {100 * (seen[1] - carcass):9.1f}"
-                     f"  {100 * (closet_half_width(kt, cloud.q) - obj.params['width'] / 2):13.1f}")
+                     f"  {100 * (closet_half_width(kt, cloud.q) - obj.params['width'] / 2):13.1f}"
+                     f"  {100 * (carcass_half_width(kt, cloud, cloud.q) - obj.params['width'] / 2):9.1f}")
         print(line, flush=True)
 
 

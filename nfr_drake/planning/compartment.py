@@ -167,16 +167,33 @@ def closet_half_width(kt: KeypointTrajectory, q: float) -> float:
     return float(abs((kt.point("hinge_bottom", 0.0) - kt.point("goal", q)) @ lat))
 
 
+def carcass_half_width(kt: KeypointTrajectory, cloud: SemanticCloud, q: float, share: float = 0.98
+                       ) -> float | None:
+    """Half a closet's width as the fitted field's carcass points give it, m: the larger of the
+    `share` quantiles of their lateral offsets from the goal at articulation q either way (across
+    the shut door's normal, as `closet_half_width`); None under 20 such points."""
+    static = cloud.static()
+    if len(static) < 20:
+        return None
+    _, lat, _ = _frame(_door_normal(kt))
+    offsets = (static - kt.point("goal", q)) @ lat
+    return float(max(np.quantile(offsets, share), -np.quantile(offsets, 1.0 - share)))
+
+
 def _closet(kt: KeypointTrajectory, q: float, look: InteriorLook | None, cloud: SemanticCloud | None
             ) -> tuple[list[ObstacleBox], list[ObstacleBox]]:
     """A closet's hollow carcass and its open door; its top panel spans from a wall under the
-    lower of the keypoints' and the points' top to the higher."""
+    lower of the keypoints' and the points' top to the higher; its sides stand at the larger of
+    the keypoints' and the carcass points' half width (`closet_half_width`,
+    `carcass_half_width`)."""
     n, lat, R = _frame(_door_normal(kt))
     axes = (n, lat, _Z)
     goal = kt.point("goal", q)
     front = kt.point("handle", 0.0) @ n - CARCASS_SETBACK
     back = goal @ n - max(front - goal @ n, 0.05)
     half = closet_half_width(kt, q)
+    seen = None if cloud is None else carcass_half_width(kt, cloud, q)
+    half = half if seen is None else max(half, seen)
     y0, floor, top = goal @ lat, goal[2], kt.point("hinge_top", 0.0)[2]
     measured = None if cloud is None else part_top(cloud.static())
     underside = top if measured is None else min(top, measured)

@@ -10,6 +10,8 @@ from nfr_drake.errors import NfrDrakeError
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.compartment import (
     InteriorLook,
+    carcass_half_width,
+    closet_half_width,
     compartment_entry,
     compartment_obstacles,
     door_width,
@@ -463,6 +465,38 @@ def test_a_closet_doors_box_takes_the_width_the_fitted_points_give():
     assert boxes["open_door"].size[1] == pytest.approx(width + 0.03)
     from_handle = {b.name: b for b in compartment_obstacles(kt, 0.6)[1]}
     assert from_handle["open_door"].size[1] == pytest.approx(reach + 0.05, abs=0.01)
+
+
+def test_a_closets_sides_stand_where_the_carcass_points_reach_if_they_reach_further():
+    """Carcass points spread evenly out to 3 cm past the keypoints' half width either side (the
+    hinge line's distance from the goal): the carcass's side walls stand at the points' half
+    width (their 0.98 quantile, 0.96 of that reach); points that end 2 cm short of it leave the
+    walls where the keypoints put them."""
+    obj = sample_object("closet", object_rng(SEED_DOMAIN_TRAIN, 0, 0))
+    kt = KeypointTrajectory.from_articulated_object(obj, RigidTransform(), 0.0)
+    half = closet_half_width(kt, 0.6)
+    goal = kt.point("goal", 0.6)
+    lateral = np.cross([0.0, 0.0, 1.0], front_normal(kt, 0.6))
+    rng = np.random.default_rng(0)
+
+    def cloud(reach: float) -> SemanticCloud:
+        points = goal + np.outer(rng.uniform(-reach, reach, 1000), lateral) + np.outer(
+            rng.uniform(0.0, 0.5, 1000), [0.0, 0.0, 1.0])
+        return SemanticCloud(points, np.ones(1000, int), 0.0)
+
+    def sides(c: SemanticCloud | None) -> list[float]:
+        """The side walls' centres' lateral distances from the goal, m."""
+        fixed, _ = compartment_obstacles(kt, 0.6, cloud=c)
+        walls = [b for b in fixed if b.name.startswith("compartment_side")]
+        return [abs((b.X_WB.translation() - goal) @ lateral) for b in walls]
+
+    wide = cloud(half + 0.03)
+    seen = carcass_half_width(kt, wide, 0.6)
+    assert seen == pytest.approx(0.96 * (half + 0.03), abs=0.005) and seen > half + 0.01
+    assert len(sides(None)) == 2
+    assert np.subtract(sides(wide), sides(None)) == pytest.approx([seen - half] * 2, abs=1e-9)
+    assert sides(cloud(half - 0.02)) == pytest.approx(sides(None), abs=1e-12)
+    assert carcass_half_width(kt, SemanticCloud(wide.points[:19], np.ones(19, int), 0.0), 0.6) is None
 
 
 def test_a_closets_tops_reach_as_high_as_the_fitted_points_where_they_reach_higher():
