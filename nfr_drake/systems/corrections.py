@@ -1,8 +1,7 @@
 """Corrections the robot makes from its own joint positions (forward kinematics of the arm alone):
 a joint step for a tool move, a missed close tried again deeper, whether the fingers still hold
-a handle, a door turned on by the angle
-its hand swept short of the keypoints' turn, a door taken for a drawer turned on as the hand felt
-it swing (docs/SIMULATION.md). All in the world frame W,
+a handle, a door turned on by the angle its hand swept short of the keypoints' turn, a door
+taken for a drawer turned on as the hand felt it swing (docs/SIMULATION.md). All in the world frame W,
 metres and radians; joint vectors are the robot's 9 positions (arm joints 1-7, then the
 fingers), steps the 7 arm joints'."""
 
@@ -67,6 +66,7 @@ STEP_STRAY = 0.25
 share of the asked translation (plus 1 mm) of its target and turns the hand by at most
 `STEP_TURN_DEG`; else the step is solved by inverse kinematics (`tool_step`)."""
 STEP_TURN_DEG = 3.0
+"""How far a tool step may turn the hand, degrees (`STEP_STRAY`)."""
 
 
 def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -93,8 +93,8 @@ def tool_step(robot_plant: MultibodyPlant, q: np.ndarray, translation: np.ndarra
 
 def _tool_step_by_ik(robot_plant: MultibodyPlant, q: np.ndarray, target: RigidTransform) -> np.ndarray:
     """The arm joints' step (NUM_ARM_JOINTS,) nearest q (9,) that puts the tool at `target` (W)
-    within 2 mm along each axis and `STEP_TURN_DEG`, the arm within its limits less `LIMIT_MARGIN` and the
-    fingers where they are; zeros where the solver finds none."""
+    within 2 mm along each axis and `STEP_TURN_DEG`, the arm within its limits less
+    `LIMIT_MARGIN` and the fingers where they are; zeros where the solver finds none."""
     ik = InverseKinematics(robot_plant)
     world, tool = robot_plant.world_frame(), robot_plant.GetFrameByName(TOOL_FRAME)
     p = target.translation()
@@ -122,7 +122,7 @@ def regrasp_step(robot_plant: MultibodyPlant, q_grasp: np.ndarray, step: float) 
 FINGERS_EMPTY = 0.002
 """Fingers closed to under this opening (m, the two together) hold nothing (`fingers_hold`):
 empty, the squeeze closes them to their stop at 0; on a 1.4 cm bar a 40 N squeeze sinks each
-pad about 1 mm, so a handle under about 5 mm thick would read as lost."""
+pad about 1 mm, so a handle under about 4 mm thick would read as lost."""
 
 
 def fingers_hold(q_now: np.ndarray) -> bool:
