@@ -3,16 +3,18 @@
 
     python scripts/door_turn_trace.py --seed 200 --objects 46
     python scripts/door_turn_trace.py --seed 901 --objects 8
+    python scripts/door_turn_trace.py --category closet --grasp contact --objects 43
 
-For each piece of `nfr-drake eval-pipeline --category furniture --min-confidence 0` (the same
-scenario and part, `object_scenario`) it runs the pipeline once and prints, from the simulation's
-samples: the fit's articulation of the part; the largest articulation between the fingers closing
-and the pull starting (a grasp's jolt); the angle the held hand swept about the circle through its
-path until the pull settled, measured from the path's first sample and from its point furthest
-back (`corrections.arc_angle`, today's measure); the articulation then; the turn the robot asked
-for (`SimulationResult.turned`) and the turn the door made; the final articulation; and where
-the turn was taken on from a second base (`systems.task.turn_on`), how that ended. Angles in
-degrees (generated doors: a quarter turn per unit of q); a drawer is named and skipped.
+For each piece of `nfr-drake eval-pipeline --category C --min-confidence 0 [--grasp G]` (the same
+scenario, part and target, `object_scenario`) it runs the pipeline once and prints, from
+the simulation's samples: the fit's articulation of the part; the largest articulation between the
+fingers closing and the pull starting (a grasp's jolt); the angle the held hand swept about the
+circle through its path until the pull settled, measured from the path's first sample and from its
+point furthest back (`corrections.arc_angle`, today's measure); the articulation then; the turn
+the robot asked for (`SimulationResult.turned`) and the turn the door made; the final
+articulation; and where the turn was taken on from a second base (`systems.task.turn_on`), how
+that ended. Angles in degrees (generated doors: a quarter turn per unit of q); a drawer is named
+and skipped.
 """
 
 from __future__ import annotations
@@ -33,7 +35,9 @@ from nfr_drake.systems.scenario import Scenario
 class Args:
     seed: int = 200
     objects: list[int] = field(default_factory=lambda: [46])
-    model: str = "models/furniture"
+    category: str = "furniture"
+    """furniture, or closet (`models/closet`)."""
+    grasp: str = "constraint"
 
 
 def first_sample_sweep(points: np.ndarray) -> float:
@@ -49,7 +53,8 @@ def first_sample_sweep(points: np.ndarray) -> float:
 
 def main(args: Args) -> None:
     torch.set_num_threads(1)
-    base = Scenario(category="furniture", model=args.model, seed=args.seed, min_confidence=0.0)
+    base = Scenario(category=args.category, model=f"models/{args.category}", seed=args.seed,
+                    min_confidence=0.0, grasp=args.grasp)
     for index in args.objects:
         scenario = object_scenario(base, index, part_target=True)
         outcome = run_scenario(scenario)
