@@ -233,7 +233,7 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
                           guarded_pull: float = SimulationConfig.guarded_pull,
                           pull_on: bool = SimulationConfig.pull_on,
                           regrasps: int = SimulationConfig.regrasps,
-                          turn_max_hinge_gap: float = SimulationConfig.second_turn_max_hinge_gap,
+                          turn_max_hinge_gap: float | None = SimulationConfig.second_turn_max_hinge_gap,
                           threads: int | None = None) -> None:
     """Open (or close) n unseen objects with neural-field keypoints, or open them and place an
     item inside; print the success rate. A piece of furniture is opened at one part drawn from its
@@ -296,7 +296,8 @@ def eval_pipeline_command(category: Literal["closet", "drawer", "furniture"], mo
             (`SimulationConfig.regrasps`; 0: one close).
         turn_max_hinge_gap: a door is turned by what the hand swept only when the hinge it felt
             lies within this of the keypoints' hinge, m (`SimulationConfig.second_turn_max_hinge_gap`;
-            inf: always); the CSV's hinge_gap_cm holds the gap.
+            inf: always; default: by the grasp, 2 cm by contact, inf by constraint); the CSV's
+            hinge_gap_cm holds the gap.
         threads: torch CPU threads (default: the free cores, `nfr_drake.cpu.free_cores`).
     """
     set_torch_threads(threads)

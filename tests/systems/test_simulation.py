@@ -9,6 +9,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from nfr_drake.objects import SEED_DOMAIN_TRAIN, object_rng, sample_object
 from nfr_drake.planning.planner import PlannerConfig
 from nfr_drake.systems.articulation import (
+    CONTACT_TURN_MAX_HINGE_GAP,
+    GRASPS,
     CompliantCommand,
     SimulationConfig,
     StartsInsideObject,
@@ -146,6 +148,17 @@ def test_a_door_planned_on_a_turned_arc_is_turned_on_by_what_the_hand_swept_shor
     gated = run_task(scene_object, 0.6, keypoints=turned_arc, simulation_config=SimulationConfig(
         second_turn_max_hinge_gap=0.5 * moved)).simulation
     assert gated.turned == 0.0 and gated.q_final == pytest.approx(planned_only.q_final, abs=0.01)
+
+
+def test_the_hinge_gap_a_turn_allows_follows_the_grasp_unless_set():
+    """The constraint grasp's compliant arm follows the true hinge, so its turn corrects the
+    keypoints' hinge however far off (the test above: turned by default); the contact grasp's stiff
+    arm follows the plan, so a felt hinge over `CONTACT_TURN_MAX_HINGE_GAP` off says the bar slid
+    and it is not turned. A value set wins for either grasp."""
+    assert SimulationConfig().turn_max_hinge_gap == np.inf
+    assert SimulationConfig(grasp="contact").turn_max_hinge_gap == CONTACT_TURN_MAX_HINGE_GAP < np.inf
+    for grasp in GRASPS:
+        assert SimulationConfig(grasp=grasp, second_turn_max_hinge_gap=0.05).turn_max_hinge_gap == 0.05
 
 
 @pytest.mark.parametrize("closet", [0, 1])  # closet 1's door opens the other way about the vertical
