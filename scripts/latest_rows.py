@@ -1,11 +1,13 @@
 """Each object's latest row over several `eval-pipeline` CSVs, summarised as the evaluation prints it.
 
-    python scripts/latest_rows.py docs/results/A.csv docs/results/B.csv [--out merged.csv]
+    python scripts/latest_rows.py --files docs/results/A.csv docs/results/B.csv \
+        [--columns C ...] [--out merged.csv]
 
 Files are read in the order given; a later file's row for an object index replaces an earlier
 one's. Prints the summary row (`SUMMARY_HEADER`), the place line for open-and-place rows, how
 many rows each file gave, and the indices of the objects that did not succeed with their
-`failure`. `--out` writes the merged rows (by index) as one CSV.
+`failure`. `--columns` prints those columns of every row as well (index first); `--out` writes the
+merged rows (by index) as one CSV.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ from nfr_drake.eval.pipeline_eval import SUMMARY_HEADER, place_summary, summary_
 def latest_rows(files: list[Path]) -> tuple[dict[int, dict], dict[int, Path]]:
     """(rows by object index, the file each came from): the last file that has an index wins."""
     rows, sources = {}, {}
+    missing = [str(path) for path in files if not path.is_file()]
+    if missing:
+        raise SystemExit(f"latest_rows: no such file: {', '.join(missing)}")
     for path in files:
         with open(path, newline="") as f:
             for row in csv.DictReader(f):
@@ -28,8 +33,8 @@ def latest_rows(files: list[Path]) -> tuple[dict[int, dict], dict[int, Path]]:
     return rows, sources
 
 
-def main(files: list[Path], out: Path | None = None) -> None:
-    """Print the merged rows' summary; write them to `out` when given."""
+def main(files: list[Path], columns: tuple[str, ...] = (), out: Path | None = None) -> None:
+    """Print the merged rows' summary (and `columns` of each); write them to `out` when given."""
     rows, sources = latest_rows(files)
     ordered = [rows[i] for i in sorted(rows)]
     print(SUMMARY_HEADER)
@@ -42,6 +47,8 @@ def main(files: list[Path], out: Path | None = None) -> None:
         if rows[i]["success"] != "True":
             state = "refused" if rows[i]["refused"] == "True" else "failed"
             print(f"  {i}: {state}: {rows[i]['failure']}")
+    for i in sorted(rows) if columns else ():
+        print(i, *(rows[i][c] for c in columns))
     if out is not None:
         with open(out, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(ordered[0]))
