@@ -84,10 +84,12 @@ GRASPS = ("constraint", "contact")
 PAD_MODULUS = 1e6
 """Hydroelastic modulus of the finger pads in a contact grasp, Pa (a rubber-like pad)."""
 CONTACT_TURN_MAX_HINGE_GAP = 0.02
-"""The contact grasp's `SimulationConfig.turn_max_hinge_gap`, m. Over 100 unseen closets fitted
-by the field, the felt hinge of the 94 whose gap was under 2.4 cm lay at most 2.4 degrees from
-the door's end after the turn; the six over 2.4 cm (a bar slid 1.6-1.8 cm along the fingers)
-were turned 2.2-5.4 degrees wrong (docs/PLACE.md, "The turn measured by a hand that slid")."""
+"""The contact grasp's `SimulationConfig.turn_max_hinge_gap`, m. On the development closets (seed
+901, 0-23) the four doors turned with felt hinges 2.2-4.5 cm off ended 2.7-7.4 degrees off, the 20
+up to 1.6 cm off at most 2.1 (docs/SIMULATION.md); over 100 unseen closets fitted by the
+field, the 94 with gaps under 2.4 cm ended at most 2.4 degrees off after the turn, the six over
+2.4 cm (a bar slid 1.6-1.8 cm along the fingers) 2.2-5.4 degrees (docs/PLACE.md, "The turn
+measured by a hand that slid")."""
 JOINT_FRICTION = {"prismatic": 3.0, "revolute": 0.3}
 """Coulomb friction of the articulated joint by its type, N (a drawer's runners) or N m (a door's
 hinges). Without it a drawer, on its 2 N s/m of damping alone, slid 2 cm back in from the nudge
